@@ -1,0 +1,223 @@
+"""N-body triplet dynamics: the right-hand side with its variational equations, conserved
+quantities and triangle geometry.
+
+State layout (flat float64 array): positions q (N*d, body-major), momenta p (N*d); then,
+for each tangent vector, its (dq, dp) block of the same size n = 2*N*d; then, when MEGNO is
+on, two accumulators per tangent vector (see `rhs`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .potentials import Potential, kernel, make_potential, profile, triplet_forces, triplet_measure
+
+
+@dataclass(frozen=True, eq=False)
+class System:
+    """N >= 3 bodies of positive masses in d = 2 or 3 dimensions, interacting through a
+    triplet potential summed over all triangles i < j < k."""
+
+    masses: np.ndarray
+    dim: int = 2
+    potential: Potential = field(default_factory=lambda: make_potential("perimetric_power"))
+
+    def __post_init__(self):
+        m = np.ascontiguousarray(self.masses, dtype=np.float64)
+        if m.ndim != 1 or m.size < 3:
+            raise ValueError("a triplet system needs masses for N >= 3 bodies")
+        if not np.all(np.isfinite(m)) or np.any(m <= 0):
+            raise ValueError("masses must be finite and > 0")
+        if self.dim not in (2, 3):
+            raise ValueError(f"dim must be 2 or 3, got {self.dim!r}")
+        m.setflags(write=False)
+        object.__setattr__(self, "masses", m)
+
+    @classmethod
+    def create(cls, masses=(1.0, 1.0, 1.0), dim=2, potential="perimetric_power", **params):
+        return cls(np.asarray(masses, dtype=np.float64), dim, make_potential(potential, params))
+
+    @property
+    def n_bodies(self) -> int:
+        return self.masses.size
+
+    @property
+    def n(self) -> int:
+        """Size of the phase-space state (2 N d)."""
+        return 2 * self.n_bodies * self.dim
+
+    @property
+    def kernel_args(self):
+        """The arguments every compiled kernel takes to describe the system."""
+        pot = self.potential
+        return self.masses, self.dim, pot.measure, pot.profile, pot.par
+
+    def state(self, positions, momenta) -> np.ndarray:
+        """Flat state from positions and momenta of shape (N, d)."""
+        q = np.asarray(positions, dtype=np.float64).reshape(self.n_bodies, self.dim)
+        p = np.asarray(momenta, dtype=np.float64).reshape(self.n_bodies, self.dim)
+        return np.concatenate([q.ravel(), p.ravel()])
+
+    def split(self, y):
+        """Positions and momenta of shape (..., N, d) from states of shape (..., >= n)."""
+        y = np.asarray(y, dtype=np.float64)
+        nq = self.n // 2
+        shape = y.shape[:-1] + (self.n_bodies, self.dim)
+        return y[..., :nq].reshape(shape), y[..., nq:2 * nq].reshape(shape)
+
+    # -------------------------------------------------------- conserved quantities
+    def energy(self, y):
+        """Total energy H = K + U of states (..., n)."""
+        q, p = self.split(y)
+        kinetic = 0.5 * np.sum(np.sum(p * p, axis=-1) / self.masses, axis=-1)
+        flat = np.ascontiguousarray(q.reshape(-1, self.n // 2))
+        pot = self.potential
+        u = _potential_energies(flat, self.n_bodies, self.dim, pot.measure, pot.profile, pot.par)
+        return kinetic + u.reshape(kinetic.shape)
+
+    def potential_energy(self, y):
+        return self.energy(y) - self.kinetic_energy(y)
+
+    def kinetic_energy(self, y):
+        _, p = self.split(y)
+        return 0.5 * np.sum(np.sum(p * p, axis=-1) / self.masses, axis=-1)
+
+    def momentum(self, y):
+        """Total momentum, shape (..., d)."""
+        return self.split(y)[1].sum(axis=-2)
+
+    def angular_momentum(self, y):
+        """Total angular momentum about the origin: scalar in 2-D, vector in 3-D."""
+        q, p = self.split(y)
+        return cross(q, p).sum(axis=-1 if self.dim == 2 else -2)
+
+    def centre_of_mass(self, y):
+        q, _ = self.split(y)
+        return np.einsum("...id,i->...d", q, self.masses) / self.masses.sum()
+
+    def moment_of_inertia(self, y):
+        """Moment of inertia about the centre of mass, sum m_i |r_i - R|^2."""
+        q, _ = self.split(y)
+        r = q - self.centre_of_mass(y)[..., None, :]
+        return np.einsum("...id,...id,i->...", r, r, self.masses)
+
+    def triangle(self, y, triplet=(0, 1, 2)):
+        """Positions (u, v, w) of one triplet, each of shape (..., d)."""
+        q, _ = self.split(y)
+        return tuple(q[..., b, :] for b in triplet)
+
+
+@kernel
+def _potential_energies(qs, N, d, measure, prof, par):
+    out = np.empty(qs.shape[0])
+    for s in range(qs.shape[0]):
+        out[s] = potential_energy(qs[s], N, d, measure, prof, par)
+    return out
+
+
+@kernel
+def potential_energy(q, N, d, measure, prof, par):
+    """Sum over triplets i < j < k of U(P or |A|)."""
+    total = 0.0
+    for i in range(N - 2):
+        for j in range(i + 1, N - 1):
+            for k in range(j + 1, N):
+                total += profile(prof, par, triplet_measure(q, i, j, k, d, measure))[0]
+    return total
+
+
+@kernel
+def rhs(t, y, dy, masses, d, measure, prof, par, n_tan, megno, t_ref):
+    """Hamilton's equations, the variational equations of n_tan tangent vectors
+    (d dq/dt = M^-1 dp, d dp/dt = -Hess U dq) and, if megno, for each tangent vector w two
+    accumulators: z1' = s (w'.w)/|w|^2 and z2' = 2 z1 / s, s = t - t_ref, so that
+    Y(t) = 2 z1 / s and <Y>(t) = z2 / s (Cincotta & Simo 2000)."""
+    N = masses.size
+    nq = N * d
+    n = 2 * nq
+    for b in range(N):
+        inv = 1.0 / masses[b]
+        for c in range(b * d, b * d + d):
+            dy[c] = y[nq + c] * inv
+            dy[nq + c] = 0.0
+            for t_ in range(n_tan):
+                base = n * (1 + t_)
+                dy[base + c] = y[base + nq + c] * inv
+                dy[base + nq + c] = 0.0
+    for i in range(N - 2):
+        for j in range(i + 1, N - 1):
+            for k in range(j + 1, N):
+                triplet_forces(y, dy, i, j, k, d, n, n_tan, measure, prof, par)
+    if megno:
+        s = t - t_ref
+        off = n * (1 + n_tan)
+        for t_ in range(n_tan):
+            base = n * (1 + t_)
+            ww = 0.0
+            wdw = 0.0
+            for c in range(base, base + n):
+                ww += y[c] * y[c]
+                wdw += y[c] * dy[c]
+            dy[off + 2 * t_] = s * wdw / ww
+            dy[off + 2 * t_ + 1] = 2.0 * y[off + 2 * t_] / s if s != 0.0 else 0.0
+
+
+# ---------------------------------------------------------------- triangle geometry
+
+def cross(a, b):
+    """Cross product; the scalar z-component for 2-D vectors."""
+    if np.shape(a)[-1] == 2:
+        return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return np.cross(a, b)
+
+
+# Functions of triangle vertices u, v, w of shape (..., d); sides follow the paper:
+# a = |w - v|, b = |u - w|, c = |v - u| (side a is opposite u).
+
+def sides(u, v, w):
+    """Side lengths (a, b, c), shape (..., 3)."""
+    return np.stack([np.linalg.norm(w - v, axis=-1), np.linalg.norm(u - w, axis=-1),
+                     np.linalg.norm(v - u, axis=-1)], axis=-1)
+
+
+def perimeter(u, v, w):
+    return sides(u, v, w).sum(axis=-1)
+
+
+def area(u, v, w):
+    """Signed area (2-D, positive when u, v, w turn counter-clockwise) or area vector (3-D),
+    A = (v - u) x (w - u) / 2."""
+    return 0.5 * cross(v - u, w - u)
+
+
+def area_magnitude(u, v, w):
+    A = area(u, v, w)
+    return np.abs(A) if A.ndim == np.ndim(u) - 1 else np.linalg.norm(A, axis=-1)
+
+
+def inequities(u, v, w):
+    """(i_a, i_b, i_c) = (b + c - a, c + a - b, a + b - c), all >= 0; zero on collinear
+    configurations (paper Appendix B)."""
+    a, b, c = np.moveaxis(sides(u, v, w), -1, 0)
+    return np.stack([b + c - a, c + a - b, a + b - c], axis=-1)
+
+
+def incenter(u, v, w):
+    """(a u + b v + c w) / P: where the bisector (perimetric) forces meet."""
+    s = sides(u, v, w)
+    return (s[..., 0:1] * u + s[..., 1:2] * v + s[..., 2:3] * w) / s.sum(axis=-1, keepdims=True)
+
+
+def orthocenter(u, v, w):
+    """Intersection of the altitudes, where the areal forces meet:
+    c_o = v + ((v - u).(v - w)) / (2|A|) Ahat x (w - u). The paper's Appendix D prints
+    (u - v).(v - w), which puts a right triangle's orthocenter off its right-angle vertex."""
+    pad = (lambda x: np.concatenate([x, np.zeros(x.shape[:-1] + (1,))], axis=-1)) \
+        if np.shape(u)[-1] == 2 else (lambda x: np.asarray(x, dtype=float))
+    U, V, W = pad(u), pad(v), pad(w)
+    A = 0.5 * np.cross(V - U, W - U)
+    absA = np.linalg.norm(A, axis=-1, keepdims=True)
+    co = V + (np.sum((V - U) * (V - W), axis=-1, keepdims=True) / (2 * absA ** 2)) \
+        * np.cross(A, W - U)
+    return co[..., :np.shape(u)[-1]]

@@ -1,0 +1,188 @@
+"""Initial-condition families of the paper (three bodies in the plane), each a function of
+named parameters that a survey may turn into grid axes.
+
+A family builds positions and velocities of shape (3, 2); `initial_state` turns them into
+the flat state of a `System` (momenta p = m v; in 3-D the plane z = 0). The paper's printed
+numbers decide where its text has typos: in the equilateral example the printed
+dv/dt(0) = V_rot/2 (-sqrt3, 1) does not give E = 84.45577, J = 24.40192; (-sqrt3, -1) does,
+and it is the uniformly rotating velocity.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from .dynamics import System
+from .potentials import AREA, PERIMETER, profile
+
+SQ3 = math.sqrt(3.0)
+
+
+def rotation(angle: float) -> np.ndarray:
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, -s], [s, c]])
+
+
+def triangle_from_sides(a: float, b: float, c: float, masses=(1.0, 1.0, 1.0)) -> np.ndarray:
+    """Vertices (u, v, w) with |w - v| = a, |u - w| = b, |v - u| = c, v - u along +x, w above
+    (counter-clockwise, positive area), centre of mass at the origin."""
+    if min(a, b, c) <= 0 or a >= b + c or b >= c + a or c >= a + b:
+        raise ValueError(f"sides (a, b, c) = ({a:g}, {b:g}, {c:g}) do not make a "
+                         "non-degenerate triangle: each side must be shorter than the sum "
+                         "of the other two")
+    x = (b * b + c * c - a * a) / (2.0 * c)
+    q = np.array([[0.0, 0.0], [c, 0.0], [x, math.sqrt(b * b - x * x)]])
+    m = np.asarray(masses, dtype=float)
+    return q - (m @ q) / m.sum()
+
+
+def _dU(system: System, q: np.ndarray) -> float:
+    """U'(x) of the (single) triplet at positions q (3, 2)."""
+    u, v, w = q
+    if system.potential.measure == PERIMETER:
+        x = np.linalg.norm(v - u) + np.linalg.norm(w - v) + np.linalg.norm(u - w)
+    else:
+        x = 0.5 * abs((v - u)[0] * (w - u)[1] - (v - u)[1] * (w - u)[0])
+    return profile(system.potential.profile, system.potential.par, x)[1]
+
+
+def _equal_masses(system: System, family: str):
+    m = system.masses
+    if not np.allclose(m, m[0], rtol=0, atol=0):
+        raise ValueError(f"family {family!r} is a special solution for equal masses only")
+
+
+def _vec2(value, key):
+    v = np.asarray(value, dtype=float)
+    if v.shape != (2,):
+        raise ValueError(f"{key} must be a 2-vector, got {value!r}")
+    return v
+
+
+def _sides(system, a, b, c, velocities, delta, delta_direction):
+    """Paper Fig. 1: triangle with sides (a, b, c) = (2.9, 2.0, 1.8), du/dt = -dw/dt = (1, 3),
+    dv/dt = 0 (E = 32.445, J = 2.94842); delta moves along delta_direction, so the default
+    gives the paper's Lyapunov family du/dt = -dw/dt = (1 + delta, 3)."""
+    q = triangle_from_sides(a, b, c, system.masses)
+    vel = np.asarray(velocities, float) + delta * np.asarray(delta_direction, float)
+    return q, vel
+
+
+def _equilateral(system, side, v_rot, delta, delta_direction):
+    """Paper Fig. 5: equilateral triangle u = (side/sqrt3, 0) rotated by 2pi/3, velocities
+    du/dt = V_rot (0, 1) + delta dir, dv/dt = V_rot/2 (-sqrt3, -1), dw/dt = -du/dt - dv/dt.
+    v_rot = 0 (the default) means the uniformly rotating value sqrt(side U'/m) for this
+    potential (= 6 for U = P^2/2, side 2 sqrt3): delta = 0 is the rotating equilateral
+    solution, delta = 3 the paper's regular orbit (E = 84.45577, J = 24.40192)."""
+    _equal_masses(system, "equilateral")
+    r = side / SQ3
+    q = np.array([[r, 0.0], rotation(2 * math.pi / 3) @ [r, 0.0], rotation(4 * math.pi / 3) @ [r, 0.0]])
+    if v_rot == 0:
+        dU = _dU(system, q)
+        if system.potential.measure == AREA:   # |grad_u |A|| = side/2 on the altitude
+            speed2 = r * dU * side / (2.0 * system.masses[0])
+        else:                                  # |grad_u P| = sqrt3 towards the centre
+            speed2 = r * dU * SQ3 / system.masses[0]
+        if speed2 <= 0:
+            raise ValueError("v_rot = 0 asks for the rotating speed, but this potential "
+                             "does not pull the equilateral triangle inwards")
+        v_rot = math.sqrt(speed2)
+    du = v_rot * np.array([0.0, 1.0]) + delta * _vec2(delta_direction, "delta_direction")
+    dv = 0.5 * v_rot * np.array([-SQ3, -1.0])
+    return q, np.array([du, dv, -du - dv])
+
+
+def _linear(system, half_length, velocity_u, delta, delta_direction):
+    """Paper eq. (LinearIC): u = (-L, 0), v = 0, w = (L, 0), du/dt = (1.5, -10.0711),
+    dv/dt = -delta (0.5, 1.0), dw/dt = -du/dt - dv/dt."""
+    _equal_masses(system, "linear")
+    q = np.array([[-half_length, 0.0], [0.0, 0.0], [half_length, 0.0]])
+    du = _vec2(velocity_u, "velocity_u")
+    dv = -delta * _vec2(delta_direction, "delta_direction")
+    return q, np.array([du, dv, -du - dv])
+
+
+def _rotating_line(system, radius, angle):
+    """Collinear special solution: v = 0 at the centre, u = -w at distance r, rotating
+    uniformly at omega = sqrt(2 U'(4r) / (m r)) (perimetric potentials; paper Sec. 3.3)."""
+    _equal_masses(system, "rotating_line")
+    if system.potential.measure != PERIMETER:
+        raise ValueError("family 'rotating_line' needs a perimetric potential")
+    q = np.array([[radius, 0.0], [0.0, 0.0], [-radius, 0.0]]) @ rotation(angle).T
+    omega2 = 2.0 * _dU(system, q) / (system.masses[0] * radius)
+    if omega2 <= 0:
+        raise ValueError("the rotating line needs U'(P) > 0")
+    vel = math.sqrt(omega2) * np.array([[-q[0, 1], q[0, 0]], [0.0, 0.0], [q[0, 1], -q[0, 0]]])
+    return q, vel
+
+
+def _isosceles(system, base, height, base_rate, height_rate):
+    """Paper Sec. 3.3: u = (-b/2, -h/3), v = (0, 2h/3), w = (b/2, -h/3) with the matching
+    velocities; the shape stays isosceles (a = c) for equal masses."""
+    _equal_masses(system, "isosceles")
+    q = np.array([[-base / 2, -height / 3], [0.0, 2 * height / 3], [base / 2, -height / 3]])
+    vel = np.array([[-base_rate / 2, -height_rate / 3], [0.0, 2 * height_rate / 3],
+                    [base_rate / 2, -height_rate / 3]])
+    return q, vel
+
+
+def _areal_example(system, velocity_u):
+    """Paper Fig. 7 (U = 2/|A| + |A|^2): equilateral u = (1, 0), v = (-1, sqrt3)/2,
+    w = (-1, -sqrt3)/2 with du/dt = -dw/dt = (1, 3), dv/dt = 0. These caption velocities
+    give E = 13.227, not the printed 5.51067 (which the printed area limits do follow from):
+    ask for a target energy to put the start on the printed shell."""
+    q = np.array([[1.0, 0.0], [-0.5, SQ3 / 2], [-0.5, -SQ3 / 2]])
+    du = _vec2(velocity_u, "velocity_u")
+    return q, np.array([du, [0.0, 0.0], -du])
+
+
+@dataclass(frozen=True)
+class Family:
+    name: str
+    build: Callable
+    defaults: dict
+
+    @property
+    def doc(self) -> str:
+        return " ".join((self.build.__doc__ or "").split())
+
+
+FAMILIES = {f.name: f for f in [
+    Family("sides", _sides, dict(a=2.9, b=2.0, c=1.8,
+                                 velocities=((1.0, 3.0), (0.0, 0.0), (-1.0, -3.0)),
+                                 delta=0.0, delta_direction=((1.0, 0.0), (0.0, 0.0), (-1.0, 0.0)))),
+    Family("equilateral", _equilateral, dict(side=2 * SQ3, v_rot=0.0, delta=0.0,
+                                             delta_direction=(0.5, -1.0))),
+    Family("linear", _linear, dict(half_length=2.5, velocity_u=(1.5, -10.0711), delta=0.0,
+                                   delta_direction=(0.5, 1.0))),
+    Family("rotating_line", _rotating_line, dict(radius=2.5, angle=0.0)),
+    Family("isosceles", _isosceles, dict(base=2.0, height=1.5, base_rate=0.0, height_rate=0.0)),
+    Family("areal_example", _areal_example, dict(velocity_u=(1.0, 3.0))),
+]}
+
+
+def family_parameters(name: str) -> dict:
+    """Parameter names and defaults of a family (KeyError-free: unknown names raise)."""
+    if name not in FAMILIES:
+        raise ValueError(f"unknown family {name!r}; choose one of {', '.join(FAMILIES)}")
+    return dict(FAMILIES[name].defaults)
+
+
+def initial_state(system: System, family: str, **params) -> np.ndarray:
+    """Flat state (positions, momenta) of a family member; parameters not given take the
+    family's defaults."""
+    defaults = family_parameters(family)
+    unknown = sorted(set(params) - set(defaults))
+    if unknown:
+        raise ValueError(f"family {family!r} has no parameter {unknown[0]!r}; "
+                         f"its parameters are {', '.join(defaults)}")
+    if system.n_bodies != 3:
+        raise ValueError(f"family {family!r} is a three-body family; the system has "
+                         f"{system.n_bodies} bodies")
+    q, vel = FAMILIES[family].build(system, **{**defaults, **params})
+    if system.dim == 3:
+        q, vel = (np.pad(x, ((0, 0), (0, 1))) for x in (q, vel))
+    return system.state(q, vel * system.masses[:, None])

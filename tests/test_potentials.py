@@ -1,0 +1,131 @@
+"""Forces and tangent forces of every built-in potential against finite differences and
+against the side-length reference, in 2-D and 3-D, N = 3 and 4, unequal masses."""
+import numpy as np
+import pytest
+
+import reference
+from survey.dynamics import System, perimeter, rhs
+from survey.potentials import POTENTIAL_NAMES, make_potential
+
+PARAMS = {  # non-default parameters, so that no special case (k = 2) hides a bug
+    "perimetric_power": dict(coupling=0.7, exponent=3.0),
+    "perimetric_yukawa": dict(coupling=2.0, gamma=0.3),
+    "perimetric_barrier": dict(alpha=1.5, beta=0.4),
+    "areal_power": dict(coupling=1.3, exponent=2.5),
+    "areal_yukawa": dict(coupling=1.0, gamma=0.5),
+    "areal_barrier": dict(alpha=2.0, beta=1.0),
+}
+CASES = [(name, N, d) for name in POTENTIAL_NAMES for N in (3, 4) for d in (2, 3)]
+
+
+def make_case(name, N, d, seed=0):
+    rng = np.random.default_rng(seed)
+    system = System.create(masses=rng.uniform(0.5, 2.0, N), dim=d, potential=name,
+                           **PARAMS[name])
+    y = rng.normal(size=system.n)
+    return system, y
+
+
+def full_rhs(system, y, n_tan=0, megno=False):
+    dy = np.zeros_like(y)
+    m, d, meas, prof, par = system.kernel_args
+    rhs(0.0, y, dy, m.copy(), d, meas, prof, par, n_tan, megno, 0.0)
+    return dy
+
+
+def test_all_named_potentials_are_tested():
+    assert set(PARAMS) == set(POTENTIAL_NAMES)
+
+
+@pytest.mark.parametrize("name,N,d", CASES)
+def test_forces_are_minus_gradient_of_energy(name, N, d):
+    system, y = make_case(name, N, d)
+    nq = system.n // 2
+    force = full_rhs(system, y)[nq:]
+    grad = np.zeros(nq)
+    h = 1e-5
+    for a in range(nq):
+        e = np.zeros(system.n)
+        e[a] = h
+        # 4th-order central difference of the total energy in q_a
+        grad[a] = (-system.energy(y + 2 * e) + 8 * system.energy(y + e)
+                   - 8 * system.energy(y - e) + system.energy(y - 2 * e)) / (12 * h)
+    np.testing.assert_allclose(force, -grad, rtol=1e-7, atol=1e-8 * np.abs(grad).max())
+
+
+@pytest.mark.parametrize("name,N,d", CASES)
+def test_tangent_forces_are_derivative_of_forces(name, N, d):
+    system, y = make_case(name, N, d, seed=1)
+    n, nq = system.n, system.n // 2
+    rng = np.random.default_rng(2)
+    tangents = rng.normal(size=(2, n))
+    out = full_rhs(system, np.concatenate([y, tangents.ravel()]), n_tan=2)
+    for t in range(2):
+        dq, dp = tangents[t, :nq], tangents[t, nq:]
+        h = 1e-5
+        f = lambda s: full_rhs(system, y + s * np.concatenate([dq, np.zeros(nq)]))[nq:]
+        fd = (-f(2 * h) + 8 * f(h) - 8 * f(-h) + f(-2 * h)) / (12 * h)
+        block = out[n * (1 + t):n * (2 + t)]
+        np.testing.assert_allclose(block[nq:], fd, rtol=1e-6, atol=1e-8 * np.abs(fd).max())
+        # d(dq)/dt = M^-1 dp
+        np.testing.assert_allclose(block[:nq], dp / np.repeat(system.masses, d), rtol=1e-15)
+
+
+@pytest.mark.parametrize("name,N,d", CASES)
+def test_kernel_agrees_with_numpy_reference(name, N, d):
+    system, y = make_case(name, N, d, seed=3)
+    rng = np.random.default_rng(4)
+    tangent = rng.normal(size=system.n)
+    state = np.concatenate([y, tangent])
+    ref = reference.rhs(state, system, n_tangent=1)
+    np.testing.assert_allclose(full_rhs(system, state, n_tan=1), ref, rtol=1e-6,
+                               atol=1e-7 * np.abs(ref).max())
+    assert system.energy(y) - system.kinetic_energy(y) == pytest.approx(
+        reference.potential(y[:system.n // 2].reshape(N, d), system), rel=1e-12)
+
+
+def test_forces_stay_finite_and_bisect_near_collinear_triangle():
+    """Vector forms keep full accuracy where the side-length chain rule loses it."""
+    system = System.create()
+    eps = 1e-9
+    q = np.array([[-1.0, 0.0], [0.3, eps], [1.0, 0.0]])
+    y = system.state(q, np.zeros((3, 2)))
+    F = full_rhs(system, y)[6:].reshape(3, 2)
+    P = perimeter(*system.triangle(y))
+    # middle body: unit vectors to its neighbours nearly cancel, leaving a force of order eps
+    assert abs(F[1, 0]) < 1e-8 * P and np.all(np.isfinite(F))
+    # end bodies: U'(P) times two nearly parallel unit vectors
+    np.testing.assert_allclose(F[0], [2 * P, 0.0], atol=1e-8 * P)
+
+
+def test_areal_forces_are_parallel_to_altitudes():
+    system = System.create(potential="areal_barrier")
+    q = np.array([[0.1, -0.4], [1.3, 0.2], [-0.2, 0.9]])
+    F = full_rhs(system, system.state(q, np.zeros((3, 2))))[6:].reshape(3, 2)
+    for i in range(3):
+        j, k = (i + 1) % 3, (i + 2) % 3
+        assert abs(np.dot(F[i], q[k] - q[j])) < 1e-13 * np.linalg.norm(F[i])
+    np.testing.assert_allclose(F.sum(axis=0), 0.0, atol=1e-14)
+
+
+def test_megno_accumulator_rates():
+    system, y = make_case("perimetric_power", 3, 2)
+    w = np.random.default_rng(5).normal(size=system.n)
+    state = np.concatenate([y, w, [0.3, 0.0]])
+    dy = np.zeros_like(state)
+    m, d, meas, prof, par = system.kernel_args
+    rhs(2.5, state, dy, m.copy(), d, meas, prof, par, 1, True, 0.5)
+    wdot = dy[system.n:2 * system.n]
+    assert dy[-2] == pytest.approx(2.0 * np.dot(wdot, w) / np.dot(w, w), rel=1e-14)
+    assert dy[-1] == pytest.approx(2 * 0.3 / 2.0, rel=1e-14)
+
+
+@pytest.mark.parametrize("bad,match", [
+    (("perimetric_cubic", {}), "unknown potential"),
+    (("perimetric_power", {"k": 2}), "no parameter 'k'"),
+    (("perimetric_yukawa", {"gamma": -1.0}), "gamma"),
+    (("areal_power", {"coupling": "x"}), "finite number"),
+])
+def test_bad_potential_names_and_parameters(bad, match):
+    with pytest.raises(ValueError, match=match):
+        make_potential(*bad)
