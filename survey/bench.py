@@ -1,0 +1,191 @@
+"""`python -m survey bench`: survey's DOP853 against scipy's DOP853 (NumPy right-hand side)
+and heyoka's Taylor integrator, all measured in the same run on the paper's two orbits.
+
+Speed claims are ratios against baselines timed here, never absolute numbers: machines
+differ, ratios on one machine in one run do not. Compilation (numba's cached load, heyoka's
+LLVM JIT) is timed separately from integration.
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from .dynamics import System
+from .families import initial_state
+from .integrator import integrate
+
+CASES = [("chaotic 'sides'", "sides", {}),
+         ("regular equilateral d=3", "equilateral", {"delta": 3.0})]
+
+
+def _best_time(fn, repeats):
+    best, out = math.inf, None
+    for _ in range(repeats):
+        t = time.perf_counter()
+        out = fn()
+        best = min(best, time.perf_counter() - t)
+    return best, out
+
+
+def deviation_vector(system: System, seed: int = 0) -> np.ndarray:
+    """Unit random deviation with zero total position and momentum deviation (a centre-of-
+    mass shift or boost never grows, so it carries no information)."""
+    w = np.random.default_rng(seed).normal(size=(2, system.n_bodies, system.dim))
+    w -= w.mean(axis=1, keepdims=True)
+    w = w.ravel()
+    return w / np.linalg.norm(w)
+
+
+def numpy_rhs(system: System, tangent: bool):
+    """A plain vectorised NumPy right-hand side for scipy (three bodies, U = c P^k / k), with
+    the tangent dynamics from the paper's one-jet (Appendix E)."""
+    m = np.repeat(system.masses, system.dim)
+    c, k = system.potential.params
+    N, d, n = system.n_bodies, system.dim, system.n
+    nq = n // 2
+    pairs = np.array([[0, 1], [1, 2], [2, 0]])
+
+    def f(_, y):
+        q = y[:nq].reshape(N, d)
+        r = q[pairs[:, 1]] - q[pairs[:, 0]]
+        L = np.linalg.norm(r, axis=1)
+        e = r / L[:, None]
+        P = L.sum()
+        U1, U2 = c * P ** (k - 1), c * (k - 1) * P ** (k - 2)
+        F = np.zeros((N, d))
+        np.add.at(F, pairs[:, 0], U1 * e)
+        np.add.at(F, pairs[:, 1], -U1 * e)
+        out = [y[nq:n] / m, F.ravel()]
+        if tangent:
+            dq = y[n:n + nq].reshape(N, d)
+            dr = dq[pairs[:, 1]] - dq[pairs[:, 0]]
+            edr = np.sum(e * dr, axis=1)
+            g = U2 * edr.sum() * e + U1 * (dr - e * edr[:, None]) / L[:, None]
+            dF = np.zeros((N, d))
+            np.add.at(dF, pairs[:, 0], g)
+            np.add.at(dF, pairs[:, 1], -g)
+            out += [y[n + nq:] / m, dF.ravel()]
+        return np.concatenate(out)
+    return f
+
+
+def heyoka_integrator(system: System, y0, tangent_vector, tol):
+    """heyoka Taylor integrator of the same system (U = c P^k / k); the tangent dynamics are
+    the symbolic derivative of the forces applied to one deviation vector."""
+    import heyoka as hy
+    N, d = system.n_bodies, system.dim
+    c, k = system.potential.params
+    q = hy.make_vars(*[f"q{i}" for i in range(N * d)])
+    p = hy.make_vars(*[f"p{i}" for i in range(N * d)])
+    pos = [q[i * d:(i + 1) * d] for i in range(N)]
+    P = sum(hy.sqrt(sum((pos[j][a] - pos[i][a]) ** 2 for a in range(d)))
+            for i, j in ((0, 1), (1, 2), (2, 0)))
+    U = c * P ** k / k
+    force = [-hy.diff(U, qi) for qi in q]
+    m = np.repeat(system.masses, d)
+    sys = [(q[i], p[i] / m[i]) for i in range(N * d)] + [(p[i], force[i]) for i in range(N * d)]
+    state = list(y0)
+    if tangent_vector is not None:
+        dq = hy.make_vars(*[f"dq{i}" for i in range(N * d)])
+        dp = hy.make_vars(*[f"dp{i}" for i in range(N * d)])
+        sys += [(dq[i], dp[i] / m[i]) for i in range(N * d)]
+        sys += [(dp[i], sum(hy.diff(force[i], q[j]) * dq[j] for j in range(N * d)))
+                for i in range(N * d)]
+        state += list(tangent_vector)
+    return hy.taylor_adaptive(sys, state, tol=tol)
+
+
+def run(t_final=2000.0, t_scipy=50.0, repeats=2, heyoka_tols=(1e-12, 1e-11, 1e-10, 1e-9),
+        out=print):
+    """Measure and print the comparison table; returns the rows as dicts."""
+    system = System.create()
+    tol = 1e-12
+    rows = []
+    t = time.perf_counter()
+    integrate(system, initial_state(system, "sides"), 1.0, tangents=deviation_vector(system))
+    out(f"numba kernels loaded/compiled in {time.perf_counter() - t:.2f} s (cached on disk)")
+    out(f"t = {t_final:g}, rtol = atol = {tol:g}, U = P^2/2, unit masses; wall times best of "
+        f"{repeats}; dE = |E(t)/E(0) - 1| at the end")
+    for label, family, params in CASES:
+        y0 = initial_state(system, family, **params)
+        E0 = system.energy(y0)
+        w0 = deviation_vector(system)
+        for with_tangent in (False, True):
+            kind = "orbit+tangent" if with_tangent else "orbit"
+            kw = dict(tangents=w0) if with_tangent else {}
+            wall, res = _best_time(lambda: integrate(system, y0, t_final, rtol=tol, atol=tol,
+                                                     **kw), repeats)
+            row = dict(case=label, kind=kind, survey_s=wall, steps=res.n_steps,
+                       rhs=res.n_rhs, dE=abs(system.energy(res.y) / E0 - 1))
+            # scipy on a shorter span, extrapolated by survey's own work ratio (same method,
+            # same steps): t_scipy(T) ~ t_scipy(t_short) * rhs(T) / rhs(t_short)
+            from scipy.integrate import solve_ivp
+            state0 = np.concatenate([y0, w0]) if with_tangent else y0
+            short = integrate(system, y0, t_scipy, rtol=tol, atol=tol, **kw)
+            f = numpy_rhs(system, with_tangent)
+            sp_wall, sp = _best_time(lambda: solve_ivp(f, (0, t_scipy), state0, method="DOP853",
+                                                       rtol=tol, atol=tol), 1)
+            row["scipy_s"] = sp_wall * res.n_rhs / short.n_rhs
+            row["scipy_check"] = float(np.abs(sp.y[:system.n, -1] - short.y).max())
+            row.update(_heyoka(system, y0, w0 if with_tangent else None, t_final, E0, row["dE"],
+                               heyoka_tols, repeats))
+            rows.append(row)
+    _print_table(rows, t_scipy, t_final, out)
+    return rows
+
+
+def _heyoka(system, y0, w0, t_final, E0, dE_survey, tols, repeats):
+    """heyoka at tol 1e-12 and at the loosest tolerance in `tols` whose energy error is not
+    above survey's ("similar energy error")."""
+    try:
+        import heyoka  # noqa: F401
+    except ImportError:
+        return {}
+    res = {}
+    matched = None
+    for tol in tols:
+        t = time.perf_counter()
+        ta = heyoka_integrator(system, y0, w0, tol)
+        compile_s = time.perf_counter() - t
+        start = np.array(ta.state)
+
+        def go():
+            ta.time = 0.0
+            ta.state[:] = start
+            return ta.propagate_until(t_final)
+        wall, r = _best_time(go, repeats)
+        dE = abs(system.energy(np.array(ta.state[:system.n])) / E0 - 1)
+        if tol == 1e-12:
+            res.update(hy12_s=wall, hy12_steps=r[3], hy12_dE=dE, hy_compile_s=compile_s)
+        if dE <= max(dE_survey, 1e-15):
+            matched = dict(hym_s=wall, hym_tol=tol, hym_steps=r[3], hym_dE=dE)
+    res.update(matched or {})
+    return res
+
+
+def _print_table(rows, t_scipy, t_final, out):
+    out("")
+    out(f"{'case':26s} {'kind':14s} {'survey s':>9s} {'steps':>8s} {'rhs':>9s} {'dE':>8s} | "
+        f"{'scipy s*':>9s} {'x':>6s} | {'heyoka 1e-12':>12s} {'dE':>8s} {'x':>5s} | "
+        f"{'heyoka tol':>10s} {'s':>7s} {'dE':>8s} {'x':>5s}")
+    for r in rows:
+        line = (f"{r['case']:26s} {r['kind']:14s} {r['survey_s']:9.3f} {r['steps']:8d} "
+                f"{r['rhs']:9d} {r['dE']:8.1e} | {r['scipy_s']:9.1f} "
+                f"{r['scipy_s'] / r['survey_s']:6.0f} |")
+        if "hy12_s" in r:
+            line += (f" {r['hy12_s']:12.3f} {r['hy12_dE']:8.1e} {r['hy12_s'] / r['survey_s']:5.2f} |")
+        if "hym_s" in r:
+            line += (f" {r['hym_tol']:10.0e} {r['hym_s']:7.3f} {r['hym_dE']:8.1e} "
+                     f"{r['hym_s'] / r['survey_s']:5.2f}")
+        out(line)
+    out("")
+    out(f"* scipy solve_ivp(DOP853) with a NumPy right-hand side, run to t = {t_scipy:g} and "
+        f"extrapolated to t = {t_final:g} by survey's own RHS-evaluation ratio (same method and "
+        "steps; its end state agrees with survey's to "
+        f"{max(r['scipy_check'] for r in rows):.0e}).")
+    out("x = baseline time / survey time (> 1: survey is faster). Targets: scipy x >= 100; "
+        "orbit+tangent heyoka x >= 1.")
+    if not any("hy12_s" in r for r in rows):
+        out("heyoka is not installed (pip install 'survey[bench]'): its columns are empty.")
