@@ -11,6 +11,49 @@ def _bench(args):
     return 0
 
 
+def _orbit(args):
+    """Integrate one family member with a tangent vector and report what it conserved."""
+    import time
+
+    import numpy as np
+
+    from .bench import deviation_vector
+    from .dynamics import System
+    from .families import initial_state
+    from .integrator import integrate
+
+    params = {}
+    for item in args.param:
+        key, _, value = item.partition("=")
+        try:
+            params[key] = float(value)
+        except ValueError:
+            print(f"error: --param {item!r}: expected KEY=NUMBER", file=sys.stderr)
+            return 2
+    try:
+        system = System.create(potential=args.potential)
+        y0 = initial_state(system, args.family, **params)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    E0, J0 = system.energy(y0), system.angular_momentum(y0)
+    t_eval = np.linspace(0.0, args.t_final, 1001)
+    start = time.perf_counter()
+    out = integrate(system, y0, args.t_final, tangents=deviation_vector(system),
+                    t_eval=t_eval, rtol=args.tol, atol=args.tol)
+    wall = time.perf_counter() - start
+    done = ~np.isnan(out.samples[:, 0])
+    s = out.samples[done]
+    print(f"{args.family} {params or ''} with {system.potential.describe()}")
+    print(f"E = {E0:.10g}, J = {J0:.10g}; integrated to t = {out.t:g}: {out.status.name}, "
+          f"{out.n_steps} steps, {out.n_rhs} RHS evaluations, {wall:.2f} s")
+    print(f"max |E/E0 - 1| = {np.abs(system.energy(s) / E0 - 1).max():.2e}, "
+          f"max |J - J0| = {np.abs(system.angular_momentum(s) - J0).max():.2e}, "
+          f"max |p_total| = {np.abs(system.momentum(s)).max():.2e}")
+    print(f"finite-time Lyapunov exponent ln(|w(t)|/|w0|)/t = {out.log_growth[0] / out.t:.5f}")
+    return 0
+
+
 def build_parser():
     parser = argparse.ArgumentParser(prog="python -m survey",
                                      description="Order and chaos in triplet-interaction "
@@ -22,6 +65,15 @@ def build_parser():
                    help="span scipy is run over before extrapolating (default 50)")
     b.add_argument("--repeats", type=int, default=2)
     b.set_defaults(func=_bench)
+    o = sub.add_parser("orbit", help="integrate one orbit of a paper family and report "
+                                     "conservation and its Lyapunov exponent")
+    o.add_argument("--family", default="sides")
+    o.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
+                   help="family parameter, e.g. --param delta=3 (repeatable)")
+    o.add_argument("--potential", default="perimetric_power")
+    o.add_argument("--t-final", type=float, default=500.0)
+    o.add_argument("--tol", type=float, default=1e-12, help="rtol = atol (default 1e-12)")
+    o.set_defaults(func=_orbit)
     return parser
 
 

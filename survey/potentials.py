@@ -33,10 +33,10 @@ MEASURES = {"perimetric": PERIMETER, "areal": AREA}
 
 # profile name -> (code, formula, ordered parameters with defaults)
 PROFILES = {
-    "power": (POWER, "coupling * x**exponent / exponent  (coupling * log(x) if exponent == 0)",
+    "power": (POWER, "coupling * {x}**exponent / exponent  (coupling * log({x}) if exponent == 0)",
               {"coupling": 1.0, "exponent": 2.0}),
-    "yukawa": (YUKAWA, "-coupling * exp(-gamma * x) / x", {"coupling": 1.0, "gamma": 1.0}),
-    "barrier": (BARRIER, "alpha / x + beta * x**2", {"alpha": 2.0, "beta": 1.0}),
+    "yukawa": (YUKAWA, "-coupling * exp(-gamma * {x}) / {x}", {"coupling": 1.0, "gamma": 1.0}),
+    "barrier": (BARRIER, "alpha / {x} + beta * {x}**2", {"alpha": 2.0, "beta": 1.0}),
 }
 
 POTENTIAL_NAMES = tuple(f"{m}_{p}" for m in MEASURES for p in PROFILES)
@@ -59,7 +59,7 @@ class Potential:
 
     def describe(self) -> str:
         x = "P" if self.measure == PERIMETER else "|A|"
-        formula = PROFILES[self.name.split("_", 1)[1]][1].replace("x", x)
+        formula = PROFILES[self.name.split("_", 1)[1]][1].format(x=x)
         values = ", ".join(f"{k}={v:g}" for k, v in zip(self.param_names, self.params))
         return f"{self.name}: U = {formula} with {values}"
 
