@@ -39,6 +39,10 @@ def _orbit(args):
     E0, J0 = system.energy(y0), system.angular_momentum(y0)
     t_eval = np.linspace(0.0, args.t_final, 1001)
     start = time.perf_counter()
+    integrate(system, y0, 1e-3, tangents=deviation_vector(system), t_eval=t_eval[:1])
+    print(f"compiled kernels ready in {time.perf_counter() - start:.1f} s "
+          "(cached on disk after the first run)")
+    start = time.perf_counter()
     out = integrate(system, y0, args.t_final, tangents=deviation_vector(system),
                     t_eval=t_eval, rtol=args.tol, atol=args.tol)
     wall = time.perf_counter() - start
