@@ -21,6 +21,11 @@ from .potentials import AREA, PERIMETER, profile
 SQ3 = math.sqrt(3.0)
 
 
+class Inaccessible(Exception):
+    """No initial condition exists at this grid point (e.g. U(q0) > E): a cell status, not
+    an input error."""
+
+
 def rotation(angle: float) -> np.ndarray:
     c, s = math.cos(angle), math.sin(angle)
     return np.array([[c, -s], [s, c]])
@@ -139,6 +144,33 @@ def _areal_example(system, velocity_u):
     return q, np.array([du, [0.0, 0.0], -du])
 
 
+def _section(system, energy, angular_momentum, sigma, p_sigma, eta, p_eta, phi, theta,
+             direction):
+    """A start on the surface phi = phi0 (default pi/2) on the energy shell H = E with
+    angular momentum J: from (sigma, p_sigma, eta, p_eta), p_phi solves the reduced
+    Hamiltonian, its sign the crossing direction (p_phi has the sign of dphi/dt). Where no
+    real p_phi exists the point is inaccessible. Centre of mass at rest at the origin."""
+    from .coordinates import Reduced, phi_momentum_coefficient, reduced_potential, to_cartesian
+    from .coordinates import JacobiMasses
+    if sigma <= 0 or eta <= 0:
+        raise ValueError(f"section start needs sigma > 0 and eta > 0, got {sigma}, {eta}")
+    if direction not in (-1, 1):
+        raise ValueError(f"section start direction must be +1 or -1, got {direction}")
+    m = JacobiMasses.of(system)
+    inertia = m.mu1 * sigma ** 2 + m.mu2 * eta ** 2
+    rest = (energy - float(reduced_potential(system, sigma, eta, phi))
+            - p_sigma ** 2 / (2 * m.mu1) - p_eta ** 2 / (2 * m.mu2)
+            - angular_momentum ** 2 / (2 * inertia))
+    if not rest >= 0:
+        raise Inaccessible(f"no real p_phi: E - U - (other kinetic terms) = {rest:.6g} < 0")
+    p_phi = direction * math.sqrt(rest / phi_momentum_coefficient(system, sigma, eta))
+    r = Reduced(*(np.float64(v) for v in (sigma, eta, phi, theta, p_sigma, p_eta, p_phi,
+                                          angular_momentum)))
+    y = to_cartesian(system, r)
+    q, p = system.split(y)
+    return q, p / system.masses[:, None]
+
+
 @dataclass(frozen=True)
 class Family:
     name: str
@@ -161,6 +193,9 @@ FAMILIES = {f.name: f for f in [
     Family("rotating_line", _rotating_line, dict(radius=2.5, angle=0.0)),
     Family("isosceles", _isosceles, dict(base=2.0, height=1.5, base_rate=0.0, height_rate=0.0)),
     Family("areal_example", _areal_example, dict(velocity_u=(1.0, 3.0))),
+    Family("section", _section, dict(energy=84.45577136594005, angular_momentum=24.401923788646684,
+                                     sigma=2 * SQ3, p_sigma=0.0, eta=3.0, p_eta=0.0,
+                                     phi=math.pi / 2, theta=0.0, direction=1)),
 ]}
 
 
@@ -171,9 +206,12 @@ def family_parameters(name: str) -> dict:
     return dict(FAMILIES[name].defaults)
 
 
-def initial_state(system: System, family: str, **params) -> np.ndarray:
+def initial_state(system: System, family: str, energy=None, **params) -> np.ndarray:
     """Flat state (positions, momenta) of a family member; parameters not given take the
-    family's defaults."""
+    family's defaults. With a target `energy`, the centre-of-mass-frame velocities are
+    rescaled so that K + U = energy (raises Inaccessible where U(q0) > energy, or where
+    there is no relative motion to rescale); a family with its own energy parameter
+    (`section`) starts on the shell directly."""
     defaults = family_parameters(family)
     unknown = sorted(set(params) - set(defaults))
     if unknown:
@@ -182,7 +220,31 @@ def initial_state(system: System, family: str, **params) -> np.ndarray:
     if system.n_bodies != 3:
         raise ValueError(f"family {family!r} is a three-body family; the system has "
                          f"{system.n_bodies} bodies")
+    own_energy = "energy" in defaults
+    if energy is not None and own_energy:
+        params["energy"] = energy
     q, vel = FAMILIES[family].build(system, **{**defaults, **params})
     if system.dim == 3:
         q, vel = (np.pad(x, ((0, 0), (0, 1))) for x in (q, vel))
-    return system.state(q, vel * system.masses[:, None])
+    y = system.state(q, vel * system.masses[:, None])
+    if energy is not None and not own_energy:
+        y = with_energy(system, y, energy)
+    return y
+
+
+def with_energy(system: System, y, energy: float) -> np.ndarray:
+    """Rescale the velocities relative to the centre of mass so that H = energy."""
+    q, p = system.split(y)
+    m = system.masses[:, None]
+    v_cm = p.sum(axis=0) / system.masses.sum()
+    rel = p / m - v_cm
+    k_rel = 0.5 * np.sum(m * rel ** 2)
+    k_cm = 0.5 * system.masses.sum() * np.dot(v_cm, v_cm)
+    u = system.potential_energy(y)
+    room = energy - u - k_cm
+    if not room >= 0:
+        raise Inaccessible(f"U(q0) = {u:.6g} exceeds the target energy {energy:.6g}")
+    if k_rel == 0 and room > 0:
+        raise Inaccessible("the start has no relative motion to rescale to the target energy")
+    scale = math.sqrt(room / k_rel) if k_rel > 0 else 0.0
+    return system.state(q, m * (v_cm + scale * rel))

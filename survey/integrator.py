@@ -320,13 +320,11 @@ def event_value(e, events, y, masses, d):
     if c == EV_LINEAR:
         for a in range(n):
             g += f[1 + a] * y[a]
-    elif c == EV_QUADRATIC:
+    elif c == EV_QUADRATIC:   # f = [offset, linear (n), then (i, j, Q_ij) per nonzero]
         for a in range(n):
-            qa = f[1 + a]
-            row = 1 + n + a * n
-            for b in range(n):
-                qa += f[row + b] * y[b]
-            g += qa * y[a]
+            g += f[1 + a] * y[a]
+        for z in range(1 + n, f.size, 3):
+            g += f[z + 2] * y[int(f[z])] * y[int(f[z + 1])]
     else:
         i, j, k = trip[e, 0], trip[e, 1], trip[e, 2]
         u, v, w = vec(y, i * d, d), vec(y, j * d, d), vec(y, k * d, d)
@@ -396,6 +394,70 @@ def _brent(e, a, b, fa, fb, xtol, F, y, nd, yd, events, masses, d):
     return b
 
 
+@kernel
+def _event_slope(e, events, y, f, n, buf, masses, d, h):
+    """dg/dt = grad g . f by a central difference along the flow (for screening only)."""
+    dt = 1e-4 * abs(h)
+    for a in range(n):
+        buf[a] = y[a] + dt * f[a]
+    gp = event_value(e, events, buf, masses, d)
+    for a in range(n):
+        buf[a] = y[a] - dt * f[a]
+    return (gp - event_value(e, events, buf, masses, d)) / (2.0 * dt)
+
+
+@kernel
+def _may_cross(g0, s0, g1, s1, h, n_sub):
+    """Whether g may vanish on a step: a sign change at the ends, or the cubic Hermite model
+    of g through (g0, g0') and (g1, g1') changing sign or coming within 1% of the step's
+    variation scale of zero at a sub-interval point (double crossings inside the step)."""
+    if (g0 < 0.0) != (g1 < 0.0) or g0 == 0.0 or g1 == 0.0:
+        return True
+    a0, a1 = h * s0, h * s1
+    margin = 0.01 * (abs(g0) + abs(g1) + abs(a0) + abs(a1))
+    for k in range(1, 2 * n_sub):
+        x = k / (2.0 * n_sub)
+        x2 = x * x
+        x3 = x2 * x
+        G = ((2 * x3 - 3 * x2 + 1) * g0 + (x3 - 2 * x2 + x) * a0 + (3 * x2 - 2 * x3) * g1
+             + (x3 - x2) * a1)
+        if (G < 0.0) != (g0 < 0.0) or abs(G) < margin:
+            return True
+    return False
+
+
+@kernel
+def _scan(e, g0, g1, n_sub, h, xtol, F, y, n, yd, events, masses, d, found_x, found_e,
+          n_found):
+    """Crossings of event e on a step: sign changes between n_sub sub-interval points of the
+    dense output, each refined by Brent's method, kept if in the event's direction and its
+    guard is > 0; appended to (found_x, found_e) in time order. Returns the new count."""
+    direc, guard = events[4], events[6]
+    ga = g0
+    xa = 0.0
+    for s in range(1, n_sub + 1):
+        xb = s / n_sub
+        gb = g1 if s == n_sub else _g_at(xb, e, F, y, n, yd, events, masses, d)
+        crossed = (ga < 0.0 and gb >= 0.0) or (ga > 0.0 and gb <= 0.0)
+        rising = (gb > ga) == (h > 0.0)
+        if crossed and (direc[e] == 0 or (direc[e] > 0) == rising):
+            xr = xb if gb == 0.0 else _brent(e, xa, xb, ga, gb, xtol, F, y, n, yd, events,
+                                            masses, d)
+            _dense_eval(F, y, xr, n, yd)
+            if guard[e] < 0 or event_value(guard[e], events, yd, masses, d) > 0.0:
+                p = n_found
+                while p > 0 and found_x[p - 1] > xr:
+                    found_x[p] = found_x[p - 1]
+                    found_e[p] = found_e[p - 1]
+                    p -= 1
+                found_x[p] = xr
+                found_e[p] = e
+                n_found += 1
+        ga = gb
+        xa = xb
+    return n_found
+
+
 # ---------------------------------------------------------------- the driver
 
 @kernel
@@ -442,9 +504,13 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
     sample_log = np.full((t_eval.size, n_tan), np.nan)
     log_growth = np.zeros(n_tan)
     max_log = np.zeros(n_tan)
-    code, direc, terminal, guard, watch = events[0], events[4], events[5], events[6], events[7]
+    code, terminal, watch = events[0], events[5], events[7]
     m = code.size
     g_old = np.zeros(m)
+    s_old = np.zeros(m)
+    g_new = np.zeros(m)
+    s_new = np.zeros(m)
+    todo = np.zeros(m, dtype=np.bool_)
     found_x = np.zeros(max(1, m * n_sub))
     found_e = np.zeros(max(1, m * n_sub), dtype=np.int64)
 
@@ -469,7 +535,9 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
         sample_log[i_eval, :] = log_growth
         i_eval += 1
     for e in range(m):
-        g_old[e] = event_value(e, events, y, masses, d)
+        if watch[e]:
+            g_old[e] = event_value(e, events, y, masses, d)
+            s_old[e] = _event_slope(e, events, y, K[0], n, yd, masses, d, 1.0)
     t_next_renorm = t0 + direction * renorm_dt
     span = abs(t1 - t0)
     if span == 0.0:
@@ -549,42 +617,29 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
         x_stop = 1.0
         terminal_hit = False
         if m > 0:
-            _dense_prepare(masses, d, measure, prof, par, n_tan, megno, t0, n, False, t, y, ynew, h, K, yt, F)
-            counts[2] += 3
-            nd_ready = n
-            xtol = 4.0 * EPS * max(abs(t), abs(t_new)) / abs(h)
-            n_found = 0
+            # screen every watched event on a cubic model of g(t); scan only steps whose
+            # model may cross zero, on the 7th-order dense output
+            scan = False
             for e in range(m):
-                if watch[e] == 0:
-                    continue
-                ga = g_old[e]
-                xa = 0.0
-                for s in range(1, n_sub + 1):
-                    if s == n_sub:
-                        xb = 1.0
-                        gb = event_value(e, events, ynew, masses, d)
-                        g_old[e] = gb
-                    else:
-                        xb = s / n_sub
-                        gb = _g_at(xb, e, F, y, n, yd, events, masses, d)
-                    crossed = (ga < 0.0 and gb >= 0.0) or (ga > 0.0 and gb <= 0.0)
-                    rising = (gb > ga) == (h > 0.0)
-                    if crossed and (direc[e] == 0 or (direc[e] > 0) == rising):
-                        xr = xb if gb == 0.0 else _brent(e, xa, xb, ga, gb, xtol, F, y, n, yd,
-                                                        events, masses, d)
-                        _dense_eval(F, y, xr, n, yd)
-                        if guard[e] < 0 or event_value(guard[e], events, yd, masses, d) > 0.0:
-                            # insertion keeps crossings of this step in time order
-                            p = n_found
-                            while p > 0 and found_x[p - 1] > xr:
-                                found_x[p] = found_x[p - 1]
-                                found_e[p] = found_e[p - 1]
-                                p -= 1
-                            found_x[p] = xr
-                            found_e[p] = e
-                            n_found += 1
-                    ga = gb
-                    xa = xb
+                if watch[e]:
+                    g_new[e] = event_value(e, events, ynew, masses, d)
+                    s_new[e] = _event_slope(e, events, ynew, K[12], n, yd, masses, d, h)
+                    todo[e] = _may_cross(g_old[e], s_old[e], g_new[e], s_new[e], h, n_sub)
+                    scan = scan or todo[e]
+            n_found = 0
+            if scan:
+                _dense_prepare(masses, d, measure, prof, par, n_tan, megno, t0, n, False, t, y,
+                               ynew, h, K, yt, F)
+                counts[2] += 3
+                nd_ready = n
+                xtol = 4.0 * EPS * max(abs(t), abs(t_new)) / abs(h)
+                for e in range(m):
+                    if todo[e]:
+                        n_found = _scan(e, g_old[e], g_new[e], n_sub, h, xtol, F, y, n, yd,
+                                        events, masses, d, found_x, found_e, n_found)
+            for e in range(m):
+                g_old[e] = g_new[e]
+                s_old[e] = s_new[e]
             for p in range(n_found):
                 xr = found_x[p]
                 if n_ev_total < max_events:
@@ -694,7 +749,9 @@ class Quadratic(EventFunction):
         if Q.shape != (n, n):
             raise ValueError(f"Quadratic event needs a ({n}, {n}) matrix, got {Q.shape}")
         c = np.zeros(n) if self.linear is None else np.asarray(self.linear, float).ravel()
-        return EV_QUADRATIC, (0, 0, 0), np.concatenate([[self.offset], c, Q.ravel()])
+        i, j = np.nonzero(Q)
+        coo = np.stack([i, j, Q[i, j]], axis=1).ravel()
+        return EV_QUADRATIC, (0, 0, 0), np.concatenate([[self.offset], c, coo])
 
 
 @dataclass(frozen=True)
@@ -792,6 +849,7 @@ class Outcome(NamedTuple):
     t: float                  # time reached
     y: np.ndarray             # final orbit state (n,)
     tangents: np.ndarray      # final tangent vectors, rescaled (n_tan, n)
+    tangent_norms0: np.ndarray  # |w(t0)| per tangent vector
     megno_sums: np.ndarray    # final MEGNO accumulators (n_tan, 2), empty without MEGNO
     log_growth: np.ndarray    # ln(|w(t)| / |w(t0)|) per tangent vector
     fli: np.ndarray           # max over step ends of ln(|w| / |w0|) per tangent vector
@@ -815,7 +873,8 @@ class Outcome(NamedTuple):
         """Tangent vectors at their true length |w0| e^log_growth (inf past e^709)."""
         norms = np.linalg.norm(self.tangents, axis=1, keepdims=True)
         with np.errstate(over="ignore"):
-            return self.tangents / norms * np.exp(self.log_growth)[:, None]
+            scale = self.tangent_norms0 * np.exp(self.log_growth)
+            return self.tangents / norms * scale[:, None]
 
 
 def integrate(system: System, y0, t_span, *, tangents=None, megno=False, rtol=1e-12,
@@ -865,6 +924,7 @@ def integrate(system: System, y0, t_span, *, tangents=None, megno=False, rtol=1e
     kept = min(int(counts[3]), int(max_events))
     return Outcome(
         status=Status(status), t=float(t), y=y[:n].copy(), tangents=tans.copy(),
+        tangent_norms0=np.linalg.norm(tan, axis=1),
         megno_sums=y[n * (1 + n_tan):].reshape(n_tan, -1).copy() if megno else np.zeros((n_tan, 0)),
         log_growth=log_g + np.log(norms), fli=np.maximum(max_log, log_g + np.log(norms)),
         n_steps=int(counts[0]), n_rejected=int(counts[1]), n_rhs=int(counts[2]),

@@ -194,3 +194,23 @@ def test_isosceles_stays_isosceles_and_follows_the_reduced_equations(paper_syste
     u, v, w = paper_system.triangle(out.samples[:short.size])
     np.testing.assert_allclose(w[:, 0] - u[:, 0], ref.y[0], atol=1e-9)
     np.testing.assert_allclose(v[:, 1] - u[:, 1], ref.y[1], atol=1e-9)
+
+
+def test_near_collisions_of_the_delta_4p5_orbit(paper_system):
+    """Paper, delta = 4.5: first near collision at t = 0.498 with b = 0.0924; v and w near
+    collide at t = 20.212 with a = 0.0440; the closest approach for t <= 500 is
+    a(30.790) = 0.0004372 -- early enough to be reproducible (minima located as events)."""
+    y0 = initial_state(paper_system, "equilateral", delta=4.5)
+    minima = [Event(SidesRate(w), direction=+1) for w in ((1, 0, 0), (0, 1, 0), (0, 0, 1))]
+    out = integrate(paper_system, y0, 500.0, events=minima)
+    s = sides(*paper_system.triangle(out.crossings.y))
+    value = s[np.arange(len(s)), out.crossings.index]
+    t, which = out.crossings.t, out.crossings.index
+    first = np.argmin(np.where(t < 1.0, value, np.inf))
+    assert which[first] == 1 and t[first] == pytest.approx(0.498, abs=5e-4)
+    assert value[first] == pytest.approx(0.0924, abs=5e-5)
+    near20 = (which == 0) & (np.abs(t - 20.212) < 5e-4)
+    assert near20.sum() == 1 and value[near20][0] == pytest.approx(0.0440, abs=5e-5)
+    closest = np.argmin(value)
+    assert which[closest] == 0 and t[closest] == pytest.approx(30.790, abs=5e-4)
+    assert value[closest] == pytest.approx(0.0004372, abs=5e-8)
