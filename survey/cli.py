@@ -8,6 +8,7 @@ import sys
 def _bench(args):
     from . import bench
     bench.run(t_final=args.t_final, t_scipy=args.t_scipy, repeats=args.repeats)
+    bench.indicator_overhead(t_final=args.t_final)
     return 0
 
 

@@ -51,8 +51,8 @@ class ChaosIndicators(NamedTuple):
     t: float
     ftle: float            # mean over the ensemble of ln(|w(t)|/|w0|)/t
     ftle_spread: float     # standard deviation over the ensemble (0 for one member)
-    megno: float           # <Y>(t), ensemble mean
-    megno_spread: float
+    megno: float           # <Y>(t), mean over the nominal and perturbed orbits
+    megno_spread: float    # 0 without perturbed orbits
     megno_slope: float     # least-squares d<Y>/dt over the history's second half (~lambda/2)
     fli: float             # first deviation vector
     sali: float            # nan with one deviation vector
@@ -140,12 +140,12 @@ def chaos_indicators(system: System, y0, t_final: float, options=IndicatorOption
     reached = ~np.isnan(history) & (history <= out.t)
     th = np.where(reached, history, np.nan)
     tang = out.samples[:, n:n * (1 + k)].reshape(-1, k, n)
-    z = out.samples[:, n * (1 + k):].reshape(-1, k, 2)
+    z = out.samples[:, n * (1 + k):]
     ftle_h = out.sample_log_growth / th[:, None]
-    megno_h = z[:, :, 1] / th[:, None]
+    megno_h = z[:, 1] / th
 
     ftles = list(out.log_growth / out.t) if out.t > 0 else [np.nan] * k
-    megnos = list(out.megno_sums[:, 1] / out.t) if out.t > 0 else [np.nan] * k
+    megnos = [out.megno_sums[1] / out.t if out.t > 0 else np.nan]
     for j in range(o.perturbations):
         xi = deviation_vectors(system, y0, 1, o.seed, cell, stream=1 + j)[0]
         yp = y0 + o.perturbation_size * np.linalg.norm(y0) * xi
@@ -154,7 +154,7 @@ def chaos_indicators(system: System, y0, t_final: float, options=IndicatorOption
                         max_steps=max_steps, renorm_interval=o.renorm_interval)
         if res.ok and res.t > 0:
             ftles.append(res.log_growth[0] / res.t)
-            megnos.append(res.megno_sums[0, 1] / res.t)
+            megnos.append(res.megno_sums[1] / res.t)
     spread = lambda v: float(np.std(v, ddof=1)) if len(v) > 1 else 0.0
 
     if k >= 2:
@@ -175,10 +175,10 @@ def chaos_indicators(system: System, y0, t_final: float, options=IndicatorOption
         status=out.status, t=out.t,
         ftle=float(np.mean(ftles)), ftle_spread=spread(ftles),
         megno=float(np.mean(megnos)), megno_spread=spread(megnos),
-        megno_slope=_ls_slope(th[half], megno_h[half].mean(axis=1)),
+        megno_slope=_ls_slope(th[half], megno_h[half]),
         fli=float(out.fli[0]), sali=float(sali), gali2=float(gali2),
         history_time=history, ftle_history=ftle_h.mean(axis=1),
-        megno_history=megno_h.mean(axis=1), fli_history=fli_h, sali_history=sali_h,
+        megno_history=megno_h, fli_history=fli_h, sali_history=sali_h,
         energy_error=float(np.max(np.abs(system.energy(states) / E0 - 1))),
         angular_momentum_error=float(np.max(np.linalg.norm(dJ.reshape(len(states), -1), axis=1))
                                      / max(np.linalg.norm(J0), 1.0)),

@@ -310,32 +310,32 @@ EV_LINEAR, EV_QUADRATIC, EV_SIDES, EV_SIDES_RATE, EV_AREA = 0, 1, 2, 3, 4
 
 
 @kernel
-def event_value(e, events, y, masses, d):
-    """Value of event function e at orbit state y."""
-    code, trip, foff, fpar = events[0], events[1], events[2], events[3]
-    f = fpar[foff[e]:foff[e + 1]]
-    c = code[e]
-    n = 2 * masses.size * d
-    g = f[0]
-    if c == EV_LINEAR:
-        for a in range(n):
-            g += f[1 + a] * y[a]
-    elif c == EV_QUADRATIC:   # f = [offset, linear (n), then (i, j, Q_ij) per nonzero]
-        for a in range(n):
-            g += f[1 + a] * y[a]
-        for z in range(1 + n, f.size, 3):
-            g += f[z + 2] * y[int(f[z])] * y[int(f[z + 1])]
+def event_value(ep, f0, y, masses, d):
+    """Value at orbit state y of the event function whose record starts at ep[f0]:
+    [code, i, j, k, offset, parameters...] (i, j, k: the triplet of side/area functions)."""
+    c = int(ep[f0])
+    g = ep[f0 + 4]
+    p = f0 + 5
+    if c == EV_LINEAR or c == EV_QUADRATIC:
+        # sparse: count, then (i, c_i)...; for quadratic forms also count, (i, j, Q_ij)...
+        # with each pair i <= j once
+        end = p + 1 + 2 * int(ep[p])
+        for z in range(p + 1, end, 2):
+            g += ep[z + 1] * y[int(ep[z])]
+        if c == EV_QUADRATIC:
+            for z in range(end + 1, end + 1 + 3 * int(ep[end]), 3):
+                g += ep[z + 2] * y[int(ep[z])] * y[int(ep[z + 1])]
     else:
-        i, j, k = trip[e, 0], trip[e, 1], trip[e, 2]
+        i, j, k = int(ep[f0 + 1]), int(ep[f0 + 2]), int(ep[f0 + 3])
         u, v, w = vec(y, i * d, d), vec(y, j * d, d), vec(y, k * d, d)
         if c == EV_AREA:
             A = cross(sub(v, u), sub(w, u))
-            g += f[1] * (0.5 * A[2] if d == 2 else 0.5 * norm(A))
+            g += ep[p] * (0.5 * A[2] if d == 2 else 0.5 * norm(A))
         else:
             wv, uw, vu = sub(w, v), sub(u, w), sub(v, u)
             a_, b_, c_ = norm(wv), norm(uw), norm(vu)
             if c == EV_SIDES:
-                g += f[1] * a_ + f[2] * b_ + f[3] * c_
+                g += ep[p] * a_ + ep[p + 1] * b_ + ep[p + 2] * c_
             else:
                 nq = masses.size * d
                 pu, pv, pw = vec(y, nq + i * d, d), vec(y, nq + j * d, d), vec(y, nq + k * d, d)
@@ -343,20 +343,20 @@ def event_value(e, events, y, masses, d):
                 vu_ = (pu[0] * mu, pu[1] * mu, pu[2] * mu)
                 vv_ = (pv[0] * mv, pv[1] * mv, pv[2] * mv)
                 vw_ = (pw[0] * mw, pw[1] * mw, pw[2] * mw)
-                g += (f[1] * dot(wv, sub(vw_, vv_)) / a_ + f[2] * dot(uw, sub(vu_, vw_)) / b_
-                      + f[3] * dot(vu, sub(vv_, vu_)) / c_)
+                g += (ep[p] * dot(wv, sub(vw_, vv_)) / a_ + ep[p + 1] * dot(uw, sub(vu_, vw_)) / b_
+                      + ep[p + 2] * dot(vu, sub(vv_, vu_)) / c_)
     return g
 
 
 @kernel
-def _g_at(x, e, F, y, nd, yd, events, masses, d):
+def _g_at(x, ep, f0, F, y, nd, yd, masses, d):
     _dense_eval(F, y, x, nd, yd)
-    return event_value(e, events, yd, masses, d)
+    return event_value(ep, f0, yd, masses, d)
 
 
 @kernel
-def _brent(e, a, b, fa, fb, xtol, F, y, nd, yd, events, masses, d):
-    """Root of g_e(dense(x)) bracketed by [a, b] (Brent 1973)."""
+def _brent(ep, f0, a, b, fa, fb, xtol, F, y, nd, yd, masses, d):
+    """Root of g(dense(x)) bracketed by [a, b] (Brent 1973); g's record starts at ep[f0]."""
     c, fc = a, fa
     dd = ee = b - a
     for _ in range(200):
@@ -390,61 +390,82 @@ def _brent(e, a, b, fa, fb, xtol, F, y, nd, yd, events, masses, d):
             dd = ee = m
         a, fa = b, fb
         b += dd if abs(dd) > tol else (tol if m > 0.0 else -tol)
-        fb = _g_at(b, e, F, y, nd, yd, events, masses, d)
+        fb = _g_at(b, ep, f0, F, y, nd, yd, masses, d)
     return b
 
 
 @kernel
-def _event_slope(e, events, y, f, n, buf, masses, d, h):
-    """dg/dt = grad g . f by a central difference along the flow (for screening only)."""
+def _event_slope(ep, f0, y, f, n, buf, masses, d, h):
+    """dg/dt = grad g . f: exact for linear and quadratic forms, otherwise by a central
+    difference along the flow (it only feeds the screening model)."""
+    c = int(ep[f0])
+    p = f0 + 5
+    if c == EV_LINEAR or c == EV_QUADRATIC:
+        end = p + 1 + 2 * int(ep[p])
+        s = 0.0
+        for z in range(p + 1, end, 2):
+            s += ep[z + 1] * f[int(ep[z])]
+        if c == EV_QUADRATIC:
+            for z in range(end + 1, end + 1 + 3 * int(ep[end]), 3):
+                i, j = int(ep[z]), int(ep[z + 1])
+                s += ep[z + 2] * (f[i] * y[j] + y[i] * f[j])
+        return s
     dt = 1e-4 * abs(h)
     for a in range(n):
         buf[a] = y[a] + dt * f[a]
-    gp = event_value(e, events, buf, masses, d)
+    gp = event_value(ep, f0, buf, masses, d)
     for a in range(n):
         buf[a] = y[a] - dt * f[a]
-    return (gp - event_value(e, events, buf, masses, d)) / (2.0 * dt)
+    return (gp - event_value(ep, f0, buf, masses, d)) / (2.0 * dt)
 
 
 @kernel
-def _may_cross(g0, s0, g1, s1, h, n_sub):
+def _may_cross(g0, s0, g1, s1, h):
     """Whether g may vanish on a step: a sign change at the ends, or the cubic Hermite model
     of g through (g0, g0') and (g1, g1') changing sign or coming within 1% of the step's
-    variation scale of zero at a sub-interval point (double crossings inside the step)."""
+    variation scale of zero at one of its extrema inside the step (a double crossing)."""
     if (g0 < 0.0) != (g1 < 0.0) or g0 == 0.0 or g1 == 0.0:
         return True
     a0, a1 = h * s0, h * s1
     margin = 0.01 * (abs(g0) + abs(g1) + abs(a0) + abs(a1))
-    for k in range(1, 2 * n_sub):
-        x = k / (2.0 * n_sub)
-        x2 = x * x
-        x3 = x2 * x
-        G = ((2 * x3 - 3 * x2 + 1) * g0 + (x3 - 2 * x2 + x) * a0 + (3 * x2 - 2 * x3) * g1
-             + (x3 - x2) * a1)
-        if (G < 0.0) != (g0 < 0.0) or abs(G) < margin:
-            return True
+    # G(x) = A x^3 + B x^2 + a0 x + g0 on [0, 1]; G'(x) = 3A x^2 + 2B x + a0
+    A = 2.0 * (g0 - g1) + a0 + a1
+    B = 3.0 * (g1 - g0) - 2.0 * a0 - a1
+    disc = B * B - 3.0 * A * a0
+    if disc < 0.0:
+        return False
+    r = math.sqrt(disc)
+    if A != 0.0:
+        x1, x2 = (-B + r) / (3.0 * A), (-B - r) / (3.0 * A)
+    else:
+        x1 = x2 = -a0 / (2.0 * B)
+    for x in (x1, x2):
+        if 0.0 < x < 1.0:
+            G = ((A * x + B) * x + a0) * x + g0
+            if (G < 0.0) != (g0 < 0.0) or abs(G) < margin:
+                return True
     return False
 
 
 @kernel
-def _scan(e, g0, g1, n_sub, h, xtol, F, y, n, yd, events, masses, d, found_x, found_e,
-          n_found):
-    """Crossings of event e on a step: sign changes between n_sub sub-interval points of the
-    dense output, each refined by Brent's method, kept if in the event's direction and its
-    guard is > 0; appended to (found_x, found_e) in time order. Returns the new count."""
-    direc, guard = events[4], events[6]
+def _scan(ep, f0, g0, g1, want, guard0, n_sub, h, xtol, F, y, n, yd, masses, d, found_x,
+          found_e, e, n_found):
+    """Crossings of one event on a step: sign changes between n_sub sub-interval points of
+    the dense output, each refined by Brent's method, kept if in direction `want` (+1, -1,
+    0: both) and the guard (record at ep[guard0], none if < 0) is > 0; appended as (x, e) to
+    (found_x, found_e) in time order. Returns the new count."""
     ga = g0
     xa = 0.0
     for s in range(1, n_sub + 1):
         xb = s / n_sub
-        gb = g1 if s == n_sub else _g_at(xb, e, F, y, n, yd, events, masses, d)
+        gb = g1 if s == n_sub else _g_at(xb, ep, f0, F, y, n, yd, masses, d)
         crossed = (ga < 0.0 and gb >= 0.0) or (ga > 0.0 and gb <= 0.0)
         rising = (gb > ga) == (h > 0.0)
-        if crossed and (direc[e] == 0 or (direc[e] > 0) == rising):
-            xr = xb if gb == 0.0 else _brent(e, xa, xb, ga, gb, xtol, F, y, n, yd, events,
+        if crossed and (want == 0 or (want > 0) == rising):
+            xr = xb if gb == 0.0 else _brent(ep, f0, xa, xb, ga, gb, xtol, F, y, n, yd,
                                             masses, d)
             _dense_eval(F, y, xr, n, yd)
-            if guard[e] < 0 or event_value(guard[e], events, yd, masses, d) > 0.0:
+            if guard0 < 0 or event_value(ep, guard0, yd, masses, d) > 0.0:
                 p = n_found
                 while p > 0 and found_x[p - 1] > xr:
                     found_x[p] = found_x[p - 1]
@@ -473,7 +494,7 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
            events, max_events, n_sub, t_eval, n_eval, renorm_dt):
     """Integrate the orbit (+ n_tan tangent vectors, + MEGNO accumulators) from t0 to t1.
 
-    events: (code, triplet, foff, fpar, direction, terminal, guard, watch) arrays; a watched
+    events: (offsets, records, direction, terminal, guard, watch) arrays; a watched
     event e records every crossing of g_e = 0 in its direction (+1 rising in time, -1
     falling, 0 both) where its guard function (index, or -1) is > 0; n_sub sub-intervals per
     step are scanned, so two crossings in one step are both found. t_eval: output times
@@ -504,8 +525,8 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
     sample_log = np.full((t_eval.size, n_tan), np.nan)
     log_growth = np.zeros(n_tan)
     max_log = np.zeros(n_tan)
-    code, terminal, watch = events[0], events[5], events[7]
-    m = code.size
+    eoff, ep, direc, terminal, guard, watch = events
+    m = eoff.size - 1
     g_old = np.zeros(m)
     s_old = np.zeros(m)
     g_new = np.zeros(m)
@@ -536,8 +557,8 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
         i_eval += 1
     for e in range(m):
         if watch[e]:
-            g_old[e] = event_value(e, events, y, masses, d)
-            s_old[e] = _event_slope(e, events, y, K[0], n, yd, masses, d, 1.0)
+            g_old[e] = event_value(ep, eoff[e], y, masses, d)
+            s_old[e] = _event_slope(ep, eoff[e], y, K[0], n, yd, masses, d, 1.0)
     t_next_renorm = t0 + direction * renorm_dt
     span = abs(t1 - t0)
     if span == 0.0:
@@ -622,9 +643,9 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
             scan = False
             for e in range(m):
                 if watch[e]:
-                    g_new[e] = event_value(e, events, ynew, masses, d)
-                    s_new[e] = _event_slope(e, events, ynew, K[12], n, yd, masses, d, h)
-                    todo[e] = _may_cross(g_old[e], s_old[e], g_new[e], s_new[e], h, n_sub)
+                    g_new[e] = event_value(ep, eoff[e], ynew, masses, d)
+                    s_new[e] = _event_slope(ep, eoff[e], ynew, K[12], n, yd, masses, d, h)
+                    todo[e] = _may_cross(g_old[e], s_old[e], g_new[e], s_new[e], h)
                     scan = scan or todo[e]
             n_found = 0
             if scan:
@@ -635,8 +656,10 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
                 xtol = 4.0 * EPS * max(abs(t), abs(t_new)) / abs(h)
                 for e in range(m):
                     if todo[e]:
-                        n_found = _scan(e, g_old[e], g_new[e], n_sub, h, xtol, F, y, n, yd,
-                                        events, masses, d, found_x, found_e, n_found)
+                        g0 = eoff[guard[e]] if guard[e] >= 0 else -1
+                        n_found = _scan(ep, eoff[e], g_old[e], g_new[e], direc[e], g0, n_sub,
+                                        h, xtol, F, y, n, yd, masses, d, found_x, found_e, e,
+                                        n_found)
             for e in range(m):
                 g_old[e] = g_new[e]
                 s_old[e] = s_new[e]
@@ -730,7 +753,9 @@ class Linear(EventFunction):
         c = np.asarray(self.coefficients, dtype=np.float64).ravel()
         if c.size != system.n:
             raise ValueError(f"Linear event needs {system.n} coefficients, got {c.size}")
-        return EV_LINEAR, (0, 0, 0), np.concatenate([[self.offset], c])
+        i = np.flatnonzero(c)
+        return EV_LINEAR, (0, 0, 0), np.concatenate([[self.offset, i.size],
+                                                     np.stack([i, c[i]], 1).ravel()])
 
 
 @dataclass(frozen=True)
@@ -749,9 +774,12 @@ class Quadratic(EventFunction):
         if Q.shape != (n, n):
             raise ValueError(f"Quadratic event needs a ({n}, {n}) matrix, got {Q.shape}")
         c = np.zeros(n) if self.linear is None else np.asarray(self.linear, float).ravel()
-        i, j = np.nonzero(Q)
-        coo = np.stack([i, j, Q[i, j]], axis=1).ravel()
-        return EV_QUADRATIC, (0, 0, 0), np.concatenate([[self.offset], c, coo])
+        lin = np.flatnonzero(c)
+        upper = np.triu(Q + Q.T) - np.diag(np.diag(Q))   # y^T Q y = sum_{i<=j} upper_ij y_i y_j
+        i, j = np.nonzero(upper)
+        return EV_QUADRATIC, (0, 0, 0), np.concatenate([
+            [self.offset, lin.size], np.stack([lin, c[lin]], 1).ravel(),
+            [i.size], np.stack([i, j, upper[i, j]], 1).ravel()])
 
 
 @dataclass(frozen=True)
@@ -820,18 +848,17 @@ def encode_events(events: Sequence[Event], system: System):
         else:
             guards.append(len(funcs))
             funcs.append(ev.guard)
-    enc = [f.encode(system) for f in funcs]
+    records = [np.concatenate([[code, *triplet], params]) for code, triplet, params in
+               (f.encode(system) for f in funcs)]
     m, k = len(funcs), len(events)
-    code = np.array([e[0] for e in enc], dtype=np.int64)
-    trip = np.array([e[1] for e in enc], dtype=np.int64).reshape(m, 3)
-    foff = np.concatenate([[0], np.cumsum([e[2].size for e in enc])]).astype(np.int64)
-    fpar = np.concatenate([e[2] for e in enc]) if enc else np.zeros(0)
+    offsets = np.concatenate([[0], np.cumsum([r.size for r in records])]).astype(np.int64)
+    ep = np.concatenate(records) if records else np.zeros(0)
     pad = np.zeros(m - k, dtype=np.int64)
     direction = np.concatenate([[ev.direction for ev in events], pad]).astype(np.int64)
     terminal = np.concatenate([[int(ev.terminal) for ev in events], pad]).astype(np.int64)
     guard = np.concatenate([guards, pad - 1]).astype(np.int64)
     watch = np.concatenate([np.ones(k, dtype=np.int64), pad])
-    return (code, trip, foff, fpar.astype(np.float64), direction, terminal, guard, watch)
+    return (offsets, ep.astype(np.float64), direction, terminal, guard, watch)
 
 
 class Crossings(NamedTuple):
@@ -850,7 +877,7 @@ class Outcome(NamedTuple):
     y: np.ndarray             # final orbit state (n,)
     tangents: np.ndarray      # final tangent vectors, rescaled (n_tan, n)
     tangent_norms0: np.ndarray  # |w(t0)| per tangent vector
-    megno_sums: np.ndarray    # final MEGNO accumulators (n_tan, 2), empty without MEGNO
+    megno_sums: np.ndarray    # final MEGNO accumulators (z1, z2) of the first tangent vector
     log_growth: np.ndarray    # ln(|w(t)| / |w(t0)|) per tangent vector
     fli: np.ndarray           # max over step ends of ln(|w| / |w0|) per tangent vector
     n_steps: int              # accepted steps
@@ -885,7 +912,7 @@ def integrate(system: System, y0, t_span, *, tangents=None, megno=False, rtol=1e
 
     y0: orbit state (n,). t_span: t_final or (t0, t_final); backwards if t_final < t0.
     tangents: initial deviation vectors (n_tan, n). megno: also integrate the MEGNO
-    accumulators of each tangent vector. control_tangents: include tangent vectors in the
+    accumulators of the first tangent vector. control_tangents: include tangent vectors in the
     error norm. t_eval: output times sampled from the dense output (orbit only unless
     sample_tangents). Returns an `Outcome`.
     """
@@ -901,7 +928,7 @@ def integrate(system: System, y0, t_span, *, tangents=None, megno=False, rtol=1e
     if n_tan and not np.all(np.linalg.norm(tan, axis=1) > 0):
         raise ValueError("tangent vectors must be nonzero")
     megno = bool(megno and n_tan)
-    state = np.concatenate([y0, tan.ravel(), np.zeros(2 * n_tan if megno else 0)])
+    state = np.concatenate([y0, tan.ravel(), np.zeros(2 if megno else 0)])
     t_eval = np.zeros(0) if t_eval is None else np.asarray(t_eval, dtype=np.float64).ravel()
     if t_eval.size and np.any(np.diff(t_eval) * (t1 - t0) < 0):
         raise ValueError("t_eval must be monotone in the direction of integration")
@@ -925,7 +952,7 @@ def integrate(system: System, y0, t_span, *, tangents=None, megno=False, rtol=1e
     return Outcome(
         status=Status(status), t=float(t), y=y[:n].copy(), tangents=tans.copy(),
         tangent_norms0=np.linalg.norm(tan, axis=1),
-        megno_sums=y[n * (1 + n_tan):].reshape(n_tan, -1).copy() if megno else np.zeros((n_tan, 0)),
+        megno_sums=y[n * (1 + n_tan):].copy(),
         log_growth=log_g + np.log(norms), fli=np.maximum(max_log, log_g + np.log(norms)),
         n_steps=int(counts[0]), n_rejected=int(counts[1]), n_rhs=int(counts[2]),
         h_min=float(h_range[0]), h_max=float(h_range[1]),
