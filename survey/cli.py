@@ -59,11 +59,59 @@ def _orbit(args):
     return 0
 
 
+def _run(args):
+    from pathlib import Path
+
+    from .config import ConfigError, load_config, parse_config
+    from .sweep import run_survey
+    try:
+        if args.config is None:
+            text = (Path(__file__).parent / "default.toml").read_text()
+            config = parse_config(text, "embedded default (survey/default.toml)")
+        else:
+            config = load_config(args.config)
+        if args.output:
+            from .config import _check_output
+            _check_output(Path(args.output))
+            config.tables["survey"]["output"] = args.output
+        progress = False if args.no_progress else None
+        path = run_survey(config, workers=args.workers, scheduler=args.scheduler,
+                          progress=progress, command="python -m survey " + " ".join(sys.argv[1:]))
+    except ConfigError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {path} ({config.n_cells} cells)")
+    return 0
+
+
+def _verify(args):
+    from .sweep import verify
+    ok, lines = verify(args.archive, cells=args.cells)
+    print("\n".join(lines))
+    return 0 if ok else 1
+
+
 def build_parser():
     parser = argparse.ArgumentParser(prog="python -m survey",
                                      description="Order and chaos in triplet-interaction "
                                                  "Hamiltonian systems.")
     sub = parser.add_subparsers(dest="command", required=True)
+    r = sub.add_parser("run", help="run a survey: integrate every cell of a TOML grid on dask "
+                                   "workers and write one NetCDF archive (no config: the "
+                                   "embedded default)")
+    r.add_argument("config", nargs="?", help="survey TOML file (python -m survey FILE.toml "
+                                              "is the same)")
+    r.add_argument("--workers", type=int, help="local worker processes (default: [dask] "
+                                                "workers, 2)")
+    r.add_argument("--scheduler", help="address of an existing dask scheduler")
+    r.add_argument("--output", help="archive path (overrides [survey] output)")
+    r.add_argument("--no-progress", action="store_true", help="no progress bar")
+    r.set_defaults(func=_run)
+    v = sub.add_parser("verify", help="recompute a sample of an archive's cells from its "
+                                      "stored config and compare bit for bit")
+    v.add_argument("archive")
+    v.add_argument("--cells", type=int, default=8)
+    v.set_defaults(func=_verify)
     b = sub.add_parser("bench", help="survey's DOP853 vs scipy and heyoka on the paper's orbits")
     b.add_argument("--t-final", type=float, default=2000.0)
     b.add_argument("--t-scipy", type=float, default=50.0,
@@ -83,7 +131,13 @@ def build_parser():
 
 
 def main(argv=None):
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0].endswith(".toml"):
+        argv.insert(0, "run")
     args = build_parser().parse_args(argv)
+    if getattr(args, "workers", None) is not None and args.workers < 1:
+        print("error: --workers must be >= 1", file=sys.stderr)
+        return 2
     return args.func(args)
 
 

@@ -121,9 +121,18 @@ def _ls_slope(t, v):
     return float(np.dot(t0, v - v.mean()) / np.dot(t0, t0))
 
 
+def conservation_errors(system: System, y0, states):
+    """max |E/E0 - 1| and max |J - J0| / max(|J0|, 1) over states (k, n)."""
+    E0, J0 = system.energy(y0), system.angular_momentum(y0)
+    dJ = np.reshape(system.angular_momentum(states) - J0, (len(states), -1))
+    return (float(np.max(np.abs(system.energy(states) / E0 - 1))),
+            float(np.max(np.linalg.norm(dJ, axis=1)) / max(np.linalg.norm(J0), 1.0)))
+
+
 def chaos_indicators(system: System, y0, t_final: float, options=IndicatorOptions(), *,
                      cell: int = 0, events: Sequence[Event] = (), rtol=1e-12, atol=1e-12,
-                     max_steps=10_000_000, max_events=100_000) -> ChaosIndicators:
+                     max_steps=10_000_000, max_events=100_000, time_limit=0.0,
+                     control_tangents=False) -> ChaosIndicators:
     """Integrate y0 to t_final with `options.deviations` tangent vectors and their MEGNO
     accumulators (plus `options.perturbations` nearby orbits) and return the indicators,
     their ensemble spread and convergence histories, and any section crossings."""
@@ -131,8 +140,9 @@ def chaos_indicators(system: System, y0, t_final: float, options=IndicatorOption
     y0 = np.asarray(y0, dtype=float)
     n = system.n
     history = np.linspace(t_final / o.history_points, t_final, o.history_points)
-    kw = dict(megno=True, rtol=rtol, atol=atol, max_steps=max_steps,
-              renorm_interval=o.renorm_interval, t_eval=history, sample_tangents=True)
+    run = dict(rtol=rtol, atol=atol, max_steps=max_steps, renorm_interval=o.renorm_interval,
+               time_limit=time_limit, control_tangents=control_tangents)
+    kw = dict(megno=True, t_eval=history, sample_tangents=True, **run)
     w0 = deviation_vectors(system, y0, o.deviations, o.seed, cell, o.project_flow)
     out = integrate(system, y0, t_final, tangents=w0, events=events, max_events=max_events,
                     **kw)
@@ -150,8 +160,7 @@ def chaos_indicators(system: System, y0, t_final: float, options=IndicatorOption
         xi = deviation_vectors(system, y0, 1, o.seed, cell, stream=1 + j)[0]
         yp = y0 + o.perturbation_size * np.linalg.norm(y0) * xi
         wp = deviation_vectors(system, yp, 1, o.seed, cell, o.project_flow, stream=1 + j)
-        res = integrate(system, yp, t_final, tangents=wp, megno=True, rtol=rtol, atol=atol,
-                        max_steps=max_steps, renorm_interval=o.renorm_interval)
+        res = integrate(system, yp, t_final, tangents=wp, megno=True, **run)
         if res.ok and res.t > 0:
             ftles.append(res.log_growth[0] / res.t)
             megnos.append(res.megno_sums[1] / res.t)
@@ -166,10 +175,7 @@ def chaos_indicators(system: System, y0, t_final: float, options=IndicatorOption
     fli_h = np.fmax.accumulate(np.where(reached, out.sample_log_growth[:, 0], -np.inf))
     fli_h[~reached] = np.nan
 
-    states = np.concatenate([out.samples[reached, :n], [out.y]])
-    E0 = system.energy(y0)
-    J0 = system.angular_momentum(y0)
-    dJ = np.atleast_2d(np.asarray(system.angular_momentum(states) - J0).T).T
+    dE, dJ = conservation_errors(system, y0, np.concatenate([out.samples[reached, :n], [out.y]]))
     half = history >= 0.5 * t_final
     return ChaosIndicators(
         status=out.status, t=out.t,
@@ -179,8 +185,6 @@ def chaos_indicators(system: System, y0, t_final: float, options=IndicatorOption
         fli=float(out.fli[0]), sali=float(sali), gali2=float(gali2),
         history_time=history, ftle_history=ftle_h.mean(axis=1),
         megno_history=megno_h, fli_history=fli_h, sali_history=sali_h,
-        energy_error=float(np.max(np.abs(system.energy(states) / E0 - 1))),
-        angular_momentum_error=float(np.max(np.linalg.norm(dJ.reshape(len(states), -1), axis=1))
-                                     / max(np.linalg.norm(J0), 1.0)),
+        energy_error=dE, angular_momentum_error=dJ,
         n_steps=out.n_steps, n_rhs=out.n_rhs, crossings=out.crossings,
         n_crossings=out.n_crossings, outcome=out)

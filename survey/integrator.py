@@ -17,10 +17,13 @@ from __future__ import annotations
 
 import enum
 import math
+import time
 from dataclasses import dataclass
 from typing import NamedTuple, Sequence
 
 import numpy as np
+
+from numba import objmode
 
 from .dynamics import System, rhs
 from .potentials import cross, dot, kernel, norm, sub, vec
@@ -33,7 +36,7 @@ EPS = np.finfo(np.float64).eps
 BETA = 0.04
 
 
-OK_, EVENT_, COLLISION_, STEP_LIMIT_, NONFINITE_ = 0, 1, 2, 3, 4   # kernel-side codes
+OK_, EVENT_, COLLISION_, STEP_LIMIT_, NONFINITE_, TIME_LIMIT_ = 0, 1, 2, 3, 4, 6   # kernel codes
 
 
 class Status(enum.IntEnum):
@@ -490,8 +493,9 @@ def _norm_block(y, off, n):
 
 
 @kernel
-def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, n_err, max_steps, h0, h_max, h_min,
-           events, max_events, n_sub, t_eval, n_eval, renorm_dt):
+def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, n_err,
+           max_steps, h0, h_max, h_min, events, max_events, n_sub, t_eval, n_eval, renorm_dt,
+           time_limit):
     """Integrate the orbit (+ n_tan tangent vectors, + MEGNO accumulators) from t0 to t1.
 
     events: (offsets, records, direction, terminal, guard, watch) arrays; a watched
@@ -595,10 +599,19 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
     rejected_last = False
     nonfinite_last = False
     err_old = 1e-4
+    if time_limit > 0.0:
+        with objmode(clock0="f8"):
+            clock0 = time.perf_counter()
     while True:
         if counts[0] + counts[1] >= max_steps:
             status = STEP_LIMIT_
             break
+        if time_limit > 0.0 and (counts[0] + counts[1]) % 1024 == 1023:
+            with objmode(clock="f8"):
+                clock = time.perf_counter()
+            if clock - clock0 > time_limit:
+                status = TIME_LIMIT_
+                break
         if not (abs(h) > max(h_min, 10.0 * EPS * abs(t), 1e-300)):
             status = NONFINITE_ if nonfinite_last else COLLISION_
             break
@@ -907,14 +920,15 @@ class Outcome(NamedTuple):
 def integrate(system: System, y0, t_span, *, tangents=None, megno=False, rtol=1e-12,
               atol=1e-12, control_tangents=False, max_steps=10_000_000, first_step=0.0,
               max_step=0.0, min_step=0.0, events: Sequence[Event] = (), max_events=100_000,
-              event_substeps=8, t_eval=None, sample_tangents=False, renorm_interval=1.0):
+              event_substeps=8, t_eval=None, sample_tangents=False, renorm_interval=1.0,
+              time_limit=0.0):
     """Integrate an orbit of `system` (and optionally tangent vectors) over t_span.
 
     y0: orbit state (n,). t_span: t_final or (t0, t_final); backwards if t_final < t0.
     tangents: initial deviation vectors (n_tan, n). megno: also integrate the MEGNO
     accumulators of the first tangent vector. control_tangents: include tangent vectors in the
     error norm. t_eval: output times sampled from the dense output (orbit only unless
-    sample_tangents). Returns an `Outcome`.
+    sample_tangents). time_limit: wall-clock seconds (0: none). Returns an `Outcome`.
     """
     y0 = np.asarray(y0, dtype=np.float64).ravel()
     if y0.size != system.n:
@@ -939,7 +953,8 @@ def integrate(system: System, y0, t_span, *, tangents=None, megno=False, rtol=1e
     res = dop853(state, t0, t1, m, d, pot.measure, pot.profile, pot.par, n_tan, megno,
                  float(rtol), float(atol), n_err, int(max_steps), float(first_step),
                  float(max_step), float(min_step), encode_events(events, system),
-                 int(max_events), int(event_substeps), t_eval, n_eval, float(renorm_interval))
+                 int(max_events), int(event_substeps), t_eval, n_eval, float(renorm_interval),
+                 float(time_limit))
     (status, t, y, counts, h_range, ev_i, ev_t, ev_y, samples, s_log, log_g, max_log) = res
     tans = y[n:n * (1 + n_tan)].reshape(n_tan, n)
     norms = np.linalg.norm(tans, axis=1)

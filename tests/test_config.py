@@ -1,0 +1,154 @@
+"""Malformed configs: each is answered before any work with one line naming the key, and
+exit code 2 (no traceback)."""
+import subprocess
+import sys
+
+import pytest
+
+from survey.cli import main
+from survey.config import SCHEMA, load_config
+
+GOOD = """
+[survey]
+name = "t"
+output = "{out}"
+[system]
+potential = "perimetric_power"
+[initial]
+family = "equilateral"
+delta = {{start = 0.0, stop = 1.0, num = 2}}
+[integration]
+t_final = 1.0
+[section]
+coordinate = "phi"
+"""
+
+# (what to change, expected fragment of the error: always the key)
+BAD = [
+    ("[sytem]\nbodies = 3", "[sytem]: unknown table (did you mean 'system'?)"),
+    ("[system]\nmass = [1, 1, 1]", "[system].mass: unknown key (did you mean 'masses'?)"),
+    ("[system]\nmasses = 'abc'", "[system].masses: expected a list of numbers"),
+    ("[system]\nmasses = [1.0, -1.0, 1.0]", "[system].masses: must be > 0"),
+    ("[system]\nmasses = [1.0, 0.0, 1.0]", "[system].masses: must be > 0"),
+    ("[system]\nmasses = [1.0, 1.0]", "[system].masses: needs 3 values"),
+    ("[system]\nbodies = 2", "[system].bodies: must be >= 3"),
+    ("[system]\nbodies = true", "[system].bodies: expected an integer"),
+    ("[system]\ndim = 4", "[system].dim: 4 is not one of 2, 3"),
+    ("[system]\npotential = 'perimetric_cubic'", "[system].potential: 'perimetric_cubic' is not one"),
+    ("[system]\nparams = {k = 2}", "[system.params].k: not a parameter of perimetric_power"),
+    ("[system]\npotential = 'perimetric_yukawa'\nparams = {gamma = -1.0}", "[system.params]: potential parameter 'gamma' must be >= 0"),
+    ("[integration]\nrtol = 0.0", "[integration].rtol: must be > 0"),
+    ("[integration]\nrtol = -1e-9", "[integration].rtol: must be > 0"),
+    ("[integration]\natol = 'tight'", "[integration].atol: expected a number"),
+    ("[integration]\nt_final = 0.0", "[integration].t_final: must be > 0"),
+    ("[integration]\nt_final = -5.0", "[integration].t_final: must be > 0"),
+    ("[integration]\nt_final = nan", "[integration].t_final: must be finite"),
+    ("[integration]\nmax_steps = 0", "[integration].max_steps: must be >= 1"),
+    ("[integration]\ncell_time_limit = -1.0", "[integration].cell_time_limit: must be >= 0"),
+    ("[initial]\ndelta = 1.0", "[initial].family: is required"),
+    ("[initial]\nfamily = 'equilateal'", "[initial].family: 'equilateal' is not one of"),
+    ("[initial]\nfamily = 'equilateral'\ndelt = 1.0", "[initial].delt: not a parameter of family 'equilateral' (did you mean 'delta'?)"),
+    ("[initial]\nfamily = 'equilateral'\ndelta = {start = 0, stop = 1, num = 0}", "[initial].delta.num: must be an integer >= 1"),
+    ("[initial]\nfamily = 'equilateral'\ndelta = {start = 0, num = 3}", "[initial].delta: a grid axis needs num, start, stop; stop is missing"),
+    ("[initial]\nfamily = 'equilateral'\ndelta = {start = 0, stop = 1, num = 3, step = 1}", "[initial].delta.step: a grid axis takes only start, stop, num"),
+    ("[initial]\nfamily = 'equilateral'\ndelta = []", "[initial].delta: a grid axis list needs finite numbers"),
+    ("[initial]\nfamily = 'equilateral'\ndelta = [1.0, 'x']", "[initial].delta: a grid axis list needs finite numbers"),
+    ("[initial]\nfamily = 'equilateral'\ndelta = [1.0, 1.0]", "[initial].delta: grid axis values must be distinct"),
+    ("[initial]\nfamily = 'equilateral'\ndelta = 'three'", "[initial].delta: expected a number, a list or {start, stop, num}"),
+    ("[initial]\nfamily = 'sides'\na = 5.0", "[initial]: sides (a, b, c) = (5, 2, 1.8) do not make a non-degenerate triangle"),
+    ("[initial]\nfamily = 'sides'\na = {start = 1.0, stop = 5.0, num = 3}", "[initial] at a = 5: sides"),
+    ("[initial]\nfamily = 'linear'\nvelocity_u = [1.0, 2.0, 3.0]", "[initial].velocity_u: expected numbers shaped like [1.5, -10.0711]"),
+    ("[survey]\noutput = '/proc/no/such/x.nc'", "[survey].output: cannot write to /proc/no/such"),
+    ("[survey]\noutput = 'tests'", "[survey].output: tests is a folder; give a file name"),
+    ("[section]\ncoordinate = 'psi'", "[section].coordinate: 'psi' is not one of"),
+    ("[section]\ndirection = 2", "[section].direction: 2 is not one of -1, 0, 1"),
+    ("[section]\ncoordinate = 'p_sigma'\nvalue = 1.0", "[section]: section p_sigma = 1.0: only p_sigma = 0"),
+    ("[section]\nmax_crossings = 0", "[section].max_crossings: must be >= 1"),
+    ("[section]\ntriplet = [0, 0, 1]", "[section].triplet: needs three different bodies"),
+    ("[section]\ncoordinate = 'linear'", "[section].coefficients: a 'linear' surface needs 12 coefficients"),
+    ("[system]\ndim = 3\n[section]\ncoordinate = 'phi'", "[section].coordinate: 'phi' is a reduced coordinate"),
+    ("[indicators]\nwhich = ['lyapunov']", "[indicators].which: 'lyapunov' is not one of"),
+    ("[indicators]\ndeviations = 1", "[indicators].deviations: sali and gali2 need 2 deviation vectors"),
+    ("[indicators]\nrenorm_interval = 5.0", "[indicators].renorm_interval: is longer than t_final"),
+    ("[indicators]\nperturbation_size = 0.0", "[indicators].perturbation_size: must be > 0"),
+    ("[dask]\nworkers = 0", "[dask].workers: must be >= 1"),
+    ("[dask]\nchunk_size = 0", "[dask].chunk_size: must be >= 1"),
+    ("[dask]\nchunksize = 4", "[dask].chunksize: unknown key (did you mean 'chunk_size'?)"),
+    ("system = 3", "[system]: must be a table"),
+    ("[system\nbodies = 3", "not valid TOML"),
+]
+
+
+def merged(change: str, out: str) -> str:
+    """GOOD with the tables in `change` replacing or extending those in GOOD."""
+    import tomllib
+    base = tomllib.loads(GOOD.format(out=out))
+    try:
+        extra = tomllib.loads(change)
+    except tomllib.TOMLDecodeError:
+        return GOOD.format(out=out) + "\n" + change
+    scalars = {k: v for k, v in extra.items() if not isinstance(v, dict)}
+    if scalars:   # a top-level value where a table belongs: write it raw, drop the table
+        for k in scalars:
+            base.pop(k, None)
+        from survey.config import _to_toml
+        return "\n".join(f"{k} = {v!r}" for k, v in scalars.items()) + "\n" + _to_toml(base)
+    for table, body in extra.items():
+        if table == "initial":
+            base[table] = body
+        elif isinstance(body, dict) and isinstance(base.get(table), dict):
+            base[table].update(body)
+        else:
+            base[table] = body
+    from survey.config import _to_toml
+    return _to_toml(base)
+
+
+def test_there_are_at_least_thirty_malformed_configs():
+    assert len(BAD) >= 30
+
+
+def test_the_good_config_is_good(tmp_path):
+    cfg = tmp_path / "good.toml"
+    cfg.write_text(GOOD.format(out=tmp_path / "x.nc"))
+    assert load_config(cfg).n_cells == 2
+
+
+@pytest.mark.parametrize("change,message", BAD, ids=[m.split(":")[0] for _, m in BAD])
+def test_malformed_config_is_one_line_with_the_key_and_exit_code_2(tmp_path, capsys, change,
+                                                                     message):
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text(merged(change, str(tmp_path / "x.nc")))
+    assert main([str(cfg), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and err.startswith("error: ")
+    assert message in err, err
+    assert not (tmp_path / "x.nc").exists()
+
+
+def test_cli_process_exits_2_without_traceback(tmp_path):
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text(merged("[integration]\nrtol = 0.0", str(tmp_path / "x.nc")))
+    for argv in ([str(cfg)], ["run", str(tmp_path / "missing.toml")],
+                 [str(cfg), "--workers", "0"]):
+        proc = subprocess.run([sys.executable, "-m", "survey", *argv], capture_output=True,
+                              text=True, timeout=120)
+        assert proc.returncode == 2, proc.stderr
+        assert "Traceback" not in proc.stderr and proc.stderr.startswith("error: ")
+
+
+def test_config_values_are_data_not_code(tmp_path, capsys):
+    cfg = tmp_path / "evil.toml"
+    cfg.write_text(merged("[initial]\nfamily = \"__import__('os').system('touch pwned')\"",
+                          str(tmp_path / "x.nc")))
+    assert main([str(cfg)]) == 2
+    assert not (tmp_path / "pwned").exists()
+
+
+def test_every_schema_key_is_documented_in_the_readme():
+    import pathlib
+    readme = (pathlib.Path(__file__).parents[1] / "README.md").read_text()
+    for table, keys in SCHEMA.items():
+        assert f"[{table}]" in readme
+        for key in keys:
+            assert f"`{key}`" in readme, f"[{table}].{key} is not documented"
