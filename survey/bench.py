@@ -180,6 +180,79 @@ def indicator_overhead(t_final=2000.0, repeats=7, deviations=2, out=print):
     return rows
 
 
+def survey_scaling(cells=200, t_final=2000.0, repeats=2, folder="results/bench", out=print):
+    """End-to-end survey of `cells` cells of the equilateral family on 1 and 2 local
+    workers, interleaved `repeats` times (this kind of machine drifts by 20% from run to
+    run; each worker count keeps its best run). Reports the phases, the 2-vs-1 speed-up,
+    and the per-task overhead: the share of the workers' compute phase not spent inside
+    cells (targets: speed-up >= 1.85, overhead < 5%)."""
+    import xarray as xr
+    from .sweep import run_survey
+    rows = {}
+    for _ in range(repeats):
+        for workers in (1, 2):
+            cfg = {"survey": {"name": f"bench-{workers}w",
+                              "output": f"{folder}/bench-{workers}w.nc"},
+                   "initial": {"family": "equilateral",
+                               "delta": {"start": 0.0, "stop": 10.0, "num": cells}},
+                   "integration": {"t_final": t_final},
+                   "indicators": {"perturbations": 1},
+                   "section": {"coordinate": "phi"},
+                   "dask": {"workers": workers}}
+            timings = {}
+            path = run_survey(cfg, progress=False, timings=timings)
+            with xr.open_dataset(path) as ds:
+                timings["in_cells"] = float(ds.wall_time.sum())
+            timings["overhead"] = 1.0 - timings["in_cells"] / (workers * timings["compute"])
+            if workers not in rows or timings["total"] < rows[workers]["total"]:
+                rows[workers] = timings
+    out("")
+    out(f"Survey of {cells} cells (equilateral family, t = {t_final:g}, default chunks; best "
+        f"of {repeats} interleaved runs): seconds")
+    out(f"{'workers':>8s} {'prepare':>8s} {'cluster':>8s} {'compute':>8s} {'archive':>8s} "
+        f"{'total':>8s} {'in cells':>9s} {'overhead':>9s}")
+    for w, t in rows.items():
+        out(f"{w:8d} {t['prepare']:8.2f} {t['cluster']:8.2f} {t['compute']:8.2f} "
+            f"{t['archive']:8.2f} {t['total']:8.2f} {t['in_cells']:9.2f} "
+            f"{100 * t['overhead']:8.1f}%")
+    out(f"speed-up 2 vs 1 workers: {rows[1]['total'] / rows[2]['total']:.2f}x end to end, "
+        f"{rows[1]['compute'] / rows[2]['compute']:.2f}x in the compute phase "
+        "(targets: >= 1.85x; overhead < 5%)")
+    return rows
+
+
+def survey_memory(sizes=(10_000, 100_000), folder="results/bench", out=print):
+    """Peak resident memory of the process driving a survey of many tiny cells (the
+    workers are separate processes): finished results stream to checkpoint files, and the
+    archive is written one variable at a time."""
+    import subprocess
+    import sys
+    out("")
+    out("Peak memory of the process driving a survey (cells of t = 0.01, orbit + indicators, "
+        "no section; the workers are separate processes)")
+    for n in sizes:
+        code = f"from survey.bench import _memory_run; print(*_memory_run({n}, {folder!r}))"
+        res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                             check=True)
+        peak, seconds = map(float, res.stdout.split()[-2:])
+        out(f"{n:>8d} cells: peak RSS {peak / 1024:7.1f} MiB, {seconds:6.1f} s")
+
+
+def _memory_run(n, folder):
+    import resource
+    from .sweep import run_survey
+    cfg = {"survey": {"name": f"mem-{n}", "output": f"{folder}/mem-{n}.nc"},
+           "initial": {"family": "equilateral",
+                       "delta": {"start": 0.0, "stop": 10.0, "num": n}},
+           "integration": {"t_final": 0.01},
+           "indicators": {"perturbations": 0, "history_points": 2,
+                          "renorm_interval": 0.005},
+           "dask": {"chunk_size": 500}}
+    t = time.perf_counter()
+    run_survey(cfg, progress=False)
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, time.perf_counter() - t
+
+
 def _heyoka(system, y0, w0, t_final, E0, dE_survey, tols, repeats):
     """heyoka at tol 1e-12 and at the loosest tolerance in `tols` whose energy error is not
     above survey's ("similar energy error")."""

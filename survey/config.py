@@ -106,7 +106,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "workers": Key("int", 2, "local worker processes (1 thread each)", low=1),
         "scheduler": Key("str", "", "address of an existing dask scheduler, e.g. "
                                     "tcp://host:8786 (then workers is ignored)"),
-        "chunk_size": Key("int", 16, "cells per task", low=1),
+        "chunk_size": Key("int", 0, "cells per task; 0 picks about 64 tasks per worker "
+                                    "(at most 256 cells each); chunks interleave the grid so "
+                                    "that every task mixes cheap and costly cells", low=0),
         "retries": Key("int", 2, "retries of a task whose worker raised", low=0),
     },
 }

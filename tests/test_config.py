@@ -72,7 +72,7 @@ BAD = [
     ("[indicators]\nrenorm_interval = 5.0", "[indicators].renorm_interval: is longer than t_final"),
     ("[indicators]\nperturbation_size = 0.0", "[indicators].perturbation_size: must be > 0"),
     ("[dask]\nworkers = 0", "[dask].workers: must be >= 1"),
-    ("[dask]\nchunk_size = 0", "[dask].chunk_size: must be >= 1"),
+    ("[dask]\nchunk_size = -1", "[dask].chunk_size: must be >= 0"),
     ("[dask]\nchunksize = 4", "[dask].chunksize: unknown key (did you mean 'chunk_size'?)"),
     ("system = 3", "[system]: must be a table"),
     ("[system\nbodies = 3", "not valid TOML"),
@@ -152,3 +152,12 @@ def test_every_schema_key_is_documented_in_the_readme():
         assert f"[{table}]" in readme
         for key in keys:
             assert f"`{key}`" in readme, f"[{table}].{key} is not documented"
+
+
+def test_shipped_workflows_and_the_embedded_default_validate():
+    import pathlib
+    root = pathlib.Path(__file__).parents[1]
+    paths = sorted((root / "workflows").glob("*.toml")) + [root / "survey" / "default.toml"]
+    assert len(paths) >= 4
+    for path in paths:
+        assert load_config(path).n_cells >= 1
