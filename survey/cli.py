@@ -25,9 +25,9 @@ def _orbit(args):
 
     import numpy as np
 
-    from .bench import deviation_vector
     from .dynamics import System
     from .families import initial_state
+    from .indicators import deviation_vectors
     from .integrator import integrate
 
     params = {}
@@ -47,11 +47,12 @@ def _orbit(args):
     E0, J0 = system.energy(y0), system.angular_momentum(y0)
     t_eval = np.linspace(0.0, args.t_final, 1001)
     start = time.perf_counter()
-    integrate(system, y0, 1e-3, tangents=deviation_vector(system), t_eval=t_eval[:1])
+    w0 = deviation_vectors(system, y0, 1, seed=0)[0]
+    integrate(system, y0, 1e-3, tangents=w0, t_eval=t_eval[:1])
     print(f"compiled kernels ready in {time.perf_counter() - start:.1f} s "
           "(cached on disk after the first run)")
     start = time.perf_counter()
-    out = integrate(system, y0, args.t_final, tangents=deviation_vector(system),
+    out = integrate(system, y0, args.t_final, tangents=w0,
                     t_eval=t_eval, rtol=args.tol, atol=args.tol)
     wall = time.perf_counter() - start
     done = ~np.isnan(out.samples[:, 0])
@@ -78,8 +79,8 @@ def _run(args):
         else:
             config = load_config(args.config)
         if args.output:
-            from .config import _check_output
-            _check_output(Path(args.output))
+            from .config import ensure_writable
+            ensure_writable(Path(args.output))
             config.tables["survey"]["output"] = args.output
         progress = False if args.no_progress else None
         path = run_survey(config, workers=args.workers, scheduler=args.scheduler,

@@ -355,7 +355,7 @@ def validate(raw: dict, text: str, where: str = "<config>", check_output: bool =
     _validate_cross(tables, system)
     config = Config(tables=tables, axes=tuple(axes), fixed=fixed, text=text, source=where)
     if check_output:
-        _check_output(config.output)
+        ensure_writable(config.output)
     return config
 
 
@@ -449,7 +449,7 @@ def section_event_for(tables: dict, system: System):
                          tuple(sec["triplet"]), sec["coefficients"])
 
 
-def _check_output(path: Path):
+def ensure_writable(path: Path):
     folder = path.parent if str(path.parent) else Path(".")
     try:
         folder.mkdir(parents=True, exist_ok=True)
