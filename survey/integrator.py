@@ -424,30 +424,29 @@ def _event_slope(ep, f0, y, f, n, buf, masses, d, h):
 
 @kernel
 def _may_cross(g0, s0, g1, s1, h):
-    """Whether g may vanish on a step: a sign change at the ends, or the cubic Hermite model
-    of g through (g0, g0') and (g1, g1') changing sign or coming within 1% of the step's
-    variation scale of zero at one of its extrema inside the step (a double crossing)."""
-    if (g0 < 0.0) != (g1 < 0.0) or g0 == 0.0 or g1 == 0.0:
-        return True
+    """How g may vanish on a step, from the cubic Hermite model of g through (g0, g0') and
+    (g1, g1'): 0 not at all; 1 once (a sign change at the ends, the model monotone); 2
+    possibly several times (the model has an extremum inside the step that changes sign or
+    comes within 1% of the step's variation scale of zero) -- then the step is scanned."""
     a0, a1 = h * s0, h * s1
     margin = 0.01 * (abs(g0) + abs(g1) + abs(a0) + abs(a1))
+    change = (g0 < 0.0) != (g1 < 0.0) or g0 == 0.0 or g1 == 0.0
     # G(x) = A x^3 + B x^2 + a0 x + g0 on [0, 1]; G'(x) = 3A x^2 + 2B x + a0
     A = 2.0 * (g0 - g1) + a0 + a1
     B = 3.0 * (g1 - g0) - 2.0 * a0 - a1
     disc = B * B - 3.0 * A * a0
-    if disc < 0.0:
-        return False
-    r = math.sqrt(disc)
-    if A != 0.0:
-        x1, x2 = (-B + r) / (3.0 * A), (-B - r) / (3.0 * A)
-    else:
-        x1 = x2 = -a0 / (2.0 * B)
-    for x in (x1, x2):
-        if 0.0 < x < 1.0:
-            G = ((A * x + B) * x + a0) * x + g0
-            if (G < 0.0) != (g0 < 0.0) or abs(G) < margin:
-                return True
-    return False
+    if disc >= 0.0:
+        r = math.sqrt(disc)
+        if A != 0.0:
+            x1, x2 = (-B + r) / (3.0 * A), (-B - r) / (3.0 * A)
+        else:
+            x1 = x2 = -a0 / (2.0 * B)
+        for x in (x1, x2):
+            if 0.0 < x < 1.0:
+                G = ((A * x + B) * x + a0) * x + g0
+                if change or (G < 0.0) != (g0 < 0.0) or abs(G) < margin:
+                    return 2
+    return 1 if change else 0
 
 
 @kernel
@@ -535,7 +534,7 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
     s_old = np.zeros(m)
     g_new = np.zeros(m)
     s_new = np.zeros(m)
-    todo = np.zeros(m, dtype=np.bool_)
+    todo = np.zeros(m, dtype=np.int64)
     found_x = np.zeros(max(1, m * n_sub))
     found_e = np.zeros(max(1, m * n_sub), dtype=np.int64)
 
@@ -659,7 +658,7 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
                     g_new[e] = event_value(ep, eoff[e], ynew, masses, d)
                     s_new[e] = _event_slope(ep, eoff[e], ynew, K[12], n, yd, masses, d, h)
                     todo[e] = _may_cross(g_old[e], s_old[e], g_new[e], s_new[e], h)
-                    scan = scan or todo[e]
+                    scan = scan or todo[e] > 0
             n_found = 0
             if scan:
                 _dense_prepare(masses, d, measure, prof, par, n_tan, megno, t0, n, False, t, y,
@@ -670,9 +669,9 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
                 for e in range(m):
                     if todo[e]:
                         g0 = eoff[guard[e]] if guard[e] >= 0 else -1
-                        n_found = _scan(ep, eoff[e], g_old[e], g_new[e], direc[e], g0, n_sub,
-                                        h, xtol, F, y, n, yd, masses, d, found_x, found_e, e,
-                                        n_found)
+                        n_found = _scan(ep, eoff[e], g_old[e], g_new[e], direc[e], g0,
+                                        n_sub if todo[e] == 2 else 1, h, xtol, F, y, n, yd,
+                                        masses, d, found_x, found_e, e, n_found)
             for e in range(m):
                 g_old[e] = g_new[e]
                 s_old[e] = s_new[e]
