@@ -11,12 +11,14 @@ except PackageNotFoundError:  # running from a source tree
 
 def _refresh_kernel_cache():
     """numba's disk cache is keyed by each function's own source file, so a kernel that
-    inlines code from another module (rhs inlines the forces of potentials.py) would keep
-    stale machine code after that module changes. Clear survey's cached kernels whenever
-    the kernel modules' sources change."""
+    inlines code from another module (rhs inlines the forces of potentials.py), or freezes
+    another module's constants (the status codes), would keep stale machine code after that
+    module changes. Clear survey's cached kernels whenever the kernel modules' sources
+    change."""
     here = Path(__file__).parent
     digest = hashlib.sha256(b"".join((here / f).read_bytes() for f in
-                                     ("potentials.py", "dynamics.py", "integrator.py")))
+                                     ("status.py", "potentials.py", "dynamics.py",
+                                      "integrator.py")))
     cache = here / "__pycache__"
     stamp = cache / "kernels.sha256"
     try:

@@ -1,5 +1,10 @@
-"""The survey archive: Dataset schema (units, long names, CF flags declared once, here),
-provenance, and the atomic NetCDF write.
+"""The survey archive: every variable declared once (units, long name, fill, which cells
+carry it, how a cell's result fills it, whether it is reproducible), the CF attributes and
+provenance, the atomic NetCDF write, and the checks `verify` runs on a file.
+
+Everything else follows from VARIABLES: the arrays a task returns (`layout`), how a cell
+fills them (`fill_row`), the archive's variables and attributes, the schema `verify`
+expects (`problems`) and the README's variable table (`markdown_table`).
 
 Dimensions: the grid axes (in the order the config writes them), then per variable at most
 one of `crossing` (section points, NaN-padded, with n_crossings), `history_time`
@@ -8,33 +13,72 @@ one of `crossing` (section points, NaN-padded, with n_crossings), `history_time`
 from __future__ import annotations
 
 import datetime
+import hashlib
 import os
 import subprocess
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from importlib import metadata
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable, NamedTuple
 
 import numpy as np
-import xarray as xr
 
-from .integrator import Status
+from .status import Status
+
+# which cells a variable has values for; elsewhere it holds its fill value
+ALL, STARTED, FINISHED = "all cells", "cells with a start", "cells with status ok or event"
+
+
+class CellResult(NamedTuple):
+    """What one cell computed: the source every archive variable is filled from."""
+
+    status: Status
+    wall_time: float
+    n_steps: int = 0
+    n_rhs: int = 0
+    start: np.ndarray | None = None        # None where no start exists (inaccessible)
+    t_end: float = np.nan
+    energy: Any = np.nan
+    angular_momentum: Any = np.nan
+    energy_error: float = np.nan
+    angular_momentum_error: float = np.nan
+    indicators: Any = None                 # indicators.ChaosIndicators
+    n_crossings: int = 0
+    crossing_time: np.ndarray | None = None    # kept crossings
+    crossing_state: np.ndarray | None = None
+    reduced: Any = None                    # coordinates.Reduced of the kept crossings
 
 
 @dataclass(frozen=True)
 class Var:
     name: str
     long_name: str
+    value: Callable[[CellResult], Any]     # how a cell's result fills it
+    cells: str = STARTED                   # ALL, STARTED or FINISHED
     dtype: str = "f8"
-    extra: str | None = None       # crossing, history_time, component, spatial
+    extra: str | None = None               # crossing, history_time, component, spatial
     units: str = "1"
-    reproducible: bool = True      # part of the bit-for-bit contract
-    when: Callable = lambda c: True
+    reproducible: bool = True              # part of the bit-for-bit contract
+    when: Callable = lambda config: True   # whether a config's archive holds it
 
     @property
     def fill(self):
         return np.nan if self.dtype.startswith("f") else -1
+
+    def attrs(self) -> dict:
+        attrs = {"long_name": self.long_name}
+        if self.name == "status":
+            attrs["flag_values"] = np.array([s.value for s in Status], dtype=np.int8)
+            attrs["flag_meanings"] = " ".join(s.name.lower() for s in Status)
+        else:
+            attrs["units"] = self.units
+        if self.cells != ALL:
+            attrs["comment"] = f"{'NaN' if self.dtype.startswith('f') else '-1'} except in " \
+                               f"{self.cells}"
+        if not self.reproducible:
+            attrs["reproducible"] = "no: differs between runs"
+        return attrs
 
 
 def _which(*names):
@@ -50,48 +94,68 @@ def _planar3(c):
     return s["bodies"] == 3 and s["dim"] == 2
 
 
+def _indicator(name, long_name, when):
+    return Var(name, long_name, lambda r: getattr(r.indicators, name), FINISHED, when=when)
+
+
+def _history(name, of, when):
+    return Var(f"{name}_history", f"{of} convergence history",
+               lambda r: getattr(r.indicators, f"{name}_history"), FINISHED,
+               extra="history_time", when=when)
+
+
+def _reduced_crossing(q):
+    return Var(f"crossing_{q}", f"reduced coordinate {q} at each kept section crossing",
+               lambda r: getattr(r.reduced, q), extra="crossing",
+               when=lambda c: _section(c) and _planar3(c))
+
+
 VARIABLES = [
-    Var("status", "integration outcome of the cell", "i1"),
-    Var("t_end", "time reached by the integration"),
-    Var("energy", "energy H at t = 0"),
-    Var("angular_momentum", "total angular momentum at t = 0 (z component in 2-D)"),
-    Var("energy_error", "max |E(t)/E(0) - 1| over the history times and the end"),
-    Var("angular_momentum_error", "max |J(t) - J(0)| / max(|J(0)|, 1) over the same times"),
-    Var("ftle", "finite-time maximal Lyapunov exponent at t_end, ensemble mean",
-        when=_which("ftle")),
-    Var("ftle_spread", "standard deviation of the FTLE over deviation vectors and perturbed "
-                       "starts", when=_which("ftle")),
-    Var("megno", "mean exponential growth factor of nearby orbits <Y> at t_end, ensemble "
-                 "mean", when=_which("megno")),
-    Var("megno_spread", "standard deviation of <Y> over the perturbed starts",
-        when=_which("megno")),
-    Var("megno_slope", "least-squares slope d<Y>/dt over the second half of the run "
-                       "(about ftle/2 in chaos)", when=_which("megno")),
-    Var("fli", "fast Lyapunov indicator: max ln(|w|/|w0|) of the first deviation vector",
-        when=_which("fli")),
-    Var("sali", "smaller alignment index of two deviation vectors at t_end",
-        when=_which("sali")),
-    Var("gali2", "generalized alignment index |w1^ ^ w2^| at t_end", when=_which("gali2")),
-    Var("n_steps", "accepted integration steps of the nominal orbit", "i8"),
-    Var("n_rhs", "right-hand-side evaluations of the nominal orbit", "i8"),
-    Var("wall_time", "wall-clock time spent on the cell", units="s", reproducible=False),
-    Var("initial_state", "phase-space state at t = 0", extra="component"),
-    Var("n_crossings", "crossings of the surface of section (all, also those not kept)", "i8",
-        when=_section),
-    Var("crossing_time", "time of each kept section crossing", extra="crossing",
-        when=_section),
-    *[Var(f"crossing_{q}", f"reduced coordinate {q} at each kept section crossing",
-          extra="crossing", when=lambda c: _section(c) and _planar3(c))
-      for q in ("sigma", "p_sigma", "eta", "p_eta", "phi", "p_phi")],
+    Var("status", "integration outcome of the cell", lambda r: r.status, ALL, "i1"),
+    Var("t_end", "time reached by the integration", lambda r: r.t_end),
+    Var("energy", "energy H at t = 0", lambda r: r.energy),
+    Var("angular_momentum", "total angular momentum at t = 0 (z component in 2-D)",
+        lambda r: r.angular_momentum),
+    Var("energy_error", "max |E(t)/E(0) - 1| over the history times and the end",
+        lambda r: r.energy_error),
+    Var("angular_momentum_error", "max |J(t) - J(0)| / max(|J(0)|, 1) over the same times",
+        lambda r: r.angular_momentum_error),
+    _indicator("ftle", "finite-time maximal Lyapunov exponent at t_end, ensemble mean",
+               _which("ftle")),
+    _indicator("ftle_spread", "standard deviation of the FTLE over deviation vectors and "
+                              "perturbed starts", _which("ftle")),
+    _indicator("megno", "mean exponential growth factor of nearby orbits <Y> at t_end, "
+                        "ensemble mean", _which("megno")),
+    _indicator("megno_spread", "standard deviation of <Y> over the perturbed starts",
+               _which("megno")),
+    _indicator("megno_slope", "least-squares slope d<Y>/dt over the second half of the run "
+                              "(about ftle/2 in chaos)", _which("megno")),
+    _indicator("fli", "fast Lyapunov indicator: max ln(|w|/|w0|) of the first deviation "
+                      "vector", _which("fli")),
+    _indicator("sali", "smaller alignment index of two deviation vectors at t_end",
+               _which("sali")),
+    _indicator("gali2", "generalized alignment index |w1^ ^ w2^| at t_end", _which("gali2")),
+    Var("n_steps", "accepted integration steps of the nominal orbit", lambda r: r.n_steps,
+        ALL, "i8"),
+    Var("n_rhs", "right-hand-side evaluations of the nominal orbit", lambda r: r.n_rhs,
+        ALL, "i8"),
+    Var("wall_time", "wall-clock time spent on the cell", lambda r: r.wall_time, ALL,
+        units="s", reproducible=False),
+    Var("initial_state", "phase-space state at t = 0", lambda r: r.start, extra="component"),
+    Var("n_crossings", "crossings of the surface of section (all, also those not kept)",
+        lambda r: r.n_crossings, dtype="i8", when=_section),
+    Var("crossing_time", "time of each kept section crossing", lambda r: r.crossing_time,
+        extra="crossing", when=_section),
+    *[_reduced_crossing(q) for q in ("sigma", "p_sigma", "eta", "p_eta", "phi", "p_phi")],
     Var("crossing_state", "phase-space state at each kept section crossing",
-        extra="crossing", when=lambda c: _section(c) and c.tables["section"]["store_state"]),
-    Var("ftle_history", "FTLE convergence history", extra="history_time", when=_which("ftle")),
-    Var("megno_history", "<Y> convergence history", extra="history_time",
-        when=_which("megno")),
-    Var("fli_history", "FLI convergence history", extra="history_time", when=_which("fli")),
-    Var("sali_history", "SALI convergence history", extra="history_time",
-        when=_which("sali")),
+        lambda r: r.crossing_state, extra="crossing",
+        when=lambda c: _section(c) and c.tables["section"]["store_state"]),
+    _history("ftle", "FTLE", _which("ftle")),
+    _history("megno", "<Y>", _which("megno")),
+    _history("fli", "FLI", _which("fli")),
+    _history("sali", "SALI", _which("sali")),
 ]
+BY_NAME = {v.name: v for v in VARIABLES}
 
 
 def variables(config) -> list[Var]:
@@ -103,7 +167,7 @@ def variables(config) -> list[Var]:
         if not v.when(config) or v.name in axes:
             continue
         if v.name == "angular_momentum" and config.tables["system"]["dim"] == 3:
-            v = Var(v.name, "total angular momentum at t = 0", extra="spatial")
+            v = replace(v, long_name="total angular momentum at t = 0", extra="spatial")
         out.append(v)
     return out
 
@@ -115,14 +179,52 @@ def extra_size(config, extra: str | None) -> int:
             "component": 2 * s["bodies"] * s["dim"], "spatial": 3}[extra]
 
 
-def empty_results(config, count: int) -> dict[str, np.ndarray]:
-    """Fill-valued result arrays for `count` cells (the layout a task returns)."""
-    out = {}
-    for v in variables(config):
-        k = extra_size(config, v.extra)
-        shape = (count,) if v.extra is None else (count, k)
-        out[v.name] = np.full(shape, v.fill, dtype=v.dtype)
-    return out
+class Slot(NamedTuple):
+    """One result array of a task: (name, dtype, width); width 0 for one value per cell."""
+
+    name: str
+    dtype: str
+    width: int
+
+
+def layout(config) -> tuple[Slot, ...]:
+    """The arrays a task returns for a config: small, picklable, shipped with every task."""
+    return tuple(Slot(v.name, v.dtype, 0 if v.extra is None else extra_size(config, v.extra))
+                 for v in variables(config))
+
+
+def empty_results(slots, count: int) -> dict[str, np.ndarray]:
+    """Fill-valued result arrays for `count` cells."""
+    return {s.name: np.full((count,) + ((s.width,) if s.width else ()), BY_NAME[s.name].fill,
+                            dtype=s.dtype) for s in slots}
+
+
+def fill_row(results: dict, k: int, cell: CellResult):
+    """Row k of every result array from one cell's result, as each variable declares."""
+    finished, started = cell.status.finished, cell.start is not None
+    for name, row in results.items():
+        v = BY_NAME[name]
+        if (v.cells == FINISHED and not finished) or (v.cells == STARTED and not started):
+            continue
+        value = v.value(cell)
+        if row.ndim == 1:
+            row[k] = value
+        else:
+            value = np.asarray(value)
+            row[k, :value.shape[0]] = value
+
+
+def markdown_table() -> str:
+    """The README's table of archive variables."""
+    lines = ["| variable | meaning | units | dimensions beyond the grid | cells |",
+             "| --- | --- | --- | --- | --- |"]
+    for v in VARIABLES:
+        units = "flags" if v.name == "status" else v.units
+        extra = "spatial (3-D)" if v.name == "angular_momentum" else (v.extra or "")
+        note = "" if v.reproducible else " (not reproducible)"
+        text = (v.long_name + note).replace("|", "\\|").replace("<", "&lt;").replace(">", "&gt;")
+        lines.append(f"| `{v.name}` | {text} | {units} | {extra} | {v.cells} |")
+    return "\n".join(lines)
 
 
 # ---------------------------------------------------------------- provenance
@@ -161,26 +263,26 @@ def _component_labels(config):
 
 
 def coordinates(config) -> dict:
+    """Coordinate variables (numeric, monotone: CF section 1.3) and the string labels of the
+    component and spatial dimensions as auxiliary coordinates (CF section 6.1)."""
+    from .indicators import history_times
     coords = {a.name: (a.name, a.values, {"long_name": f"initial-condition parameter "
                                                      f"{a.name}", "units": "1"})
               for a in config.axes}
-    coords["history_time"] = ("history_time", _history_times(config),
-                              {"long_name": "time of the convergence history points",
-                               "units": "1"})
-    coords["component"] = ("component", _component_labels(config),
-                           {"long_name": "phase-space component (positions, then momenta)"})
+    coords["history_time"] = ("history_time", history_times(
+        config.tables["integration"]["t_final"], config.tables["indicators"]["history_points"]),
+        {"long_name": "time of the convergence history points", "units": "1"})
+    coords["component_name"] = ("component", _component_labels(config),
+                                {"long_name": "phase-space component (positions, then "
+                                              "momenta)"})
     if config.tables["section_enabled"]:
         n = config.tables["section"]["max_crossings"]
         coords["crossing"] = ("crossing", np.arange(n), {"long_name": "index of the kept "
-                                                                      "section crossing"})
+                                                                      "section crossing",
+                                                         "units": "1"})
     if config.tables["system"]["dim"] == 3:
-        coords["spatial"] = ("spatial", ["x", "y", "z"], {"long_name": "spatial axis"})
+        coords["spatial_axis"] = ("spatial", ["x", "y", "z"], {"long_name": "spatial axis"})
     return coords
-
-
-def _history_times(config):
-    t, k = config.tables["integration"]["t_final"], config.tables["indicators"]["history_points"]
-    return np.linspace(t / k, t, k)
 
 
 def attributes(config, command: str) -> dict:
@@ -205,39 +307,32 @@ def attributes(config, command: str) -> dict:
     }
 
 
-def variable_attrs(v: Var) -> dict:
-    attrs = {"long_name": v.long_name}
-    if v.name == "status":
-        attrs["flag_values"] = np.array([s.value for s in Status], dtype=np.int8)
-        attrs["flag_meanings"] = " ".join(s.name.lower() for s in Status)
-    else:
-        attrs["units"] = v.units
-    if not v.reproducible:
-        attrs["reproducible"] = "no: differs between runs"
-    return attrs
-
-
 # ---------------------------------------------------------------- writing
 
 def write(config, load: Callable[[str], np.ndarray], command: str) -> Path:
     """Write the archive atomically: to a temporary file beside the output, variable by
     variable (peak memory: one variable), then renamed into place. `load(name)` returns a
     variable over all cells in flat C order, shape (n_cells, ...)."""
+    import xarray as xr
     out = config.output
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.partial-{os.getpid()}")
+    tmp = partial_path(out)
     dims = tuple(a.name for a in config.axes)
     try:
-        base = xr.Dataset(coords={k: xr.Variable(*v) for k, v in coordinates(config).items()},
+        coords = coordinates(config)
+        base = xr.Dataset(coords={k: xr.Variable(*v) for k, v in coords.items()},
                           attrs=attributes(config, command))
-        base.to_netcdf(tmp, mode="w", engine="netcdf4")
+        base.to_netcdf(tmp, mode="w", engine="netcdf4",
+                       encoding={k: {"_FillValue": None} for k in coords})
         for v in variables(config):
             data = load(v.name).reshape(config.shape + (() if v.extra is None else (-1,)))
             var_dims = dims + (() if v.extra is None else (v.extra,))
-            one = xr.Dataset({v.name: xr.Variable(var_dims, data, variable_attrs(v))})
+            one = xr.Dataset({v.name: xr.Variable(var_dims, data, v.attrs())})
             enc = {v.name: {"zlib": True, "complevel": 4,
                             "_FillValue": None if v.dtype.startswith("i") else np.nan}}
             one.to_netcdf(tmp, mode="a", engine="netcdf4", encoding=enc)
+        with open(tmp, "rb+") as fh:
+            os.fsync(fh.fileno())
         os.replace(tmp, out)
     finally:
         if tmp.exists():
@@ -245,5 +340,75 @@ def write(config, load: Callable[[str], np.ndarray], command: str) -> Path:
     return out
 
 
-def reproducible_variables(ds: xr.Dataset) -> list[str]:
-    return [k for k, v in ds.data_vars.items() if v.attrs.get("reproducible") is None]
+def partial_path(out: Path) -> Path:
+    """Where an archive is written before it is renamed into place."""
+    return out.with_name(f".{out.name}.partial-{os.getpid()}")
+
+
+# ---------------------------------------------------------------- reading and checking
+
+class ArchiveError(ValueError):
+    """A file that is not a readable survey archive: one line saying what it is instead."""
+
+
+def open_archive(path):
+    """The Dataset of a survey archive, or ArchiveError naming what is wrong with the file."""
+    import xarray as xr
+    path = Path(path)
+    if not path.exists():
+        raise ArchiveError(f"{path}: no such file")
+    if not path.is_file():
+        raise ArchiveError(f"{path}: not a regular file; give a survey archive (.nc)")
+    try:
+        ds = xr.open_dataset(path, engine="netcdf4")
+    except Exception as exc:   # netCDF4 and HDF5 raise OSError, ValueError, RuntimeError
+        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise ArchiveError(f"{path}: not a readable NetCDF file ({reason}); it may be "
+                           "truncated or of another format") from None
+    if "config" not in ds.attrs or "config_sha256" not in ds.attrs:
+        ds.close()
+        raise ArchiveError(f"{path}: a NetCDF file but not a survey archive (no stored "
+                           "config)")
+    return ds
+
+
+def problems(ds, config) -> list[str]:
+    """How an archive departs from what its stored config implies: the config's sha256,
+    the grid coordinates, the set of variables, their dimensions, types and attributes."""
+    found = []
+    sha = hashlib.sha256(ds.attrs["config"].encode()).hexdigest()
+    if sha != ds.attrs["config_sha256"]:
+        found.append("config_sha256 does not match the stored config text (edited after "
+                     "the run)")
+    for name, (dim, values, attrs) in coordinates(config).items():
+        if name not in ds.variables:
+            found.append(f"coordinate {name} is missing")
+            continue
+        stored = ds[name].values
+        values = np.asarray(values)
+        if stored.shape != values.shape or (stored.dtype.kind == "f" and
+                                            stored.tobytes() != values.astype(stored.dtype).tobytes()) \
+                or (stored.dtype.kind != "f" and not np.array_equal(stored.astype(values.dtype), values)):
+            found.append(f"coordinate {name} differs from the grid of the stored config")
+    expected = {v.name: v for v in variables(config)}
+    for name in sorted(set(ds.data_vars) - set(expected)):
+        found.append(f"variable {name} is not part of this config's archive")
+    dims = tuple(a.name for a in config.axes)
+    for name, v in expected.items():
+        if name not in ds.data_vars:
+            found.append(f"variable {name} is missing")
+            continue
+        var = ds[name]
+        want_dims = dims + (() if v.extra is None else (v.extra,))
+        if var.dims != want_dims:
+            found.append(f"variable {name} has dimensions {var.dims}, expected {want_dims}")
+        if np.dtype(var.dtype).kind != np.dtype(v.dtype).kind:
+            found.append(f"variable {name} has type {var.dtype}, expected {v.dtype}")
+        for key, value in v.attrs().items():
+            if not np.array_equal(np.asarray(var.attrs.get(key)), np.asarray(value)):
+                found.append(f"variable {name}: attribute {key} is "
+                             f"{var.attrs.get(key)!r}, expected {value!r}")
+        for key in sorted(set(var.attrs) - set(v.attrs())):
+            if key in ("reproducible", "flag_values", "flag_meanings"):
+                found.append(f"variable {name}: unexpected attribute {key}")
+    return found

@@ -30,20 +30,28 @@ def _orbit(args):
     from .indicators import deviation_vectors
     from .integrator import integrate
 
+    from .config import ConfigError
+    from .integrator import RTOL_MIN
+
     params = {}
     for item in args.param:
         key, _, value = item.partition("=")
         try:
             params[key] = float(value)
         except ValueError:
-            print(f"error: --param {item!r}: expected KEY=NUMBER", file=sys.stderr)
-            return 2
+            raise ConfigError(f"--param {item}", "expected KEY=NUMBER") from None
+        if not np.isfinite(params[key]):
+            raise ConfigError(f"--param {item}", "the value must be a finite number")
+    if not (np.isfinite(args.t_final) and args.t_final > 0):
+        raise ConfigError("--t-final", f"must be a finite number > 0, got {args.t_final!r}")
+    if not RTOL_MIN <= args.tol < 1:
+        raise ConfigError("--tol", f"must be in [{RTOL_MIN:.2g}, 1) (double precision cannot "
+                                   f"honour less), got {args.tol!r}")
     try:
         system = System.create(potential=args.potential)
         y0 = initial_state(system, args.family, **params)
     except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        raise ConfigError("orbit", str(exc)) from None
     E0, J0 = system.energy(y0), system.angular_momentum(y0)
     t_eval = np.linspace(0.0, args.t_final, 1001)
     start = time.perf_counter()
@@ -70,30 +78,28 @@ def _orbit(args):
 def _run(args):
     from pathlib import Path
 
-    from .config import ConfigError, load_config, parse_config
+    from .config import ensure_writable, load_config, parse_config
     from .sweep import run_survey
-    try:
-        if args.config is None:
-            text = (Path(__file__).parent / "default.toml").read_text()
-            config = parse_config(text, "embedded default (survey/default.toml)")
-        else:
-            config = load_config(args.config)
-        if args.output:
-            from .config import ensure_writable
-            ensure_writable(Path(args.output))
-            config.tables["survey"]["output"] = args.output
-        progress = False if args.no_progress else None
-        path = run_survey(config, workers=args.workers, scheduler=args.scheduler,
-                          progress=progress, command="python -m survey " + " ".join(sys.argv[1:]))
-    except ConfigError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    if args.config is None:
+        text = (Path(__file__).parent / "default.toml").read_text()
+        config = parse_config(text, "embedded default (survey/default.toml)")
+    else:
+        config = load_config(args.config)
+    if args.output:
+        ensure_writable(Path(args.output))
+        config.tables["survey"]["output"] = args.output
+    progress = False if args.no_progress else None
+    path = run_survey(config, workers=args.workers, scheduler=args.scheduler,
+                      progress=progress, command="python -m survey " + " ".join(sys.argv[1:]))
     print(f"wrote {path} ({config.n_cells} cells)")
     return 0
 
 
 def _verify(args):
     from .sweep import verify
+    if args.cells < 1:
+        from .config import ConfigError
+        raise ConfigError("--cells", f"must be >= 1, got {args.cells}")
     ok, lines = verify(args.archive, cells=args.cells)
     print("\n".join(lines))
     return 0 if ok else 1
@@ -142,14 +148,30 @@ def build_parser():
 
 
 def main(argv=None):
+    """Run a command; every failure is one line on stderr: exit 2 for bad input (a config,
+    an argument, a file that is not an archive), 1 for a survey that could not finish (a
+    full disk, a busy output), 130 when interrupted."""
+    from .archive import ArchiveError
+    from .config import ConfigError
+    from .sweep import SurveyError
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0].endswith(".toml"):
         argv.insert(0, "run")
     args = build_parser().parse_args(argv)
-    if getattr(args, "workers", None) is not None and args.workers < 1:
-        print("error: --workers must be >= 1", file=sys.stderr)
+    try:
+        if getattr(args, "workers", None) is not None and args.workers < 1:
+            raise ConfigError("--workers", f"must be >= 1, got {args.workers}")
+        return args.func(args)
+    except (ConfigError, ArchiveError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
         return 2
-    return args.func(args)
+    except SurveyError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        again = " -- run the same command to resume" if args.command == "run" else ""
+        print(f"interrupted{again}", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -12,7 +12,7 @@ import json
 import math
 import os
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
@@ -21,10 +21,12 @@ import numpy as np
 from .coordinates import REDUCED_SURFACES, SURFACES
 from .families import FAMILIES, family_parameters
 from .dynamics import System
-from .indicators import IndicatorOptions
+from .indicators import INDICATORS, IndicatorOptions
+from .integrator import RTOL_MIN
 from .potentials import POTENTIAL_NAMES, PROFILES, make_potential
 
-INDICATOR_NAMES = ("ftle", "megno", "fli", "sali", "gali2")
+INT64_MAX = 2 ** 63 - 1
+_IND = IndicatorOptions()      # one set of defaults: the Python API's and the config's
 
 
 class ConfigError(ValueError):
@@ -44,6 +46,8 @@ class Key:
     low: float | None = None        # inclusive lower bound
     above: float | None = None      # exclusive lower bound
     choices: tuple | None = None
+    high: float | None = None       # inclusive upper bound
+    hint: str = ""                  # why the bounds are what they are, added to range errors
 
 
 SCHEMA: dict[str, dict[str, Key]] = {
@@ -68,28 +72,34 @@ SCHEMA: dict[str, dict[str, Key]] = {
     },
     "integration": {
         "t_final": Key("float", 2000.0, "integration time of every cell", "time", above=0),
-        "rtol": Key("float", 1e-12, "relative tolerance of DOP853", above=0),
+        "rtol": Key("float", 1e-12, "relative tolerance of DOP853 (at least 10 eps = "
+                                    "2.2e-15)", low=RTOL_MIN,
+                    hint="double precision cannot honour a smaller relative tolerance"),
         "atol": Key("float", 1e-12, "absolute tolerance of DOP853", above=0),
         "max_steps": Key("int", 10_000_000, "step attempts per orbit before step_limit", low=1),
-        "cell_time_limit": Key("float", 0.0, "wall-clock budget per cell, 0 for none "
-                                             "(cells past it get status time_limit)", "s",
-                               low=0),
+        "cell_time_limit": Key("float", 0.0, "wall-clock budget of a cell (all its "
+                                             "integrations), 0 for none; cells past it get "
+                                             "status time_limit", "s", low=0),
         "control_tangents": Key("bool", False, "include tangent vectors in the error norm"),
     },
     "indicators": {
-        "which": Key("strs", list(INDICATOR_NAMES), "indicators to compute; [] integrates "
-                     "the orbit alone", choices=INDICATOR_NAMES),
-        "deviations": Key("int", 2, "seeded deviation vectors per orbit (sali and gali2 need "
-                                    "2)", low=1),
-        "seed": Key("int", 0, "seed of the deviation vectors (with the cell index)", low=0),
-        "renorm_interval": Key("float", 1.0, "time between renormalisations of the deviation "
-                                             "vectors", "time", above=0),
-        "history_points": Key("int", 64, "points of the convergence histories", low=2),
-        "project_flow": Key("bool", False, "project deviation vectors off the flow and grad H"),
-        "perturbations": Key("int", 2, "orbits started perturbation_size away, for the "
-                                       "spread of ftle and megno", low=0),
-        "perturbation_size": Key("float", 1e-9, "relative size of those perturbations",
-                                 above=0),
+        "which": Key("strs", list(INDICATORS), "indicators to compute; [] integrates "
+                     "the orbit alone", choices=INDICATORS),
+        "deviations": Key("int", _IND.deviations, "seeded deviation vectors per orbit (sali "
+                                                  "and gali2 need 2)", low=1),
+        "seed": Key("int", _IND.seed, "seed of the deviation vectors (with the cell index)",
+                    low=0),
+        "renorm_interval": Key("float", _IND.renorm_interval, "time between "
+                               "renormalisations of the deviation vectors", "time", above=0),
+        "history_points": Key("int", _IND.history_points, "points of the convergence "
+                                                          "histories", low=2),
+        "project_flow": Key("bool", _IND.project_flow, "project deviation vectors off the "
+                                                       "flow and grad H"),
+        "perturbations": Key("int", _IND.perturbations, "orbits started perturbation_size "
+                                                        "away, for the spread of ftle and "
+                                                        "megno", low=0),
+        "perturbation_size": Key("float", _IND.perturbation_size, "relative size of those "
+                                                                  "perturbations", above=0),
     },
     "section": {
         "coordinate": Key("str", "phi", "surface coordinate = value", choices=SURFACES),
@@ -106,6 +116,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "workers": Key("int", 2, "local worker processes (1 thread each)", low=1),
         "scheduler": Key("str", "", "address of an existing dask scheduler, e.g. "
                                     "tcp://host:8786 (then workers is ignored)"),
+        "connect_timeout": Key("float", 30.0, "seconds to wait for that scheduler to answer",
+                               "s", above=0, high=3600),
         "chunk_size": Key("int", 0, "cells per task; 0 picks about 64 tasks per worker "
                                     "(at most 256 cells each); chunks interleave the grid so "
                                     "that every task mixes cheap and costly cells", low=0),
@@ -113,6 +125,24 @@ SCHEMA: dict[str, dict[str, Key]] = {
     },
 }
 # [initial] also takes the family's own parameters; any numeric one may be a grid axis.
+
+
+def markdown_tables() -> str:
+    """The README's tables of config keys, one per table of SCHEMA."""
+    def show(v):
+        if v is None or v == "":
+            return "—"
+        if isinstance(v, list):
+            return "[" + ", ".join(map(str, v)) + "]"
+        return "{}" if v == {} else str(v).replace("|", "\\|")
+    out = []
+    for table, keys in SCHEMA.items():
+        out += [f"**[{table}]**", "", "| key | meaning | unit | default |",
+                "| --- | --- | --- | --- |"]
+        out += [f"| `{k}` | {spec.doc.replace('<', '&lt;').replace('>', '&gt;')} | "
+                f"{spec.unit or '—'} | {show(spec.default)} |" for k, spec in keys.items()]
+        out.append("")
+    return "\n".join(out).rstrip()
 
 
 @dataclass(frozen=True)
@@ -155,19 +185,7 @@ class Config:
         return hashlib.sha256(self.text.encode()).hexdigest()
 
     def system(self) -> System:
-        s = self.tables["system"]
-        masses = s["masses"] if s["masses"] is not None else [1.0] * s["bodies"]
-        return System(np.array(masses, dtype=float), s["dim"],
-                      make_potential(s["potential"], s["params"]))
-
-    def indicator_options(self) -> IndicatorOptions:
-        i = self.tables["indicators"]
-        return IndicatorOptions(deviations=i["deviations"], seed=i["seed"],
-                                renorm_interval=i["renorm_interval"],
-                                history_points=i["history_points"],
-                                project_flow=i["project_flow"],
-                                perturbations=i["perturbations"],
-                                perturbation_size=i["perturbation_size"])
+        return build_system(self.tables["system"])
 
     def cell_parameters(self, index: int) -> dict:
         """Family parameters (and target energy) of flat cell `index` (C order)."""
@@ -177,11 +195,33 @@ class Config:
         return params
 
     def result_key(self) -> str:
-        """Hash of everything that determines the cells' results (not dask or output
-        settings), plus the code that computes them: checkpoints are reused only under it."""
+        """Hash of everything that determines the cells' results -- the result tables, the
+        grid (axis names and values, fixed family parameters, cell count) -- and the code
+        that computes them: checkpoints are reused only under it. [dask] and [survey] do not
+        change results and are left out."""
+        h = hashlib.sha256()
         relevant = {k: v for k, v in self.tables.items() if k not in ("dask", "survey")}
-        blob = json.dumps(relevant, sort_keys=True, default=_jsonable).encode()
-        return hashlib.sha256(blob + code_fingerprint().encode()).hexdigest()[:20]
+        h.update(json.dumps(relevant, sort_keys=True, default=_jsonable).encode())
+        for axis in self.axes:
+            h.update(f"axis {axis.name} {axis.values.size}\n".encode())
+            h.update(np.ascontiguousarray(axis.values, dtype="<f8").tobytes())
+        fixed = {k: np.asarray(v, dtype=float).tolist() for k, v in self.fixed.items()}
+        h.update(json.dumps(fixed, sort_keys=True).encode())
+        h.update(f"cells {self.n_cells}\n".encode())
+        h.update(code_fingerprint().encode())
+        return h.hexdigest()[:20]
+
+
+def build_system(s: dict) -> System:
+    """The System of a validated [system] table."""
+    masses = s["masses"] if s["masses"] is not None else [1.0] * s["bodies"]
+    return System(np.array(masses, dtype=float), s["dim"],
+                  make_potential(s["potential"], s["params"]))
+
+
+def indicator_options(i: dict) -> IndicatorOptions:
+    """The IndicatorOptions of a validated [indicators] table."""
+    return IndicatorOptions(**{f.name: i[f.name] for f in fields(IndicatorOptions)})
 
 
 def _jsonable(x):
@@ -189,23 +229,49 @@ def _jsonable(x):
 
 
 def code_fingerprint() -> str:
-    """sha256 of survey's own source files."""
+    """sha256 of every Python module of the package, subpackages included, with their paths
+    (a module moved or added changes it too)."""
+    root = Path(__file__).parent
     h = hashlib.sha256()
-    for path in sorted(Path(__file__).parent.glob("*.py")):
-        h.update(path.read_bytes())
+    for path in sorted(root.rglob("*.py")):
+        h.update(str(path.relative_to(root)).encode() + b"\0" + path.read_bytes())
     return h.hexdigest()
 
 
 # ---------------------------------------------------------------- loading
 
 def load_config(source) -> Config:
-    """A Config from a TOML file path or a dict of tables."""
+    """A Config from a TOML file path or a dict of tables (Python values: numpy scalars,
+    tuples and 1-D arrays are taken as numbers and lists; None as "not given")."""
     if isinstance(source, dict):
-        return validate(source, _to_toml(source), "<dict>")
+        tables = _plain(source, "")
+        return validate(tables, _to_toml(tables), "<dict>")
+    if not isinstance(source, (str, os.PathLike)):
+        raise ConfigError("config", f"expected a TOML file path or a dict of tables, got "
+                                    f"{type(source).__name__}")
     path = Path(source)
-    if not path.is_file():
-        raise ConfigError(str(source), "no such config file")
-    return parse_config(path.read_text(), str(path))
+    if "\0" in str(path):
+        raise ConfigError("config", "the file name contains a NUL character")
+    try:
+        data = path.read_bytes()
+    except IsADirectoryError:
+        raise ConfigError(str(source), "is a folder; give a TOML file") from None
+    except FileNotFoundError:
+        raise ConfigError(str(source), "no such config file") from None
+    except OSError as exc:
+        raise ConfigError(str(source), f"cannot read it ({exc.strerror or exc})") from None
+    return parse_config(_decode(data, str(source)), str(source))
+
+
+def _decode(data: bytes, where: str) -> str:
+    """TOML files are UTF-8: anything else is named, not decoded by guesswork."""
+    if data.startswith((b"\xff\xfe", b"\xfe\xff")):
+        raise ConfigError(where, "is UTF-16 text; TOML files are UTF-8: save it as UTF-8")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(where, f"is not UTF-8 text (byte {exc.start} is not valid); a "
+                                 "config is a UTF-8 TOML file") from None
 
 
 def parse_config(text: str, where: str = "<text>", check_output: bool = True) -> Config:
@@ -217,13 +283,45 @@ def parse_config(text: str, where: str = "<text>", check_output: bool = True) ->
     return validate(raw, text, where, check_output)
 
 
+def _plain(value, where):
+    """A Python value given to the API as the TOML value it stands for."""
+    if isinstance(value, dict):
+        out = {}
+        for k, v in value.items():
+            if not isinstance(k, str):
+                raise ConfigError(f"{where}{k!r}", "table keys must be strings")
+            if v is not None:
+                out[k] = _plain(v, f"{where}[{k}]." if not where else f"{where}{k}.")
+        return out
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value)
+    if isinstance(value, str):
+        return value
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    if isinstance(value, (list, tuple, np.ndarray)):
+        if isinstance(value, np.ndarray) and value.ndim > 2:
+            raise ConfigError(where.rstrip("."), f"expected a list, got a {value.ndim}-D array")
+        return [_plain(v, where) for v in value]
+    raise ConfigError(where.rstrip(".") or "config",
+                      f"{type(value).__name__} is not a config value (numbers, strings, "
+                      "booleans, lists and tables are)")
+
+
 def _to_toml(tables: dict) -> str:
     """Minimal TOML writer for config dicts (so an API-given config is archived as text)."""
     def val(v):
         if isinstance(v, bool):
             return "true" if v else "false"
-        if isinstance(v, (int, float, np.integer, np.floating)):
-            return repr(float(v)) if isinstance(v, (float, np.floating)) else str(int(v))
+        if isinstance(v, float):
+            return repr(v) if math.isfinite(v) else ("nan" if v != v else
+                                                    ("inf" if v > 0 else "-inf"))
+        if isinstance(v, int):
+            return str(v)
         if isinstance(v, str):
             return json.dumps(v)
         if isinstance(v, dict):
@@ -268,19 +366,36 @@ def _check(table: str, key: str, spec: Key, value):
     for v in items:
         if isinstance(v, float) and not math.isfinite(v):
             raise ConfigError(where, f"must be finite, got {v!r}")
+        if isinstance(v, int) and abs(v) > INT64_MAX:
+            raise ConfigError(where, f"{v} does not fit a 64-bit integer; use a value below "
+                                     f"{INT64_MAX:.3g}")
+        if isinstance(v, str) and "\0" in v:
+            raise ConfigError(where, "contains a NUL character")
         if spec.choices is not None and v not in spec.choices:
             raise ConfigError(where, f"{v!r} is not one of {', '.join(map(repr, spec.choices))}"
                               + (_suggest(v, spec.choices) if isinstance(v, str) else ""))
+        hint = f"; {spec.hint}" if spec.hint else ""
         if spec.low is not None and v < spec.low:
-            raise ConfigError(where, f"must be >= {spec.low:g}, got {v!r}")
+            raise ConfigError(where, f"must be >= {spec.low:.3g}, got {v!r}{hint}")
         if spec.above is not None and not v > spec.above:
-            raise ConfigError(where, f"must be > {spec.above:g}, got {v!r}")
+            raise ConfigError(where, f"must be > {spec.above:.3g}, got {v!r}{hint}")
+        if spec.high is not None and v > spec.high:
+            raise ConfigError(where, f"must be <= {spec.high:.3g}, got {v!r}{hint}")
     return value
 
 
 def _kind_name(kind):
     return {"int": "an integer", "float": "a number", "str": "a string", "bool": "true or false",
             "floats": "numbers", "ints": "integers", "strs": "strings"}[kind]
+
+
+def _axis_size(value) -> int:
+    """Number of values of a grid axis as written (1 for a number or a malformed axis, which
+    is reported later): lets the memory check run before any axis is allocated."""
+    if isinstance(value, dict):
+        num = value.get("num")
+        return num if isinstance(num, int) and not isinstance(num, bool) and num > 1 else 1
+    return max(len(value), 1) if isinstance(value, list) else 1
 
 
 def _axis(where: str, value) -> np.ndarray | None:
@@ -308,16 +423,22 @@ def _axis(where: str, value) -> np.ndarray | None:
         num = value["num"]
         if isinstance(num, bool) or not isinstance(num, int) or num < 1:
             raise ConfigError(f"{where}.num", f"must be an integer >= 1, got {num!r}")
-        return np.linspace(float(value["start"]), float(value["stop"]), num)
-    if isinstance(value, list):
+        arr = np.linspace(float(value["start"]), float(value["stop"]), num)
+        if not np.all(np.isfinite(arr)):
+            raise ConfigError(where, "start and stop are so far apart that the grid "
+                                     "overflows; narrow the range")
+    elif isinstance(value, list):
         if not value or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
                                 and math.isfinite(v) for v in value):
             raise ConfigError(where, f"a grid axis list needs finite numbers, got {value!r}")
         arr = np.array(value, dtype=float)
-        if np.unique(arr).size != arr.size:
-            raise ConfigError(where, "grid axis values must be distinct")
-        return arr
-    raise ConfigError(where, f"expected a number, a list or {{start, stop, num}}, got {value!r}")
+    else:
+        raise ConfigError(where, f"expected a number, a list or {{start, stop, num}}, got "
+                                 f"{value!r}")
+    if np.unique(arr).size != arr.size:
+        raise ConfigError(where, "grid axis values must be distinct (in double precision); "
+                                 "widen the range or use fewer points")
+    return arr
 
 
 def validate(raw: dict, text: str, where: str = "<config>", check_output: bool = True) -> Config:
@@ -327,7 +448,7 @@ def validate(raw: dict, text: str, where: str = "<config>", check_output: bool =
         raise ConfigError(f"[{unknown[0]}]", "unknown table" + _suggest(unknown[0], SCHEMA)
                           + f"; tables are {', '.join(SCHEMA)}")
     tables: dict[str, dict] = {}
-    initial_raw = dict(raw.get("initial", {}))
+    initial_raw = raw.get("initial", {})
     for table, keys in SCHEMA.items():
         given = raw.get(table, {})
         if not isinstance(given, dict):
@@ -349,14 +470,89 @@ def validate(raw: dict, text: str, where: str = "<config>", check_output: bool =
                 body[key] = spec.default
         tables[table] = body
     tables["section_enabled"] = "section" in raw
+    _validate_names(tables)
+    check_memory(tables, math.prod(_axis_size(v) for v in initial_raw.values()))
 
     system = _validate_system(tables["system"])
-    axes, fixed = _validate_initial(initial_raw, tables["initial"], system)
+    axes, fixed = _validate_initial(dict(initial_raw), tables["initial"], system)
     _validate_cross(tables, system)
     config = Config(tables=tables, axes=tuple(axes), fixed=fixed, text=text, source=where)
     if check_output:
         ensure_writable(config.output)
     return config
+
+
+def _validate_names(tables: dict):
+    name = tables["survey"]["name"]
+    if not name.strip() or name in (".", "..") or any(c in name for c in "/\\") \
+            or any(ord(c) < 32 for c in name):
+        raise ConfigError("[survey].name", f"{name!r} is not a usable name: it names the "
+                                           "archive file, so no path separators, control "
+                                           "characters or '..'; e.g. name = \"delta-map\"")
+    address = tables["dask"]["scheduler"]
+    if address:
+        _check_address(address)
+
+
+def _check_address(address: str):
+    """A dask scheduler address, checked for form (the connection is tried later, bounded by
+    connect_timeout)."""
+    from distributed.comm.addressing import parse_address, parse_host_port
+    fix = "write it like tcp://host:8786 (the scheduler's port, not the dashboard's 8787)"
+    try:
+        scheme, location = parse_address(address, strict=True)
+        if scheme not in ("tcp", "tls", "ws", "wss", "ucx"):
+            raise ValueError(f"unknown scheme {scheme!r}")
+        host, port = parse_host_port(location)
+        if not host or not 0 < int(port) < 65536:
+            raise ValueError("no host or a port outside 1..65535")
+    except (ValueError, TypeError) as exc:
+        raise ConfigError("[dask].scheduler", f"{address!r} is not a scheduler address "
+                                              f"({exc}); {fix}") from None
+
+
+def memory_needed(n_cells, n, deviations, crossings, store_state, history, chunk,
+                  workers) -> int:
+    """Bytes a survey holds at its peak: the driver keeps every cell's start and one archive
+    variable over all cells; each worker a chunk of result rows and one integration's
+    buffers (stages, crossing states, history samples of the orbit and its tangents)."""
+    full = n * (1 + deviations) + 2
+    row = n + 24 + 4 * history + crossings * (7 + (n if store_state else 0))
+    integration = 27 * full + crossings * (n + 2) + history * (full + deviations)
+    driver = n_cells * (n + max(n, history, crossings * (n if store_state else 1)) + 1)
+    return 8 * (driver + workers * (chunk * row + integration))
+
+
+def check_memory(tables: dict, n_cells: int):
+    """Refuse, before anything is allocated, a survey that cannot fit in this machine's
+    memory, naming the setting whose reduction would help most."""
+    import psutil
+    s, sec, ind, dsk = tables["system"], tables["section"], tables["indicators"], tables["dask"]
+    size = dict(n_cells=n_cells, n=2 * s["bodies"] * s["dim"], deviations=ind["deviations"],
+                crossings=sec["max_crossings"] if tables["section_enabled"] else 0,
+                store_state=sec["store_state"], history=ind["history_points"],
+                chunk=dsk["chunk_size"] or 256, workers=dsk["workers"])
+    total = memory_needed(**size)
+    machine = psutil.virtual_memory().total
+    if total <= 0.8 * machine:
+        return
+    smaller = {"[initial] (the grid)": dict(n_cells=1), "[system].bodies": dict(n=6),
+               "[section].max_crossings": dict(crossings=1),
+               "[indicators].history_points": dict(history=2),
+               "[indicators].deviations": dict(deviations=1),
+               "[dask].chunk_size": dict(chunk=1), "[dask].workers": dict(workers=1)}
+    key = min(smaller, key=lambda k: memory_needed(**{**size, **smaller[k]}))
+    what = f"{n_cells:,} cells" if key.startswith("[initial]") else "this survey"
+    raise ConfigError(key.split()[0], f"{what} would need about {_bytes(total)} of memory, "
+                                      f"more than this machine's {_bytes(machine)}: reduce "
+                                      f"{key}, or split the survey")
+
+
+def _bytes(x: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if x < 1024 or unit == "PiB":
+            return f"{x:.3g} {unit}"
+        x /= 1024
 
 
 def _validate_system(s: dict) -> System:
@@ -370,9 +566,7 @@ def _validate_system(s: dict) -> System:
             raise ConfigError(f"[system.params].{key}", f"not a parameter of {s['potential']}"
                               + _suggest(key, allowed) + f"; it takes {', '.join(allowed)}")
     try:
-        masses = s["masses"] if s["masses"] is not None else [1.0] * s["bodies"]
-        return System(np.array(masses, float), s["dim"], make_potential(s["potential"],
-                                                                        s["params"]))
+        return build_system(s)
     except ValueError as exc:
         raise ConfigError("[system.params]", str(exc)) from None
 
@@ -402,8 +596,10 @@ def _validate_initial(given: dict, body: dict, system: System):
             arr = np.asarray(value, dtype=object)
             if np.shape(arr) != np.shape(default) or not all(
                     isinstance(v, (int, float)) and not isinstance(v, bool)
-                    for v in np.ravel(arr)):
-                raise ConfigError(where, f"expected numbers shaped like {list(map(list, default)) if np.ndim(default) == 2 else list(default)}, got {value!r}")
+                    and math.isfinite(v) for v in np.ravel(arr)):
+                shape = np.asarray(default).tolist()
+                raise ConfigError(where, f"expected finite numbers shaped like {shape}, got "
+                                         f"{value!r}")
             fixed[key] = np.asarray(value, dtype=float)
             continue
         values = _axis(where, value)
@@ -450,14 +646,50 @@ def section_event_for(tables: dict, system: System):
 
 
 def ensure_writable(path: Path):
+    """Refuse an output the survey could not write, or should not: names the file system
+    cannot hold (with the temporary, lock and checkpoint names derived from them), a
+    folder, a device, pipe or socket, a symbolic link (the archive is renamed into place,
+    which would replace the link, not write through it), an unwritable folder."""
+    key = "[survey].output"
+    if "\0" in str(path):
+        raise ConfigError(key, "contains a NUL character")
+    if path.name in ("", ".", ".."):
+        raise ConfigError(key, f"{str(path)!r} names no file; give a file name like "
+                               "results/map.nc")
     folder = path.parent if str(path.parent) else Path(".")
+    existing = next(p for p in [folder, *folder.absolute().parents] if p.exists())
+    try:
+        name_max = os.pathconf(existing, "PC_NAME_MAX")
+        path_max = os.pathconf(existing, "PC_PATH_MAX")
+    except (OSError, ValueError):
+        name_max, path_max = 255, 4096
+    longest = max(len(os.fsencode(part)) for part in path.parts)
+    derived = len(os.fsencode(path.name)) + NAME_EXTRA
+    if max(longest, derived) > name_max:
+        raise ConfigError(key, f"a name in it is too long for the file system ({name_max} "
+                               f"bytes, and survey adds up to {NAME_EXTRA} to the file "
+                               "name); shorten it")
+    if len(os.fsencode(os.path.abspath(path))) + CHECKPOINT_PATH_EXTRA > path_max:
+        raise ConfigError(key, f"the path is too long for the file system ({path_max} bytes "
+                               "with the checkpoint names survey adds); shorten it")
+    if path.is_symlink():
+        raise ConfigError(key, f"{path} is a symbolic link; give the path of the file itself")
+    if path.exists() and not path.is_file():
+        kind = "a folder; give a file name" if path.is_dir() else \
+            "not a regular file (a device, pipe or socket); give a file path"
+        raise ConfigError(key, f"{path} is {kind}")
     try:
         folder.mkdir(parents=True, exist_ok=True)
         probe = folder / f".survey-write-test-{os.getpid()}"
         probe.write_bytes(b"")
         probe.unlink()
     except OSError as exc:
-        raise ConfigError("[survey].output", f"cannot write to {folder} ({exc.strerror}); "
-                                             "choose a writable path") from None
-    if path.exists() and path.is_dir():
-        raise ConfigError("[survey].output", f"{path} is a folder; give a file name")
+        raise ConfigError(key, f"cannot write to {folder} ({exc.strerror}); "
+                               "choose a writable path") from None
+
+
+# what survey adds to an output's name and path: the archive's temporary file is
+# .NAME.partial-PID (PIDs have up to 7 digits; archive.partial_path), a checkpoint is
+# NAME.checkpoints/KEY/.chunk-FIRST-LAST-COUNT.npz.PID.tmp (sweep.save_chunk)
+NAME_EXTRA = 17
+CHECKPOINT_PATH_EXTRA = 120

@@ -16,25 +16,35 @@ started a tiny distance away.
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import NamedTuple, Sequence
 
 import numpy as np
 
 from .dynamics import System, rhs
-from .integrator import Crossings, Event, Outcome, Status, integrate
+from .integrator import Crossings, Event, Outcome, integrate
+from .status import Status
+
+INDICATORS = ("ftle", "megno", "fli", "sali", "gali2")
+
+
+def history_times(t_final: float, points: int) -> np.ndarray:
+    """The time grid of the convergence histories: `points` evenly spaced up to t_final."""
+    return np.linspace(t_final / points, t_final, points)
 
 
 @dataclass(frozen=True)
 class IndicatorOptions:
-    """How the indicators are computed (the `[indicators]` table of a survey config)."""
+    """How the indicators are computed; its defaults are the `[indicators]` defaults of a
+    survey config."""
 
     deviations: int = 2            # seeded deviation vectors per orbit (>= 2 for SALI)
     seed: int = 0
     renorm_interval: float = 1.0   # time between renormalisations of the tangent vectors
     history_points: int = 64       # coarse time grid of the convergence histories
     project_flow: bool = False     # project deviations off the flow and grad H at t = 0
-    perturbations: int = 0         # extra orbits started perturbation_size away
+    perturbations: int = 2         # extra orbits started perturbation_size away
     perturbation_size: float = 1e-9
 
     def __post_init__(self):
@@ -105,11 +115,13 @@ def deviation_vectors(system: System, y0, count: int, seed: int, cell: int = 0,
 
 
 def _sali(w1, w2):
+    """SALI and GALI_2 of two deviation vectors. For unit a, b: |a + b|^2 |a - b|^2 =
+    4 (1 - (a.b)^2), so GALI_2 = |a ^ b| = |a + b| |a - b| / 2 -- from the components,
+    without the cancellation of sqrt(1 - c^2) that stops GALI_2 near 1e-8."""
     a = w1 / np.linalg.norm(w1, axis=-1, keepdims=True)
     b = w2 / np.linalg.norm(w2, axis=-1, keepdims=True)
-    c = np.clip(np.sum(a * b, axis=-1), -1.0, 1.0)
-    sali = np.minimum(np.linalg.norm(a + b, axis=-1), np.linalg.norm(a - b, axis=-1))
-    return sali, np.sqrt(1.0 - c * c)
+    plus, minus = np.linalg.norm(a + b, axis=-1), np.linalg.norm(a - b, axis=-1)
+    return np.minimum(plus, minus), 0.5 * plus * minus
 
 
 def _ls_slope(t, v):
@@ -135,17 +147,25 @@ def chaos_indicators(system: System, y0, t_final: float, options=IndicatorOption
                      control_tangents=False) -> ChaosIndicators:
     """Integrate y0 to t_final with `options.deviations` tangent vectors and their MEGNO
     accumulators (plus `options.perturbations` nearby orbits) and return the indicators,
-    their ensemble spread and convergence histories, and any section crossings."""
+    their ensemble spread and convergence histories, and any section crossings.
+    time_limit (wall-clock seconds, 0 for none) is the budget of all these integrations
+    together; when it runs out the status is TIME_LIMIT."""
     o = options
     y0 = np.asarray(y0, dtype=float)
     n = system.n
-    history = np.linspace(t_final / o.history_points, t_final, o.history_points)
+    history = history_times(t_final, o.history_points)
+    deadline = time.perf_counter() + time_limit if time_limit > 0 else None
+
+    def left():    # the kernel's time_limit for the next integration: 0 means none
+        return 0.0 if deadline is None else deadline - time.perf_counter()
+
     run = dict(rtol=rtol, atol=atol, max_steps=max_steps, renorm_interval=o.renorm_interval,
-               time_limit=time_limit, control_tangents=control_tangents)
+               control_tangents=control_tangents)
     kw = dict(megno=True, t_eval=history, sample_tangents=True, **run)
     w0 = deviation_vectors(system, y0, o.deviations, o.seed, cell, o.project_flow)
     out = integrate(system, y0, t_final, tangents=w0, events=events, max_events=max_events,
-                    **kw)
+                    time_limit=left(), **kw)
+    status = out.status
     k = o.deviations
     reached = ~np.isnan(history) & (history <= out.t)
     th = np.where(reached, history, np.nan)
@@ -156,11 +176,17 @@ def chaos_indicators(system: System, y0, t_final: float, options=IndicatorOption
 
     ftles = list(out.log_growth / out.t) if out.t > 0 else [np.nan] * k
     megnos = [out.megno_sums[1] / out.t if out.t > 0 else np.nan]
-    for j in range(o.perturbations):
+    for j in range(o.perturbations if status.finished else 0):
+        if deadline is not None and left() <= 0:
+            status = Status.TIME_LIMIT
+            break
         xi = deviation_vectors(system, y0, 1, o.seed, cell, stream=1 + j)[0]
         yp = y0 + o.perturbation_size * np.linalg.norm(y0) * xi
         wp = deviation_vectors(system, yp, 1, o.seed, cell, o.project_flow, stream=1 + j)
-        res = integrate(system, yp, t_final, tangents=wp, megno=True, **run)
+        res = integrate(system, yp, t_final, tangents=wp, megno=True, time_limit=left(), **run)
+        if res.status == Status.TIME_LIMIT:
+            status = Status.TIME_LIMIT
+            break
         if res.ok and res.t > 0:
             ftles.append(res.log_growth[0] / res.t)
             megnos.append(res.megno_sums[1] / res.t)
@@ -178,7 +204,7 @@ def chaos_indicators(system: System, y0, t_final: float, options=IndicatorOption
     dE, dJ = conservation_errors(system, y0, np.concatenate([out.samples[reached, :n], [out.y]]))
     half = history >= 0.5 * t_final
     return ChaosIndicators(
-        status=out.status, t=out.t,
+        status=status, t=out.t,
         ftle=float(np.mean(ftles)), ftle_spread=spread(ftles),
         megno=float(np.mean(megnos)), megno_spread=spread(megnos),
         megno_slope=_ls_slope(th[half], megno_h[half]),

@@ -2,29 +2,44 @@
 
 A cell's result depends only on the config and its own index (deviation vectors are seeded
 by (seed, cell index)), never on the chunk it travels in or the worker that runs it, so an
-archive is the same bit for bit whatever the chunk size or worker count. Finished chunks are
-written to checkpoint files as they arrive (atomically); a survey started again with the
-same config computes only the missing cells. Checkpoints live under a key that hashes the
-result-determining config and survey's own code, so a changed config never reuses them.
+archive is the same bit for bit whatever the chunk size or worker count.
+
+Finished chunks are written to checkpoint files as they arrive (atomically), under a key
+that hashes everything that determines a cell's result (config tables, grid, code). Every
+checkpoint is checked before it is used -- readable, written under this key, its cells in
+the grid and its starts equal to this grid's -- and one that is not is recomputed. The
+archive is written only when every cell is present. One survey at a time writes an output
+(a lock beside it).
 """
 from __future__ import annotations
 
 import contextlib
+import errno
+import fcntl
 import logging
 import os
 import shutil
 import sys
 import time
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from . import archive
-from .config import Config, ConfigError, load_config, section_event_for
+from .archive import CellResult
+from .config import (Config, ConfigError, build_system, indicator_options, load_config,
+                     section_event_for, _check_address)
 from .coordinates import reduced
 from .families import Inaccessible, initial_state
-from .indicators import chaos_indicators, conservation_errors
-from .integrator import Status, integrate
+from .indicators import chaos_indicators, conservation_errors, history_times
+from .integrator import integrate
+from .status import Status
+
+
+class SurveyError(RuntimeError):
+    """A survey that cannot go on for a reason outside its config (a full disk, a busy
+    output, cells that could not be computed): one line saying what and what to do."""
 
 
 def build_starts(config: Config) -> np.ndarray:
@@ -47,66 +62,73 @@ def build_starts(config: Config) -> np.ndarray:
 
 # ---------------------------------------------------------------- the task
 
-def run_cells(config: Config, cell_ids, starts) -> dict[str, np.ndarray]:
-    """Integrate a chunk of cells (the unit of work a dask task does)."""
-    system = config.system()
-    integ = config.tables["integration"]
-    sec = config.tables["section"]
-    events = [section_event_for(config.tables, system)] if config.tables["section_enabled"] \
-        else []
-    which = set(config.tables["indicators"]["which"])
-    options = config.indicator_options()
-    res = archive.empty_results(config, len(cell_ids))
-    kw = dict(rtol=integ["rtol"], atol=integ["atol"], max_steps=integ["max_steps"],
-              max_events=sec["max_crossings"], time_limit=integ["cell_time_limit"],
-              control_tangents=integ["control_tangents"])
-    planar3 = system.n_bodies == 3 and system.dim == 2
+@dataclass(frozen=True)
+class CellTask:
+    """What a worker needs to integrate cells -- the result-determining tables and the
+    archive's layout -- and nothing of the grid or the config text, which can be large."""
+
+    system: dict
+    integration: dict
+    indicators: dict
+    section: dict | None
+    slots: tuple
+
+    @classmethod
+    def of(cls, config: Config) -> "CellTask":
+        t = config.tables
+        return cls(t["system"], t["integration"], t["indicators"],
+                   t["section"] if t["section_enabled"] else None, archive.layout(config))
+
+    def short(self) -> "CellTask":
+        """The same task with a tiny t_final: compiles (or loads) every kernel a cell uses."""
+        ind = self.indicators
+        return replace(self, integration={**self.integration, "t_final": 1e-3},
+                       indicators={**ind, "renorm_interval": 1e-3,
+                                   "perturbations": min(1, ind["perturbations"])})
+
+
+def run_cells(task: CellTask, cell_ids, starts) -> dict[str, np.ndarray]:
+    """Integrate a chunk of cells (the unit of work a dask task does): one result row per
+    cell in every array of the task's layout."""
+    system = build_system(task.system)
+    events = [section_event_for({"section": task.section}, system)] if task.section else []
+    res = archive.empty_results(task.slots, len(cell_ids))
     for k, (cell, y0) in enumerate(zip(cell_ids, starts)):
-        clock = time.perf_counter()
-        if np.isnan(y0[0]):
-            res["status"][k] = Status.INACCESSIBLE
-            res["n_steps"][k] = res["n_rhs"][k] = 0
-            res["wall_time"][k] = time.perf_counter() - clock
-            continue
-        res["initial_state"][k] = y0
-        for name, value in (("energy", system.energy), ("angular_momentum",
-                                                         system.angular_momentum)):
-            if name in res:
-                res[name][k] = value(y0)
-        if which:
-            ci = chaos_indicators(system, y0, integ["t_final"], options, cell=int(cell),
-                                  events=events, **kw)
-            out = ci.outcome
-            for name in ("ftle", "ftle_spread", "megno", "megno_spread", "megno_slope", "fli",
-                         "sali", "gali2", "ftle_history", "megno_history", "fli_history",
-                         "sali_history"):
-                if name in res:
-                    res[name][k] = getattr(ci, name)
-            res["energy_error"][k] = ci.energy_error
-            res["angular_momentum_error"][k] = ci.angular_momentum_error
-        else:
-            history = archive.coordinates(config)["history_time"][1]
-            kw_orbit = {key: v for key, v in kw.items() if key != "control_tangents"}
-            out = integrate(system, y0, integ["t_final"], events=events, t_eval=history,
-                            **kw_orbit)
-            done = ~np.isnan(out.samples[:, 0])
-            res["energy_error"][k], res["angular_momentum_error"][k] = conservation_errors(
-                system, y0, np.concatenate([out.samples[done], [out.y]]))
-        res["status"][k] = out.status
-        res["t_end"][k] = out.t
-        res["n_steps"][k], res["n_rhs"][k] = out.n_steps, out.n_rhs
-        if events:
-            kept = out.crossings.t.size
-            res["n_crossings"][k] = out.n_crossings
-            res["crossing_time"][k, :kept] = out.crossings.t
-            if planar3 and kept:
-                r = reduced(system, out.crossings.y)
-                for q in ("sigma", "p_sigma", "eta", "p_eta", "phi", "p_phi"):
-                    res[f"crossing_{q}"][k, :kept] = getattr(r, q)
-            if "crossing_state" in res:
-                res["crossing_state"][k, :kept] = out.crossings.y
-        res["wall_time"][k] = time.perf_counter() - clock
+        archive.fill_row(res, k, compute_cell(task, system, events, int(cell), y0))
     return res
+
+
+def compute_cell(task: CellTask, system, events, cell: int, y0) -> CellResult:
+    """Everything one cell's variables are filled from."""
+    clock = time.perf_counter()
+    if np.isnan(y0[0]):
+        return CellResult(Status.INACCESSIBLE, time.perf_counter() - clock)
+    integ, ind = task.integration, task.indicators
+    kw = dict(rtol=integ["rtol"], atol=integ["atol"], max_steps=integ["max_steps"],
+              time_limit=integ["cell_time_limit"])
+    if task.section:
+        kw["max_events"] = task.section["max_crossings"]
+    indicators = None
+    if ind["which"]:
+        indicators = chaos_indicators(system, y0, integ["t_final"], indicator_options(ind),
+                                      cell=cell, events=events,
+                                      control_tangents=integ["control_tangents"], **kw)
+        out, status = indicators.outcome, indicators.status
+        errors = indicators.energy_error, indicators.angular_momentum_error
+    else:
+        history = history_times(integ["t_final"], ind["history_points"])
+        out = integrate(system, y0, integ["t_final"], events=events, t_eval=history, **kw)
+        status = out.status
+        done = ~np.isnan(out.samples[:, 0])
+        errors = conservation_errors(system, y0, np.concatenate([out.samples[done], [out.y]]))
+    planar3 = system.n_bodies == 3 and system.dim == 2
+    return CellResult(
+        status=status, wall_time=time.perf_counter() - clock, n_steps=out.n_steps,
+        n_rhs=out.n_rhs, start=y0, t_end=out.t, energy=system.energy(y0),
+        angular_momentum=system.angular_momentum(y0), energy_error=errors[0],
+        angular_momentum_error=errors[1], indicators=indicators, n_crossings=out.n_crossings,
+        crossing_time=out.crossings.t, crossing_state=out.crossings.y,
+        reduced=reduced(system, out.crossings.y) if planar3 else None)
 
 
 # ---------------------------------------------------------------- checkpoints
@@ -116,46 +138,141 @@ def checkpoint_dir(config: Config) -> Path:
     return out.with_name(out.name + ".checkpoints") / config.result_key()
 
 
-def save_chunk(folder: Path, cell_ids, result: dict):
-    """Write one finished chunk atomically (temporary file, fsync, rename)."""
+def save_chunk(folder: Path, key: str, cell_ids, result: dict):
+    """Write one finished chunk atomically (temporary file, fsync, rename), with the key it
+    was computed under. The folder is made again if it was deleted meanwhile."""
     name = folder / f"chunk-{int(cell_ids[0]):012d}-{int(cell_ids[-1]):012d}-{len(cell_ids)}.npz"
     tmp = folder / f".{name.name}.{os.getpid()}.tmp"
-    with open(tmp, "wb") as fh:
-        np.savez(fh, cell_ids=np.asarray(cell_ids, dtype=np.int64), **result)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, name)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        with open(tmp, "wb") as fh:
+            np.savez(fh, cell_ids=np.asarray(cell_ids, dtype=np.int64), result_key=key,
+                     **result)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, name)
+    except OSError as exc:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise _write_error(exc, name, folder) from None
 
 
-def finished_cells(folder: Path) -> np.ndarray:
-    files = sorted(folder.glob("chunk-*.npz"))
-    ids = [np.load(f)["cell_ids"] for f in files]
-    return np.concatenate(ids) if ids else np.zeros(0, dtype=np.int64)
+def _write_error(exc: OSError, path: Path, folder: Path) -> SurveyError:
+    kept = f"finished cells are kept in {folder}" if folder.exists() else ""
+    if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        try:
+            free = shutil.disk_usage(path.parent if path.parent.exists() else folder).free
+            room = f" ({free / 2**20:.1f} MiB free)"
+        except OSError:
+            room = ""
+        return SurveyError(f"no space left on the device writing {path}{room}; free some "
+                           f"space and run the same command again" + (f": {kept}" if kept else ""))
+    return SurveyError(f"cannot write {path} ({exc.strerror or exc}); fix the folder and run "
+                       "the same command again" + (f": {kept}" if kept else ""))
 
 
-def _loader(config: Config, folder: Path):
-    files = sorted(folder.glob("chunk-*.npz"))
-    specs = {v.name: v for v in archive.variables(config)}
+def scan_checkpoints(folder: Path, config: Config, starts, key: str) -> dict[Path, np.ndarray]:
+    """The usable checkpoint files and their cells. A file that cannot be read, was written
+    under another key, holds cells outside the grid or already held, lacks a variable or has
+    one of the wrong shape, or whose starts differ from this grid's, is reported and
+    deleted: its cells are computed again."""
+    slots = archive.layout(config)
+    usable, seen = {}, np.zeros(config.n_cells, dtype=bool)
+    for path in sorted(folder.glob("chunk-*.npz")):
+        try:
+            with np.load(path) as z:
+                ids = z["cell_ids"]
+                problem = _chunk_problem(z, ids, slots, seen, starts, key)
+        except Exception as exc:   # zipfile, pickle and numpy raise many kinds
+            problem = f"unreadable ({type(exc).__name__}: {str(exc)[:80]})"
+        if problem:
+            warn(f"checkpoint {path} {problem}; its cells will be computed again")
+            with contextlib.suppress(OSError):
+                path.unlink()
+            continue
+        seen[ids] = True
+        usable[path] = ids
+    return usable
 
-    def load(name):
-        v = specs[name]
-        k = archive.extra_size(config, v.extra)
-        arr = np.full((config.n_cells,) + (() if v.extra is None else (k,)), v.fill, v.dtype)
-        for f in files:
-            with np.load(f) as z:
-                arr[z["cell_ids"]] = z[name]
-        return arr
-    return load
+
+def _chunk_problem(z, ids, slots, seen, starts, key) -> str:
+    if str(z["result_key"]) != key:
+        return "was written for another config or code version"
+    if ids.dtype.kind != "i" or ids.ndim != 1 or not ids.size:
+        return "has no valid cell list"
+    if ids.min() < 0 or ids.max() >= len(starts) or np.unique(ids).size != ids.size:
+        return "names cells outside this grid"
+    if seen[ids].any():
+        return "repeats cells another checkpoint holds"
+    for s in slots:
+        if s.name not in z.files:
+            return f"lacks variable {s.name}"
+        shape = (ids.size,) + ((s.width,) if s.width else ())
+        if z[s.name].shape != shape or z[s.name].dtype != np.dtype(s.dtype):
+            return f"has variable {s.name} of the wrong shape or type"
+    stored = z["initial_state"]
+    if stored.tobytes() != starts[ids].tobytes():
+        return "holds starts that differ from this grid's (another grid's results)"
+    return ""
 
 
-# ---------------------------------------------------------------- running
+def warn(message: str):
+    print(f"survey: {message}", file=sys.stderr)
+
+
+@contextlib.contextmanager
+def output_lock(output: Path):
+    """Hold the output for this process alone: a second survey writing the same output
+    refuses at once. The lock (an flock on .NAME.lock) dies with its process, so a killed
+    survey never leaves a stale one; the file is removed on the way out."""
+    path = output.with_name(f".{output.name}.lock")
+    while True:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.read(fd, 32).decode(errors="replace").strip() or "unknown"
+            os.close(fd)
+            raise SurveyError(f"another survey (process {holder}) is writing {output}; wait "
+                              "for it to finish, or choose another [survey].output") from None
+        try:
+            same = os.fstat(fd).st_ino == os.stat(path).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:      # not a file its previous holder unlinked while we waited to open it
+            break
+        os.close(fd)
+    try:
+        os.ftruncate(fd, 0)
+        os.write(fd, str(os.getpid()).encode())
+        _remove_stale_temporaries(output)
+        yield
+    finally:
+        with contextlib.suppress(OSError):
+            path.unlink()
+        os.close(fd)
+
+
+def _remove_stale_temporaries(output: Path):
+    """Temporary files of runs that were killed while writing (we hold the lock, so no
+    living survey owns them)."""
+    stale = list(output.parent.glob(f".{output.name}.partial-*"))
+    stale += list(output.with_name(output.name + ".checkpoints").glob("*/.chunk-*.tmp"))
+    for f in stale:
+        with contextlib.suppress(OSError):
+            f.unlink()
+
+
+# ---------------------------------------------------------------- the cluster
 
 @contextlib.contextmanager
 def _client(config: Config, workers, scheduler):
     from dask.distributed import Client, LocalCluster
     address = scheduler or config.tables["dask"]["scheduler"]
     if address:
-        with Client(address, timeout="30s") as client:
+        timeout = config.tables["dask"]["connect_timeout"]
+        _reach(address, timeout)
+        with Client(address, timeout=f"{timeout}s") as client:
             yield client
         return
     # One numba thread per worker process, and none of the monitoring meant for interactive
@@ -172,10 +289,45 @@ def _client(config: Config, workers, scheduler):
     os.environ.update(quiet)
     import dask
     dask.config.refresh()
+    # no dashboard; the scheduler's plain HTTP endpoints on a free loopback port, not 8787
+    # (which warns "port 8787 is already in use" whenever another cluster runs)
     with LocalCluster(n_workers=workers or config.tables["dask"]["workers"],
                       threads_per_worker=1, processes=True, dashboard_address=None,
+                      scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
                       silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
         yield client
+
+
+def _reach(address: str, timeout: float):
+    """Ask the address who it is, within `timeout` seconds in all: a port that accepts TCP
+    but never speaks dask's protocol (e.g. the dashboard's 8787) would otherwise hang the
+    client forever."""
+    import asyncio
+
+    from distributed.core import rpc
+
+    async def identity():
+        r = rpc(address, timeout=timeout)
+        try:
+            return await r.identity()
+        finally:
+            await r.close_rpc()
+
+    fix = ("start one with `dask scheduler` or give its address, e.g. tcp://host:8786 "
+           "(8787 is the dashboard, not the scheduler)")
+    try:
+        info = asyncio.run(asyncio.wait_for(identity(), timeout))
+    except (asyncio.TimeoutError, TimeoutError):
+        raise ConfigError("[dask].scheduler", f"nothing at {address} answered as a dask "
+                                              f"scheduler within {timeout:g} s; {fix}") from None
+    except Exception as exc:
+        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise ConfigError("[dask].scheduler", f"cannot reach a dask scheduler at {address} "
+                                              f"({reason}); {fix}") from None
+    if not isinstance(info, dict) or info.get("type") != "Scheduler":
+        kind = info.get("type") if isinstance(info, dict) else "something else"
+        raise ConfigError("[dask].scheduler", f"{address} is a dask {kind}, not a scheduler; "
+                                              f"{fix}")
 
 
 def _chunks(ids: np.ndarray, size: int):
@@ -186,6 +338,8 @@ def _chunks(ids: np.ndarray, size: int):
     return [ids[k::count] for k in range(count)]
 
 
+# ---------------------------------------------------------------- running
+
 def run_survey(source, *, workers: int | None = None, scheduler: str | None = None,
                progress: bool | None = None, command: str = "survey.run_survey",
                timings: dict | None = None) -> Path:
@@ -195,46 +349,51 @@ def run_survey(source, *, workers: int | None = None, scheduler: str | None = No
     (first task submitted to last result saved) and writing the archive."""
     clock = {"start": time.perf_counter()}
     config = source if isinstance(source, Config) else load_config(source)
-    starts = build_starts(config)
-    folder = checkpoint_dir(config)
-    folder.mkdir(parents=True, exist_ok=True)
-    done = finished_cells(folder)
-    todo = np.setdiff1d(np.arange(config.n_cells), done)
+    workers, scheduler, progress = _api_arguments(workers, scheduler, progress)
     if progress is None:
         progress = sys.stderr.isatty()
-    if todo.size:
-        from tqdm import tqdm
-        first = todo[~np.isnan(starts[todo, 0])][:1]
-        if first.size:   # compile (or load from the disk cache) once, before the workers
-            run_cells(_short(config), first, starts[first])
-        warm = (lambda: run_cells(_short(config), first, starts[first])) if first.size else None
-        clock["prepared"] = time.perf_counter()
-        with _client(config, workers, scheduler) as client, \
-                tqdm(total=config.n_cells, initial=done.size, unit="cell", disable=not progress,
-                     desc=config.name, smoothing=0.1) as bar:
-            from dask.distributed import as_completed
-            if warm is not None:      # every worker loads the kernels from the disk cache
-                client.run(warm)
-            clock["cluster"] = time.perf_counter()
-            size = config.tables["dask"]["chunk_size"] or min(
-                256, max(1, -(-todo.size // (64 * len(client.scheduler_info()["workers"])))))
-            chunks = _chunks(todo, size)
-            key = config.result_key()
-            futures = {client.submit(run_cells, config, ids, starts[ids], pure=False,
-                                     key=f"cells-{key}-{int(ids[0])}",
-                                     retries=config.tables["dask"]["retries"]): ids
-                       for ids in chunks}
-            for future in as_completed(futures):
-                ids = futures.pop(future)
-                save_chunk(folder, ids, future.result())
-                future.release()
-                bar.update(len(ids))
-            clock["computed"] = time.perf_counter()
-    clock["archive"] = time.perf_counter()
-    path = archive.write(config, _loader(config, folder), command)
-    shutil.rmtree(folder)
-    with contextlib.suppress(OSError):
-        folder.parent.rmdir()
+    key = config.result_key()
+    folder = checkpoint_dir(config)
+    task = CellTask.of(config)
+    with output_lock(config.output):
+        starts = build_starts(config)
+        with contextlib.ExitStack() as stack:
+            client = bar = None
+            for round_ in range(4):     # rounds after the first only if checkpoints vanish
+                done = scan_checkpoints(folder, config, starts, key)
+                have = np.zeros(config.n_cells, dtype=bool)
+                for ids in done.values():
+                    have[ids] = True
+                todo = np.flatnonzero(~have)
+                if not todo.size:
+                    break
+                if round_ == 3:
+                    raise SurveyError(f"{todo.size} cells are still missing from {folder} "
+                                      "after computing them again (is something deleting "
+                                      "checkpoints?); the checkpoints are kept: run the same "
+                                      "command again")
+                if round_:
+                    warn(f"{todo.size} finished cells went missing from {folder}; computing "
+                         "them again")
+                if client is None:
+                    client = _start(stack, config, task, starts, todo, workers, scheduler,
+                                    clock)
+                    from tqdm import tqdm
+                    bar = stack.enter_context(tqdm(total=config.n_cells, unit="cell",
+                                                   disable=not progress, desc=config.name,
+                                                   smoothing=0.1))
+                bar.n = int(have.sum())
+                bar.refresh()
+                _compute(client, task, starts, todo, folder, key, config, bar, round_)
+                clock["computed"] = time.perf_counter()
+        clock["archive"] = time.perf_counter()
+        try:
+            path = archive.write(config, _loader(config, done), command)
+        except OSError as exc:
+            raise _write_error(exc, config.output, folder) from None
+        shutil.rmtree(folder, ignore_errors=True)
+        with contextlib.suppress(OSError):
+            folder.parent.rmdir()
     if timings is not None:
         now = time.perf_counter()
         c = clock
@@ -245,13 +404,66 @@ def run_survey(source, *, workers: int | None = None, scheduler: str | None = No
     return path
 
 
-def _short(config: Config) -> Config:
-    """The same config with a tiny t_final: compiles every kernel a cell uses."""
-    tables = {k: (dict(v) if isinstance(v, dict) else v) for k, v in config.tables.items()}
-    tables["integration"]["t_final"] = 1e-3
-    tables["indicators"]["renorm_interval"] = 1e-3
-    tables["indicators"]["perturbations"] = min(1, tables["indicators"]["perturbations"])
-    return Config(tables, config.axes, config.fixed, config.text, config.source)
+def _api_arguments(workers, scheduler, progress):
+    """run_survey's own arguments, checked like config values (numpy integers accepted)."""
+    if workers is not None:
+        if isinstance(workers, (bool, np.bool_)) or not isinstance(workers, (int, np.integer)) \
+                or workers < 1:
+            raise ConfigError("workers", f"must be an integer >= 1, got {workers!r}")
+        workers = int(workers)
+    if scheduler is not None:
+        if not isinstance(scheduler, str):
+            raise ConfigError("scheduler", f"must be an address string, got {scheduler!r}")
+        if scheduler:
+            _check_address(scheduler)
+    if progress is not None and not isinstance(progress, (bool, np.bool_)):
+        raise ConfigError("progress", f"must be true, false or None, got {progress!r}")
+    return workers, scheduler or None, None if progress is None else bool(progress)
+
+
+def _start(stack, config, task, starts, todo, workers, scheduler, clock):
+    """Compile (or load from the disk cache) the kernels once, then start the cluster and
+    let every worker load them before the first task."""
+    first = todo[~np.isnan(starts[todo, 0])][:1]
+    short = task.short()
+    if first.size:
+        run_cells(short, first, starts[first])
+    clock["prepared"] = time.perf_counter()
+    client = stack.enter_context(_client(config, workers, scheduler))
+    if first.size:
+        client.run(run_cells, short, first, starts[first])
+    clock["cluster"] = time.perf_counter()
+    return client
+
+
+def _compute(client, task, starts, todo, folder, key, config, bar, round_):
+    from dask.distributed import as_completed
+    size = config.tables["dask"]["chunk_size"] or min(
+        256, max(1, -(-todo.size // (64 * len(client.scheduler_info()["workers"])))))
+    futures = {client.submit(run_cells, task, ids, starts[ids], pure=False,
+                             key=f"cells-{key}-{round_}-{int(ids[0])}",
+                             retries=config.tables["dask"]["retries"]): ids
+               for ids in _chunks(todo, size)}
+    for future in as_completed(futures):
+        ids = futures.pop(future)
+        save_chunk(folder, key, ids, future.result())
+        future.release()
+        bar.update(len(ids))
+
+
+def _loader(config: Config, files: dict[Path, np.ndarray]):
+    """Reads one variable over all cells from the checked checkpoint files."""
+    specs = {v.name: v for v in archive.variables(config)}
+
+    def load(name):
+        v = specs[name]
+        k = archive.extra_size(config, v.extra)
+        arr = np.full((config.n_cells,) + (() if v.extra is None else (k,)), v.fill, v.dtype)
+        for path, ids in files.items():
+            with np.load(path) as z:
+                arr[ids] = z[name]
+        return arr
+    return load
 
 
 def run(source, **kw):
@@ -263,29 +475,45 @@ def run(source, **kw):
 # ---------------------------------------------------------------- verification
 
 def verify(path, cells: int = 8, seed: int = 0):
-    """Recompute a sample of cells from the config stored in an archive and compare every
-    reproducible variable bit for bit. Returns (ok, report lines)."""
-    import xarray as xr
+    """Check an archive against its stored config -- the config's sha256, the grid
+    coordinates, the variables, their dimensions and attributes -- then recompute a sample
+    of cells and compare every variable the schema declares reproducible, bit for bit.
+    Returns (ok, report lines); a file that is not a survey archive raises ArchiveError."""
     from .config import parse_config
-    with xr.open_dataset(path) as ds:
-        config = parse_config(ds.attrs["config"], f"{path} (stored config)", check_output=False)
+    with archive.open_archive(path) as ds:
+        try:
+            config = parse_config(ds.attrs["config"], f"{path} (stored config)",
+                                  check_output=False)
+        except ConfigError as exc:
+            return False, [f"the stored config is not valid: {exc}"]
+        found = archive.problems(ds, config)
+        if found:
+            return False, ["the archive does not match its stored config:"] + \
+                [f"  {p}" for p in found]
         n = config.n_cells
         rng = np.random.default_rng(seed)
         sample = np.unique(np.concatenate([[0, n - 1], rng.choice(n, min(cells, n),
                                                                    replace=False)]))[:max(cells, 2)]
-        starts = build_starts(config)
-        fresh = run_cells(config, sample, starts[sample])
-        lines, ok = [], True
-        for name in archive.reproducible_variables(ds):
-            stored = ds[name].values.reshape((n,) + ds[name].shape[len(config.shape):])
-            a, b = stored[sample], fresh[name].astype(stored.dtype)
-            same = a.tobytes() == b.tobytes()
-            ok &= same
-            if not same:
-                lines.append(f"{name}: differs in {np.sum(~_equal(a, b))} of {len(sample)} "
-                             "cells")
-        lines.insert(0, f"recomputed cells {', '.join(map(str, sample))} of {n}: "
-                        + ("all reproducible variables match bit for bit" if ok else "MISMATCH"))
+        try:
+            stored = {v.name: ds[v.name].values.reshape((n,) + ds[v.name].shape[len(config.shape):])
+                      for v in archive.variables(config) if v.reproducible}
+        except (OSError, RuntimeError, ValueError) as exc:
+            raise archive.ArchiveError(f"{path}: its data cannot be read ({exc}); the file "
+                                       "may be truncated") from None
+    timed_out = stored["status"][sample] == Status.TIME_LIMIT
+    sample = sample[~timed_out]
+    fresh = run_cells(CellTask.of(config), sample, build_starts(config)[sample])
+    lines, ok = [], True
+    for name, values in stored.items():
+        a, b = values[sample], fresh[name].astype(values.dtype)
+        if a.tobytes() != b.tobytes():
+            ok = False
+            lines.append(f"{name}: differs in {np.sum(~_equal(a, b))} of {len(sample)} cells")
+    lines.insert(0, f"recomputed cells {', '.join(map(str, sample))} of {n}: "
+                    + ("all reproducible variables match bit for bit" if ok else "MISMATCH"))
+    if timed_out.any():
+        lines.append(f"skipped {timed_out.sum()} sampled cells that hit cell_time_limit (not "
+                     "reproducible)")
     return ok, lines
 
 

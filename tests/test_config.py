@@ -37,8 +37,9 @@ BAD = [
     ("[system]\npotential = 'perimetric_cubic'", "[system].potential: 'perimetric_cubic' is not one"),
     ("[system]\nparams = {k = 2}", "[system.params].k: not a parameter of perimetric_power"),
     ("[system]\npotential = 'perimetric_yukawa'\nparams = {gamma = -1.0}", "[system.params]: potential parameter 'gamma' must be >= 0"),
-    ("[integration]\nrtol = 0.0", "[integration].rtol: must be > 0"),
-    ("[integration]\nrtol = -1e-9", "[integration].rtol: must be > 0"),
+    ("[integration]\nrtol = 0.0", "[integration].rtol: must be >= 2.22e-15"),
+    ("[integration]\nrtol = -1e-9", "[integration].rtol: must be >= 2.22e-15"),
+    ("[integration]\nrtol = 1e-16", "double precision cannot honour"),
     ("[integration]\natol = 'tight'", "[integration].atol: expected a number"),
     ("[integration]\nt_final = 0.0", "[integration].t_final: must be > 0"),
     ("[integration]\nt_final = -5.0", "[integration].t_final: must be > 0"),
@@ -57,7 +58,7 @@ BAD = [
     ("[initial]\nfamily = 'equilateral'\ndelta = 'three'", "[initial].delta: expected a number, a list or {start, stop, num}"),
     ("[initial]\nfamily = 'sides'\na = 5.0", "[initial]: sides (a, b, c) = (5, 2, 1.8) do not make a non-degenerate triangle"),
     ("[initial]\nfamily = 'sides'\na = {start = 1.0, stop = 5.0, num = 3}", "[initial] at a = 5: sides"),
-    ("[initial]\nfamily = 'linear'\nvelocity_u = [1.0, 2.0, 3.0]", "[initial].velocity_u: expected numbers shaped like [1.5, -10.0711]"),
+    ("[initial]\nfamily = 'linear'\nvelocity_u = [1.0, 2.0, 3.0]", "[initial].velocity_u: expected finite numbers shaped like [1.5, -10.0711]"),
     ("[survey]\noutput = '/proc/no/such/x.nc'", "[survey].output: cannot write to /proc/no/such"),
     ("[survey]\noutput = 'tests'", "[survey].output: tests is a folder; give a file name"),
     ("[section]\ncoordinate = 'psi'", "[section].coordinate: 'psi' is not one of"),
@@ -128,7 +129,7 @@ def test_malformed_config_is_one_line_with_the_key_and_exit_code_2(tmp_path, cap
 
 def test_cli_process_exits_2_without_traceback(tmp_path):
     cfg = tmp_path / "bad.toml"
-    cfg.write_text(merged("[integration]\nrtol = 0.0", str(tmp_path / "x.nc")))
+    cfg.write_text(merged("[integration]\natol = 0.0", str(tmp_path / "x.nc")))
     for argv in ([str(cfg)], ["run", str(tmp_path / "missing.toml")],
                  [str(cfg), "--workers", "0"]):
         proc = subprocess.run([sys.executable, "-m", "survey", *argv], capture_output=True,
@@ -145,13 +146,20 @@ def test_config_values_are_data_not_code(tmp_path, capsys):
     assert not (tmp_path / "pwned").exists()
 
 
-def test_every_schema_key_is_documented_in_the_readme():
+def test_the_readme_tables_are_the_declarations():
+    """The README's config tables, variable table and status list are generated from SCHEMA,
+    archive.VARIABLES and Status; regenerate them with survey.config.markdown_tables() and
+    survey.archive.markdown_table() when a declaration changes."""
     import pathlib
+
+    from survey.archive import markdown_table
+    from survey.config import markdown_tables
+    from survey.status import Status
     readme = (pathlib.Path(__file__).parents[1] / "README.md").read_text()
-    for table, keys in SCHEMA.items():
-        assert f"[{table}]" in readme
-        for key in keys:
-            assert f"`{key}`" in readme, f"[{table}].{key} is not documented"
+    assert markdown_tables() in readme
+    assert markdown_table() in readme
+    for s in Status:
+        assert f"- `{s.value}` `{s.name.lower()}`: {s.meaning}" in readme
 
 
 def test_shipped_workflows_and_the_embedded_default_validate():

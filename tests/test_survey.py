@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from survey.archive import reproducible_variables
+from survey.archive import BY_NAME
 from survey.config import load_config
 from survey.integrator import Status
-from survey.sweep import checkpoint_dir, run, run_survey, verify
+from survey.sweep import SurveyError, checkpoint_dir, run, run_survey, verify
 
 CONFIG = """
 [survey]
@@ -45,6 +45,10 @@ def write_config(tmp_path, name="s", num=12, t_final=20.0, chunk=4, workers=2,
     path.write_text(CONFIG.format(name=name, out=tmp_path / f"{name}.nc", num=num,
                                   t_final=t_final, chunk=chunk, workers=workers, energy=energy))
     return path
+
+
+def reproducible_variables(ds: xr.Dataset) -> list[str]:
+    return [k for k in ds.data_vars if BY_NAME[k].reproducible]
 
 
 def assert_same_data(a: xr.Dataset, b: xr.Dataset):
@@ -215,7 +219,7 @@ def test_a_crash_while_writing_leaves_no_archive(tmp_path, monkeypatch):
         return original(self, *args, **kw)
 
     monkeypatch.setattr(xr.Dataset, "to_netcdf", flaky)
-    with pytest.raises(OSError, match="disk full"):
+    with pytest.raises(SurveyError, match="disk full"):
         run_survey(cfg, workers=1)
     assert not (tmp_path / "crash.nc").exists()
     assert not list(tmp_path.glob(".crash.nc.partial*"))
