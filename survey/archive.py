@@ -6,9 +6,9 @@ Everything else follows from VARIABLES: the arrays a task returns (`layout`), ho
 fills them (`fill_row`), the archive's variables and attributes, the schema `verify`
 expects (`problems`) and the README's variable table (`markdown_table`).
 
-Dimensions: the grid axes (in the order the config writes them), then per variable at most
-one of `crossing` (section points, NaN-padded, with n_crossings), `history_time`
-(convergence histories), `component` (phase-space state) or `spatial` (3-D vectors).
+Dimensions: the grid axes (in the order the config writes them), then a variable's own:
+`crossing` (section points, NaN-padded, with n_crossings), `history_time` (convergence
+histories), `component` (phase-space state) or `spatial` (3-D vectors).
 """
 from __future__ import annotations
 
@@ -57,7 +57,7 @@ class Var:
     value: Callable[[CellResult], Any]     # how a cell's result fills it
     cells: str = STARTED                   # ALL, STARTED or FINISHED
     dtype: str = "f8"
-    extra: str | None = None               # crossing, history_time, component, spatial
+    extra: tuple[str, ...] = ()            # own dimensions after the grid's
     units: str = "1"
     reproducible: bool = True              # part of the bit-for-bit contract
     when: Callable = lambda config: True   # whether a config's archive holds it
@@ -101,12 +101,12 @@ def _indicator(name, long_name, when):
 def _history(name, of, when):
     return Var(f"{name}_history", f"{of} convergence history",
                lambda r: getattr(r.indicators, f"{name}_history"), FINISHED,
-               extra="history_time", when=when)
+               extra=("history_time",), when=when)
 
 
 def _reduced_crossing(q):
     return Var(f"crossing_{q}", f"reduced coordinate {q} at each kept section crossing",
-               lambda r: getattr(r.reduced, q), extra="crossing",
+               lambda r: getattr(r.reduced, q), extra=("crossing",),
                when=lambda c: _section(c) and _planar3(c))
 
 
@@ -141,14 +141,15 @@ VARIABLES = [
         ALL, "i8"),
     Var("wall_time", "wall-clock time spent on the cell", lambda r: r.wall_time, ALL,
         units="s", reproducible=False),
-    Var("initial_state", "phase-space state at t = 0", lambda r: r.start, extra="component"),
+    Var("initial_state", "phase-space state at t = 0", lambda r: r.start,
+        extra=("component",)),
     Var("n_crossings", "crossings of the surface of section (all, also those not kept)",
         lambda r: r.n_crossings, dtype="i8", when=_section),
     Var("crossing_time", "time of each kept section crossing", lambda r: r.crossing_time,
-        extra="crossing", when=_section),
+        extra=("crossing",), when=_section),
     *[_reduced_crossing(q) for q in ("sigma", "p_sigma", "eta", "p_eta", "phi", "p_phi")],
     Var("crossing_state", "phase-space state at each kept section crossing",
-        lambda r: r.crossing_state, extra="crossing",
+        lambda r: r.crossing_state, extra=("crossing", "component"),
         when=lambda c: _section(c) and c.tables["section"]["store_state"]),
     _history("ftle", "FTLE", _which("ftle")),
     _history("megno", "<Y>", _which("megno")),
@@ -167,36 +168,37 @@ def variables(config) -> list[Var]:
         if not v.when(config) or v.name in axes:
             continue
         if v.name == "angular_momentum" and config.tables["system"]["dim"] == 3:
-            v = replace(v, long_name="total angular momentum at t = 0", extra="spatial")
+            v = replace(v, long_name="total angular momentum at t = 0", extra=("spatial",))
         out.append(v)
     return out
 
 
-def extra_size(config, extra: str | None) -> int:
+def cell_shape(config, v: Var) -> tuple[int, ...]:
+    """The shape of one cell's value of v (its own dimensions' sizes)."""
     s = config.tables["system"]
-    return {None: 1, "crossing": config.tables["section"]["max_crossings"],
-            "history_time": config.tables["indicators"]["history_points"],
-            "component": 2 * s["bodies"] * s["dim"], "spatial": 3}[extra]
+    sizes = {"crossing": config.tables["section"]["max_crossings"],
+             "history_time": config.tables["indicators"]["history_points"],
+             "component": 2 * s["bodies"] * s["dim"], "spatial": 3}
+    return tuple(sizes[d] for d in v.extra)
 
 
 class Slot(NamedTuple):
-    """One result array of a task: (name, dtype, width); width 0 for one value per cell."""
+    """One result array of a task: its name, dtype and the shape of one cell's value."""
 
     name: str
     dtype: str
-    width: int
+    shape: tuple
 
 
 def layout(config) -> tuple[Slot, ...]:
     """The arrays a task returns for a config: small, picklable, shipped with every task."""
-    return tuple(Slot(v.name, v.dtype, 0 if v.extra is None else extra_size(config, v.extra))
-                 for v in variables(config))
+    return tuple(Slot(v.name, v.dtype, cell_shape(config, v)) for v in variables(config))
 
 
 def empty_results(slots, count: int) -> dict[str, np.ndarray]:
     """Fill-valued result arrays for `count` cells."""
-    return {s.name: np.full((count,) + ((s.width,) if s.width else ()), BY_NAME[s.name].fill,
-                            dtype=s.dtype) for s in slots}
+    return {s.name: np.full((count,) + s.shape, BY_NAME[s.name].fill, dtype=s.dtype)
+            for s in slots}
 
 
 def fill_row(results: dict, k: int, cell: CellResult):
@@ -220,7 +222,7 @@ def markdown_table() -> str:
              "| --- | --- | --- | --- | --- |"]
     for v in VARIABLES:
         units = "flags" if v.name == "status" else v.units
-        extra = "spatial (3-D)" if v.name == "angular_momentum" else (v.extra or "")
+        extra = "spatial (3-D)" if v.name == "angular_momentum" else ", ".join(v.extra)
         note = "" if v.reproducible else " (not reproducible)"
         text = (v.long_name + note).replace("|", "\\|").replace("<", "&lt;").replace(">", "&gt;")
         lines.append(f"| `{v.name}` | {text} | {units} | {extra} | {v.cells} |")
@@ -325,8 +327,8 @@ def write(config, load: Callable[[str], np.ndarray], command: str) -> Path:
         base.to_netcdf(tmp, mode="w", engine="netcdf4",
                        encoding={k: {"_FillValue": None} for k in coords})
         for v in variables(config):
-            data = load(v.name).reshape(config.shape + (() if v.extra is None else (-1,)))
-            var_dims = dims + (() if v.extra is None else (v.extra,))
+            data = load(v.name).reshape(config.shape + cell_shape(config, v))
+            var_dims = dims + v.extra
             one = xr.Dataset({v.name: xr.Variable(var_dims, data, v.attrs())})
             enc = {v.name: {"zlib": True, "complevel": 4,
                             "_FillValue": None if v.dtype.startswith("i") else np.nan}}
@@ -399,16 +401,20 @@ def problems(ds, config) -> list[str]:
             found.append(f"variable {name} is missing")
             continue
         var = ds[name]
-        want_dims = dims + (() if v.extra is None else (v.extra,))
+        want_dims = dims + v.extra
         if var.dims != want_dims:
             found.append(f"variable {name} has dimensions {var.dims}, expected {want_dims}")
         if np.dtype(var.dtype).kind != np.dtype(v.dtype).kind:
             found.append(f"variable {name} has type {var.dtype}, expected {v.dtype}")
-        for key, value in v.attrs().items():
-            if not np.array_equal(np.asarray(var.attrs.get(key)), np.asarray(value)):
-                found.append(f"variable {name}: attribute {key} is "
-                             f"{var.attrs.get(key)!r}, expected {value!r}")
-        for key in sorted(set(var.attrs) - set(v.attrs())):
-            if key in ("reproducible", "flag_values", "flag_meanings"):
-                found.append(f"variable {name}: unexpected attribute {key}")
+        want = v.attrs()
+        for key in sorted(set(want) | (set(var.attrs) & DECLARED_ATTRS)):
+            got = var.attrs.get(key)
+            if got is None or not np.array_equal(np.asarray(got), np.asarray(want.get(key))):
+                found.append(f"variable {name}: attribute {key} is {got!r}, expected "
+                             f"{want.get(key)!r}")
     return found
+
+
+# the attributes a declaration decides; a file may add others (e.g. a user's notes)
+DECLARED_ATTRS = {"long_name", "units", "flag_values", "flag_meanings", "comment",
+                  "reproducible"}

@@ -228,10 +228,10 @@ def _jsonable(x):
     return x.tolist() if isinstance(x, np.ndarray) else str(x)
 
 
-def code_fingerprint() -> str:
-    """sha256 of every Python module of the package, subpackages included, with their paths
-    (a module moved or added changes it too)."""
-    root = Path(__file__).parent
+def code_fingerprint(root: Path | None = None) -> str:
+    """sha256 of every Python module of the package (or of `root`), subpackages included,
+    with their paths (a module moved or added changes it too)."""
+    root = Path(__file__).parent if root is None else Path(root)
     h = hashlib.sha256()
     for path in sorted(root.rglob("*.py")):
         h.update(str(path.relative_to(root)).encode() + b"\0" + path.read_bytes())
@@ -423,7 +423,8 @@ def _axis(where: str, value) -> np.ndarray | None:
         num = value["num"]
         if isinstance(num, bool) or not isinstance(num, int) or num < 1:
             raise ConfigError(f"{where}.num", f"must be an integer >= 1, got {num!r}")
-        arr = np.linspace(float(value["start"]), float(value["stop"]), num)
+        with np.errstate(over="ignore", invalid="ignore"):
+            arr = np.linspace(float(value["start"]), float(value["stop"]), num)
         if not np.all(np.isfinite(arr)):
             raise ConfigError(where, "start and stop are so far apart that the grid "
                                      "overflows; narrow the range")
@@ -657,7 +658,8 @@ def ensure_writable(path: Path):
         raise ConfigError(key, f"{str(path)!r} names no file; give a file name like "
                                "results/map.nc")
     folder = path.parent if str(path.parent) else Path(".")
-    existing = next(p for p in [folder, *folder.absolute().parents] if p.exists())
+    here = folder.absolute()
+    existing = next(p for p in (here, *here.parents) if _exists(p))
     try:
         name_max = os.pathconf(existing, "PC_NAME_MAX")
         path_max = os.pathconf(existing, "PC_PATH_MAX")
@@ -686,6 +688,13 @@ def ensure_writable(path: Path):
     except OSError as exc:
         raise ConfigError(key, f"cannot write to {folder} ({exc.strerror}); "
                                "choose a writable path") from None
+
+
+def _exists(path: Path) -> bool:
+    try:
+        return path.exists()
+    except OSError:       # a name too long to even look up
+        return False
 
 
 # what survey adds to an output's name and path: the archive's temporary file is

@@ -207,8 +207,7 @@ def _chunk_problem(z, ids, slots, seen, starts, key) -> str:
     for s in slots:
         if s.name not in z.files:
             return f"lacks variable {s.name}"
-        shape = (ids.size,) + ((s.width,) if s.width else ())
-        if z[s.name].shape != shape or z[s.name].dtype != np.dtype(s.dtype):
+        if z[s.name].shape != (ids.size,) + s.shape or z[s.name].dtype != np.dtype(s.dtype):
             return f"has variable {s.name} of the wrong shape or type"
     stored = z["initial_state"]
     if stored.tobytes() != starts[ids].tobytes():
@@ -457,8 +456,7 @@ def _loader(config: Config, files: dict[Path, np.ndarray]):
 
     def load(name):
         v = specs[name]
-        k = archive.extra_size(config, v.extra)
-        arr = np.full((config.n_cells,) + (() if v.extra is None else (k,)), v.fill, v.dtype)
+        arr = np.full((config.n_cells,) + archive.cell_shape(config, v), v.fill, v.dtype)
         for path, ids in files.items():
             with np.load(path) as z:
                 arr[ids] = z[name]
@@ -491,9 +489,8 @@ def verify(path, cells: int = 8, seed: int = 0):
             return False, ["the archive does not match its stored config:"] + \
                 [f"  {p}" for p in found]
         n = config.n_cells
-        rng = np.random.default_rng(seed)
-        sample = np.unique(np.concatenate([[0, n - 1], rng.choice(n, min(cells, n),
-                                                                   replace=False)]))[:max(cells, 2)]
+        others = np.random.default_rng(seed).permutation(np.arange(1, n - 1))[:max(cells - 2, 0)]
+        sample = np.unique(np.concatenate([[0, n - 1], others]))   # first, last, random
         try:
             stored = {v.name: ds[v.name].values.reshape((n,) + ds[v.name].shape[len(config.shape):])
                       for v in archive.variables(config) if v.reproducible}
