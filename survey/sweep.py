@@ -19,6 +19,7 @@ import fcntl
 import logging
 import os
 import shutil
+import signal
 import sys
 import time
 from dataclasses import dataclass, replace
@@ -293,8 +294,16 @@ def _client(config: Config, workers, scheduler):
     with LocalCluster(n_workers=workers or config.tables["dask"]["workers"],
                       threads_per_worker=1, processes=True, dashboard_address=None,
                       scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
-                      silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
+                      preload=[__name__], silence_logs=logging.ERROR) as cluster, \
+            Client(cluster) as client:
         yield client
+
+
+def dask_setup(worker):
+    """Preload of our local workers. A terminal's Ctrl-C reaches every process of its group;
+    the driver stops the cluster and says how to resume, so the workers ignore it rather
+    than each print a traceback."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _reach(address: str, timeout: float):

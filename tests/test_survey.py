@@ -150,8 +150,13 @@ def test_a_killed_worker_does_not_lose_cells(tmp_path):
     victim = None
     deadline = time.time() + 300
     while time.time() < deadline and proc.poll() is None and victim is None:
-        workers = [p for p in psutil.Process(proc.pid).children(recursive=True)
-                   if "spawn_main" in " ".join(p.cmdline())]
+        workers = []
+        for p in psutil.Process(proc.pid).children(recursive=True):
+            try:
+                if "spawn_main" in " ".join(p.cmdline()) and p.status() != "zombie":
+                    workers.append(p)
+            except psutil.Error:       # gone or a zombie meanwhile
+                pass
         if len(workers) == 2 and len(list(folder.glob("chunk-*.npz"))) >= 2:
             victim = workers[0]
             victim.kill()
