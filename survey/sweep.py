@@ -266,13 +266,11 @@ def _remove_stale_temporaries(output: Path):
 # ---------------------------------------------------------------- the cluster
 
 @contextlib.contextmanager
-def _client(config: Config, workers, scheduler):
+def _client(config: Config, workers, address):
+    """A client of the scheduler at `address` (already reached), or of a local cluster."""
     from dask.distributed import Client, LocalCluster
-    address = scheduler or config.tables["dask"]["scheduler"]
     if address:
-        timeout = config.tables["dask"]["connect_timeout"]
-        _reach(address, timeout)
-        with Client(address, timeout=f"{timeout}s") as client:
+        with Client(address, timeout=f"{config.tables['dask']['connect_timeout']}s") as client:
             yield client
         return
     # One numba thread per worker process, and none of the monitoring meant for interactive
@@ -358,6 +356,9 @@ def run_survey(source, *, workers: int | None = None, scheduler: str | None = No
     clock = {"start": time.perf_counter()}
     config = source if isinstance(source, Config) else load_config(source)
     workers, scheduler, progress = _api_arguments(workers, scheduler, progress)
+    address = scheduler or config.tables["dask"]["scheduler"]
+    if address:       # before any work: a wrong address is an input error
+        _reach(address, config.tables["dask"]["connect_timeout"])
     if progress is None:
         progress = sys.stderr.isatty()
     key = config.result_key()
@@ -384,7 +385,7 @@ def run_survey(source, *, workers: int | None = None, scheduler: str | None = No
                     warn(f"{todo.size} finished cells went missing from {folder}; computing "
                          "them again")
                 if client is None:
-                    client = _start(stack, config, task, starts, todo, workers, scheduler,
+                    client = _start(stack, config, task, starts, todo, workers, address,
                                     clock)
                     from tqdm import tqdm
                     bar = stack.enter_context(tqdm(total=config.n_cells, unit="cell",
@@ -429,7 +430,7 @@ def _api_arguments(workers, scheduler, progress):
     return workers, scheduler or None, None if progress is None else bool(progress)
 
 
-def _start(stack, config, task, starts, todo, workers, scheduler, clock):
+def _start(stack, config, task, starts, todo, workers, address, clock):
     """Compile (or load from the disk cache) the kernels once, then start the cluster and
     let every worker load them before the first task."""
     first = todo[~np.isnan(starts[todo, 0])][:1]
@@ -437,7 +438,7 @@ def _start(stack, config, task, starts, todo, workers, scheduler, clock):
     if first.size:
         run_cells(short, first, starts[first])
     clock["prepared"] = time.perf_counter()
-    client = stack.enter_context(_client(config, workers, scheduler))
+    client = stack.enter_context(_client(config, workers, address))
     if first.size:
         client.run(run_cells, short, first, starts[first])
     clock["cluster"] = time.perf_counter()

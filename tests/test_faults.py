@@ -375,6 +375,8 @@ def test_values_that_would_crash_or_exhaust_the_machine(tmp_path, table, line, m
 
 @pytest.mark.parametrize("delta,message", [
     ("{start = 0.0, stop = 1e12, num = 1000000000000}", "[initial]: 1,000,000,000,000 cells"),
+    ("{start = 0.0, stop = 1.0, num = 10000000}\nenergy = {start = 90.0, stop = 99.0, num = 10000000}",
+     "[initial]: 100,000,000,000,000 cells"),
     ("{start = -1.7e308, stop = 1.7e308, num = 3}", "the grid overflows"),
     ("{start = 1.0, stop = 1.0, num = 3}", "values must be distinct"),
     ("{start = 1.0, stop = 1.0000000000000002, num = 5}", "values must be distinct"),
