@@ -25,6 +25,7 @@ from typing import Any, Callable, NamedTuple
 import numpy as np
 
 from .status import Status
+from .tori import OBSERVABLES, Regime, fundamental_names
 
 # which cells a variable has values for; elsewhere it holds its fill value
 ALL, STARTED, FINISHED = "all cells", "cells with a start", "cells with status ok or event"
@@ -44,6 +45,7 @@ class CellResult(NamedTuple):
     energy_error: float = np.nan
     angular_momentum_error: float = np.nan
     indicators: Any = None                 # indicators.ChaosIndicators
+    tori: Any = None                       # tori.TorusEvidence
     n_crossings: int = 0
     crossing_time: np.ndarray | None = None    # kept crossings
     crossing_state: np.ndarray | None = None
@@ -61,6 +63,8 @@ class Var:
     units: str = "1"
     reproducible: bool = True              # part of the bit-for-bit contract
     when: Callable = lambda config: True   # whether a config's archive holds it
+    flags: Any = None                      # an IntEnum: a CF flag variable
+    derived: bool = False                  # computed from the other variables (tori.classify)
 
     @property
     def fill(self):
@@ -68,12 +72,14 @@ class Var:
 
     def attrs(self) -> dict:
         attrs = {"long_name": self.long_name}
-        if self.name == "status":
-            attrs["flag_values"] = np.array([s.value for s in Status], dtype=np.int8)
-            attrs["flag_meanings"] = " ".join(s.name.lower() for s in Status)
+        if self.flags is not None:
+            attrs["flag_values"] = np.array([s.value for s in self.flags], dtype=np.int8)
+            attrs["flag_meanings"] = " ".join(s.name.lower() for s in self.flags)
         else:
             attrs["units"] = self.units
-        if self.cells != ALL:
+        if self.derived:
+            attrs["comment"] = "derived by survey.tori.classify from the other variables"
+        elif self.cells != ALL:
             attrs["comment"] = f"{'NaN' if self.dtype.startswith('f') else '-1'} except in " \
                                f"{self.cells}"
         if not self.reproducible:
@@ -94,6 +100,14 @@ def _planar3(c):
     return s["bodies"] == 3 and s["dim"] == 2
 
 
+def _tori(c):
+    return c.tables["tori"]["analyse"]
+
+
+def _torus(name, long_name, value, dtype="f8", extra=(), when=_tori):
+    return Var(name, long_name, value, FINISHED, dtype, extra, when=when)
+
+
 def _indicator(name, long_name, when):
     return Var(name, long_name, lambda r: getattr(r.indicators, name), FINISHED, when=when)
 
@@ -111,7 +125,12 @@ def _reduced_crossing(q):
 
 
 VARIABLES = [
-    Var("status", "integration outcome of the cell", lambda r: r.status, ALL, "i1"),
+    Var("status", "integration outcome of the cell", lambda r: r.status, ALL, "i1",
+        flags=Status),
+    Var("regime", "regular or chaotic: the verdict of all the evidence", None, ALL, "i1",
+        flags=Regime, derived=True),
+    Var("regime_confidence", "share of the lines of evidence present that support the "
+                             "regime", None, ALL, derived=True),
     Var("t_end", "time reached by the integration", lambda r: r.t_end),
     Var("energy", "energy H at t = 0", lambda r: r.energy),
     Var("angular_momentum", "total angular momentum at t = 0 (z component in 2-D)",
@@ -135,6 +154,32 @@ VARIABLES = [
     _indicator("sali", "smaller alignment index of two deviation vectors at t_end",
                _which("sali")),
     _indicator("gali2", "generalized alignment index |w1^ ^ w2^| at t_end", _which("gali2")),
+    _indicator("ftle_wba", "weighted Birkhoff average of the growth rate d ln|w|/dt of the "
+                           "first deviation vector (Sander & Meiss 2025)", _which("ftle")),
+    _torus("birkhoff_digits", "weighted Birkhoff digits of convergence at t_end, mean over "
+                              "the observables", lambda r: r.tori.digits),
+    _torus("birkhoff_digits_half", "weighted Birkhoff digits of convergence at t_end / 2, "
+                                   "mean over the observables", lambda r: r.tori.digits_half),
+    _torus("birkhoff_digits_observable", "weighted Birkhoff digits of convergence at t_end "
+                                         "of each observable", lambda r: r.tori.digits_each,
+           extra=("observable",)),
+    _torus("birkhoff_digits_observable_half", "weighted Birkhoff digits of convergence at "
+                                              "t_end / 2 of each observable",
+           lambda r: r.tori.digits_each_half, extra=("observable",)),
+    _torus("frequency", "fundamental frequency in cycles per unit time (mean of the two "
+                        "halves of the orbit)", lambda r: r.tori.frequencies.frequency,
+           extra=("fundamental",)),
+    _torus("frequency_change", "change of each fundamental frequency from the first half "
+                               "of the orbit to the second", lambda r: r.tori.frequencies.change,
+           extra=("fundamental",)),
+    _torus("frequency_diffusion", "log10 max |nu(second half) - nu(first half)| / max |nu|",
+           lambda r: r.tori.frequencies.diffusion),
+    _torus("resonance", "integer vector m of the nearest resonance m . nu = 0",
+           lambda r: r.tori.frequencies.resonance, "i8", ("fundamental",)),
+    _torus("resonance_order", "order |m|_1 of the nearest resonance (-1: none searched)",
+           lambda r: r.tori.frequencies.resonance_order, "i8"),
+    _torus("resonance_distance", "|m . nu| / (|m| max |nu|) of the nearest resonance",
+           lambda r: r.tori.frequencies.resonance_distance),
     Var("n_steps", "accepted integration steps of the nominal orbit", lambda r: r.n_steps,
         ALL, "i8"),
     Var("n_rhs", "right-hand-side evaluations of the nominal orbit", lambda r: r.n_rhs,
@@ -178,7 +223,9 @@ def cell_shape(config, v: Var) -> tuple[int, ...]:
     s = config.tables["system"]
     sizes = {"crossing": config.tables["section"]["max_crossings"],
              "history_time": config.tables["indicators"]["history_points"],
-             "component": 2 * s["bodies"] * s["dim"], "spatial": 3}
+             "component": 2 * s["bodies"] * s["dim"], "spatial": 3,
+             "observable": len(config.tables["tori"]["observables"]),
+             "fundamental": len(fundamental_names(s["bodies"], s["dim"]))}
     return tuple(sizes[d] for d in v.extra)
 
 
@@ -192,7 +239,8 @@ class Slot(NamedTuple):
 
 def layout(config) -> tuple[Slot, ...]:
     """The arrays a task returns for a config: small, picklable, shipped with every task."""
-    return tuple(Slot(v.name, v.dtype, cell_shape(config, v)) for v in variables(config))
+    return tuple(Slot(v.name, v.dtype, cell_shape(config, v)) for v in variables(config)
+                 if not v.derived)
 
 
 def empty_results(slots, count: int) -> dict[str, np.ndarray]:
@@ -284,6 +332,13 @@ def coordinates(config) -> dict:
                                                          "units": "1"})
     if config.tables["system"]["dim"] == 3:
         coords["spatial_axis"] = ("spatial", ["x", "y", "z"], {"long_name": "spatial axis"})
+    if config.tables["tori"]["analyse"]:
+        s = config.tables["system"]
+        coords["observable_name"] = ("observable", config.tables["tori"]["observables"],
+                                     {"long_name": "observable of the Birkhoff averages"})
+        coords["fundamental_name"] = ("fundamental", fundamental_names(s["bodies"], s["dim"]),
+                                      {"long_name": "fundamental frequency: a basis of shape "
+                                                    "frequencies, then the rotation"})
     return coords
 
 
@@ -327,12 +382,14 @@ def write(config, load: Callable[[str], np.ndarray], command: str) -> Path:
         base.to_netcdf(tmp, mode="w", engine="netcdf4",
                        encoding={k: {"_FillValue": None} for k in coords})
         for v in variables(config):
-            data = load(v.name).reshape(config.shape + cell_shape(config, v))
-            var_dims = dims + v.extra
-            one = xr.Dataset({v.name: xr.Variable(var_dims, data, v.attrs())})
-            enc = {v.name: {"zlib": True, "complevel": 4,
-                            "_FillValue": None if v.dtype.startswith("i") else np.nan}}
-            one.to_netcdf(tmp, mode="a", engine="netcdf4", encoding=enc)
+            if not v.derived:
+                _append(tmp, v, load(v.name).reshape(config.shape + cell_shape(config, v)),
+                        dims + v.extra)
+        with xr.open_dataset(tmp, engine="netcdf4") as ds:    # reads only what it needs
+            derived = derive(ds)
+        for v in variables(config):
+            if v.derived:
+                _append(tmp, v, derived[v.name], dims, derived.get(v.name + ":attrs", {}))
         with open(tmp, "rb+") as fh:
             os.fsync(fh.fileno())
         os.replace(tmp, out)
@@ -340,6 +397,24 @@ def write(config, load: Callable[[str], np.ndarray], command: str) -> Path:
         if tmp.exists():
             tmp.unlink()
     return out
+
+
+def _append(path, v: Var, data, dims, extra_attrs=None):
+    import xarray as xr
+    one = xr.Dataset({v.name: xr.Variable(dims, data, {**v.attrs(), **(extra_attrs or {})})})
+    enc = {v.name: {"zlib": True, "complevel": 4,
+                    "_FillValue": None if v.dtype.startswith("i") else np.nan}}
+    one.to_netcdf(path, mode="a", engine="netcdf4", encoding=enc)
+
+
+def derive(ds) -> dict:
+    """The derived variables of an archive's Dataset (and the attributes they carry): the
+    regime and its confidence, with the thresholds that decided them."""
+    from .tori import Thresholds, classify, stored_table
+    thresholds = Thresholds.from_table(stored_table(ds))
+    regime, confidence = classify(ds, thresholds)
+    return {"regime": regime, "regime_confidence": confidence,
+            "regime:attrs": {"thresholds": thresholds.describe()}}
 
 
 def partial_path(out: Path) -> Path:

@@ -92,6 +92,11 @@ def _run(args):
     path = run_survey(config, workers=args.workers, scheduler=args.scheduler,
                       progress=progress, command="python -m survey " + " ".join(sys.argv[1:]))
     print(f"wrote {path} ({config.n_cells} cells)")
+    import xarray as xr
+
+    from .tori import summary
+    with xr.open_dataset(path) as ds:
+        print("\n".join(summary(ds)))
     return 0
 
 

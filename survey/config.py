@@ -24,8 +24,11 @@ from .dynamics import System
 from .indicators import INDICATORS, IndicatorOptions
 from .integrator import RTOL_MIN
 from .potentials import POTENTIAL_NAMES, PROFILES, make_potential
+from .tori import OBSERVABLES, Thresholds
 
 INT64_MAX = 2 ** 63 - 1
+# thresholds that only decide the regime when the archive is written, not a cell's result
+CLASSIFICATION_ONLY = {f.name for f in fields(Thresholds)} - {"resonance_order"}
 _IND = IndicatorOptions()      # one set of defaults: the Python API's and the config's
 
 
@@ -111,6 +114,18 @@ SCHEMA: dict[str, dict[str, Key]] = {
                        low=0),
         "coefficients": Key("floats", None, "state coefficients of a 'linear' surface"),
         "store_state": Key("bool", False, "also store the Cartesian state at each crossing"),
+    },
+    "tori": {
+        "analyse": Key("bool", True, "weighted Birkhoff digits and frequency analysis of "
+                                     "every orbit (needs 128 samples or more)"),
+        "sample_interval": Key("float", 0.1, "time between the orbit samples they are "
+                                             "computed from (NAFF sees frequencies up to "
+                                             "1/(2 interval))", "time", above=0),
+        "observables": Key("strs", list(OBSERVABLES), "observables of the Birkhoff "
+                                                      "averages", choices=tuple(OBSERVABLES)),
+        "lines": Key("int", 5, "NAFF lines per shape signal and half orbit", low=1, high=50),
+        **{f.name: Key(f.type if f.type in ("int", "float") else "float", f.default,
+                       f.metadata["doc"]) for f in fields(Thresholds)},
     },
     "dask": {
         "workers": Key("int", 2, "local worker processes (1 thread each)", low=1),
@@ -201,6 +216,8 @@ class Config:
         change results and are left out."""
         h = hashlib.sha256()
         relevant = {k: v for k, v in self.tables.items() if k not in ("dask", "survey")}
+        relevant["tori"] = {k: v for k, v in relevant["tori"].items()
+                            if k not in CLASSIFICATION_ONLY}
         h.update(json.dumps(relevant, sort_keys=True, default=_jsonable).encode())
         for axis in self.axes:
             h.update(f"axis {axis.name} {axis.values.size}\n".encode())
@@ -513,13 +530,15 @@ def _check_address(address: str):
 
 
 def memory_needed(n_cells, n, deviations, crossings, store_state, history, chunk,
-                  workers) -> int:
+                  workers, samples=0) -> int:
     """Bytes a survey holds at its peak: the driver keeps every cell's start and one archive
     variable over all cells; each worker a chunk of result rows and one integration's
-    buffers (stages, crossing states, history samples of the orbit and its tangents)."""
+    buffers (stages, crossing states, history samples of the orbit and its tangents, the
+    orbit samples of the torus analysis)."""
     full = n * (1 + deviations) + 2
-    row = n + 24 + 4 * history + crossings * (7 + (n if store_state else 0))
-    integration = 27 * full + crossings * (n + 2) + history * (full + deviations)
+    row = n + 40 + 4 * history + crossings * (7 + (n if store_state else 0))
+    integration = 27 * full + crossings * (n + 2) + history * (full + deviations) + \
+        samples * (n + 8)
     driver = n_cells * (n + max(n, history, crossings * (n if store_state else 1)) + 1)
     return 8 * (driver + workers * (chunk * row + integration))
 
@@ -532,7 +551,9 @@ def check_memory(tables: dict, n_cells: int):
     size = dict(n_cells=n_cells, n=2 * s["bodies"] * s["dim"], deviations=ind["deviations"],
                 crossings=sec["max_crossings"] if tables["section_enabled"] else 0,
                 store_state=sec["store_state"], history=ind["history_points"],
-                chunk=dsk["chunk_size"] or 256, workers=dsk["workers"])
+                chunk=dsk["chunk_size"] or 256, workers=dsk["workers"],
+                samples=int(tables["integration"]["t_final"] / tables["tori"]["sample_interval"])
+                if tables["tori"]["analyse"] else 0)
     total = memory_needed(**size)
     machine = psutil.virtual_memory().total
     if total <= 0.8 * machine:
@@ -541,6 +562,7 @@ def check_memory(tables: dict, n_cells: int):
                "[section].max_crossings": dict(crossings=1),
                "[indicators].history_points": dict(history=2),
                "[indicators].deviations": dict(deviations=1),
+               "[tori].sample_interval": dict(samples=0),
                "[dask].chunk_size": dict(chunk=1), "[dask].workers": dict(workers=1)}
     key = min(smaller, key=lambda k: memory_needed(**{**size, **smaller[k]}))
     what = f"{n_cells:,} cells" if key.startswith("[initial]") else "this survey"
@@ -618,6 +640,9 @@ def _validate_cross(tables: dict, system: System):
                                                      "set deviations = 2 or drop them from which")
     if ind["renorm_interval"] > integ["t_final"]:
         raise ConfigError("[indicators].renorm_interval", "is longer than t_final")
+    if tables["tori"]["analyse"] and not tables["tori"]["observables"]:
+        raise ConfigError("[tori].observables", "needs at least one observable (or set "
+                                                "analyse = false)")
     if tables["section_enabled"]:
         coord = sec["coordinate"]
         if coord in REDUCED_SURFACES and (system.n_bodies != 3 or system.dim != 2):

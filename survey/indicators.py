@@ -72,6 +72,7 @@ class ChaosIndicators(NamedTuple):
     megno_history: np.ndarray
     fli_history: np.ndarray
     sali_history: np.ndarray
+    ftle_wba: float        # weighted Birkhoff average of the growth rate, first vector
     energy_error: float    # max |E/E0 - 1| over the history times and the end
     angular_momentum_error: float   # max |J - J0| / max(|J0|, 1)
     n_steps: int
@@ -144,12 +145,13 @@ def conservation_errors(system: System, y0, states):
 def chaos_indicators(system: System, y0, t_final: float, options=IndicatorOptions(), *,
                      cell: int = 0, events: Sequence[Event] = (), rtol=1e-12, atol=1e-12,
                      max_steps=10_000_000, max_events=100_000, time_limit=0.0,
-                     control_tangents=False) -> ChaosIndicators:
+                     control_tangents=False, t_fine=None) -> ChaosIndicators:
     """Integrate y0 to t_final with `options.deviations` tangent vectors and their MEGNO
     accumulators (plus `options.perturbations` nearby orbits) and return the indicators,
     their ensemble spread and convergence histories, and any section crossings.
     time_limit (wall-clock seconds, 0 for none) is the budget of all these integrations
-    together; when it runs out the status is TIME_LIMIT."""
+    together; when it runs out the status is TIME_LIMIT. t_fine: times at which the nominal
+    orbit is sampled for the torus analysis (Outcome.fine)."""
     o = options
     y0 = np.asarray(y0, dtype=float)
     n = system.n
@@ -164,7 +166,7 @@ def chaos_indicators(system: System, y0, t_final: float, options=IndicatorOption
     kw = dict(megno=True, t_eval=history, sample_tangents=True, **run)
     w0 = deviation_vectors(system, y0, o.deviations, o.seed, cell, o.project_flow)
     out = integrate(system, y0, t_final, tangents=w0, events=events, max_events=max_events,
-                    time_limit=left(), **kw)
+                    time_limit=left(), t_fine=t_fine, **kw)
     status = out.status
     k = o.deviations
     reached = ~np.isnan(history) & (history <= out.t)
@@ -208,7 +210,7 @@ def chaos_indicators(system: System, y0, t_final: float, options=IndicatorOption
         ftle=float(np.mean(ftles)), ftle_spread=spread(ftles),
         megno=float(np.mean(megnos)), megno_spread=spread(megnos),
         megno_slope=_ls_slope(th[half], megno_h[half]),
-        fli=float(out.fli[0]), sali=float(sali), gali2=float(gali2),
+        fli=float(out.fli[0]), sali=float(sali), gali2=float(gali2), ftle_wba=out.ftle_wba,
         history_time=history, ftle_history=ftle_h.mean(axis=1),
         megno_history=megno_h, fli_history=fli_h, sali_history=sali_h,
         energy_error=dE, angular_momentum_error=dJ,

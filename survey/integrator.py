@@ -488,7 +488,7 @@ def _norm_block(y, off, n):
 @kernel
 def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, n_err,
            max_steps, h0, h_max, h_min, events, max_events, n_sub, t_eval, n_eval, renorm_dt,
-           time_limit):
+           time_limit, t_fine):
     """Integrate the orbit (+ n_tan tangent vectors, + MEGNO accumulators) from t0 to t1.
 
     events: (offsets, records, direction, terminal, guard, watch) arrays; a watched
@@ -496,12 +496,17 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
     falling, 0 both) where its guard function (index, or -1) is > 0; n_sub sub-intervals per
     step are scanned, so two crossings in one step are both found. t_eval: output times
     (monotone in the direction of integration), sampled on the dense output for the first
-    n_eval components. Tangent vectors are rescaled to unit norm every renorm_dt (<= 0: every
-    step), their logs accumulated in log_growth, which starts at -ln|w(t0)|.
+    n_eval components. t_fine: a second grid of output times for the orbit alone (its dense
+    output costs 3 orbit evaluations, not the tangents'): the time series the torus analysis
+    reads. Tangent vectors are rescaled to unit norm every renorm_dt (<= 0: every step),
+    their logs accumulated in log_growth, which starts at -ln|w(t0)|.
 
     Returns (status, t, y, counts[accepted, rejected, rhs evaluations, events found],
     h_range[min, max accepted step], ev_index, ev_t, ev_y, samples, sample_log, log_growth,
-    max_log): max_log is the largest ln(|w|/|w0|) seen at step ends (the FLI).
+    max_log, fine, wba): max_log is the largest ln(|w|/|w0|) seen at step ends (the FLI);
+    wba = (sum of g dL, sum of g dt) over the steps for the first tangent vector, L = ln|w|
+    and g(s) = exp(-1/(s(1-s))) at the step's mid-time s = (t - t0)/(t1 - t0): their ratio
+    is the weighted Birkhoff average of the growth rate (Sander & Meiss 2025).
     """
     n = 2 * masses.size * d
     nf = y0.size
@@ -520,6 +525,8 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
     n_ev_total = 0
     samples = np.full((t_eval.size, n_eval), np.nan)
     sample_log = np.full((t_eval.size, n_tan), np.nan)
+    fine = np.full((t_fine.size, n), np.nan)
+    wba = np.zeros(2)
     log_growth = np.zeros(n_tan)
     max_log = np.zeros(n_tan)
     eoff, ep, direc, terminal, guard, watch = events
@@ -537,7 +544,7 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
     for a in range(nf):
         if not math.isfinite(y[a]):
             return (NONFINITE_, t, y, counts, h_range, ev_index, ev_t, ev_y, samples,
-                    sample_log, log_growth, max_log)
+                    sample_log, log_growth, max_log, fine, wba)
     for tt in range(n_tan):
         w0 = _norm_block(y, n * (1 + tt), n)
         log_growth[tt] = -math.log(w0)
@@ -546,12 +553,17 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
     for a in range(nf):
         if not math.isfinite(K[0, a]):
             return (NONFINITE_, t, y, counts, h_range, ev_index, ev_t, ev_y, samples,
-                    sample_log, log_growth, max_log)
+                    sample_log, log_growth, max_log, fine, wba)
     i_eval = 0
     while i_eval < t_eval.size and t_eval[i_eval] == t0:
         samples[i_eval, :] = y[:n_eval]
         sample_log[i_eval, :] = log_growth
         i_eval += 1
+    i_fine = 0
+    while i_fine < t_fine.size and t_fine[i_fine] == t0:
+        fine[i_fine, :] = y[:n]
+        i_fine += 1
+    L_prev = 0.0          # ln(|w|/|w0|) of the first tangent vector at the last step end
     for e in range(m):
         if watch[e]:
             g_old[e] = event_value(ep, eoff[e], y, masses, d)
@@ -560,7 +572,7 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
     span = abs(t1 - t0)
     if span == 0.0:
         return (OK_, t, y, counts, h_range, ev_index, ev_t, ev_y, samples, sample_log,
-                log_growth, max_log)
+                log_growth, max_log, fine, wba)
     h_max = min(h_max, span) if h_max > 0.0 else span
 
     # initial step (Hairer's hinit)
@@ -685,6 +697,8 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
         need = nf if terminal_hit else 0
         if i_eval < t_eval.size and direction * (t_eval[i_eval] - t_stop) <= 0.0:
             need = max(need, n_eval)
+        if i_fine < t_fine.size and direction * (t_fine[i_fine] - t_stop) <= 0.0:
+            need = max(need, n)
         if need > nd_ready:
             _dense_prepare(masses, d, measure, prof, par, n_tan, megno, t0, need, need > n, t, y, ynew, h, K, yt, F)
             counts[2] += 3
@@ -697,12 +711,20 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
                 samples[i_eval, :] = yd[:n_eval]
             sample_log[i_eval, :] = log_growth
             i_eval += 1
+        while i_fine < t_fine.size and direction * (t_fine[i_fine] - t_stop) <= 0.0:
+            if t_fine[i_fine] == t_new:
+                fine[i_fine, :] = ynew[:n]
+            else:
+                _dense_eval(F, y, (t_fine[i_fine] - t) / h, n, yd)
+                fine[i_fine, :] = yd[:n]
+            i_fine += 1
         if terminal_hit:
             _dense_eval(F, y, x_stop, nf, yd)
             y[:] = yd
             t = t_stop
             status = EVENT_
             break
+        t_old = t
         t = t_new
         for a in range(nf):
             y[a] = ynew[a]
@@ -716,7 +738,14 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
             for tt in range(n_tan):
                 off = n * (1 + tt)
                 wn = _norm_block(y, off, n)
-                max_log[tt] = max(max_log[tt], log_growth[tt] + math.log(wn))
+                L = log_growth[tt] + math.log(wn)
+                max_log[tt] = max(max_log[tt], L)
+                if tt == 0:
+                    x = (0.5 * (t_old + t) - t0) / (t1 - t0)
+                    g = math.exp(-1.0 / (x * (1.0 - x))) if 0.0 < x < 1.0 else 0.0
+                    wba[0] += g * (L - L_prev)
+                    wba[1] += g * (t - t_old)
+                    L_prev = L
                 if due or wn > 1e100 or wn < 1e-100:
                     inv = 1.0 / wn
                     for a in range(off, off + n):
@@ -736,7 +765,7 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
 
     counts[3] = n_ev_total
     return (status, t, y, counts, h_range, ev_index, ev_t, ev_y, samples, sample_log,
-            log_growth, max_log)
+            log_growth, max_log, fine, wba)
 
 
 # ---------------------------------------------------------------- Python interface
@@ -896,6 +925,8 @@ class Outcome(NamedTuple):
     t_eval: np.ndarray
     samples: np.ndarray       # dense-output states at t_eval (NaN beyond the end reached)
     sample_log_growth: np.ndarray  # ln(|w|/|w0|) at t_eval, per tangent vector
+    fine: np.ndarray          # orbit states at t_fine (NaN beyond the end reached)
+    ftle_wba: float           # weighted Birkhoff average of d ln|w|/dt, first tangent vector
 
     @property
     def ok(self) -> bool:
@@ -914,14 +945,15 @@ def integrate(system: System, y0, t_span, *, tangents=None, megno=False, rtol=1e
               atol=1e-12, control_tangents=False, max_steps=10_000_000, first_step=0.0,
               max_step=0.0, min_step=0.0, events: Sequence[Event] = (), max_events=100_000,
               event_substeps=8, t_eval=None, sample_tangents=False, renorm_interval=1.0,
-              time_limit=0.0):
+              time_limit=0.0, t_fine=None):
     """Integrate an orbit of `system` (and optionally tangent vectors) over t_span.
 
     y0: orbit state (n,). t_span: t_final or (t0, t_final); backwards if t_final < t0.
     tangents: initial deviation vectors (n_tan, n). megno: also integrate the MEGNO
     accumulators of the first tangent vector. control_tangents: include tangent vectors in the
     error norm. t_eval: output times sampled from the dense output (orbit only unless
-    sample_tangents). time_limit: wall-clock seconds (0: none). Returns an `Outcome`.
+    sample_tangents). t_fine: output times of the orbit alone, usually many (the torus
+    analysis). time_limit: wall-clock seconds (0: none). Returns an `Outcome`.
     """
     y0 = np.asarray(y0, dtype=np.float64).ravel()
     if y0.size != system.n:
@@ -940,8 +972,11 @@ def integrate(system: System, y0, t_span, *, tangents=None, megno=False, rtol=1e
     megno = bool(megno and n_tan)
     state = np.concatenate([y0, tan.ravel(), np.zeros(2 if megno else 0)])
     t_eval = np.zeros(0) if t_eval is None else np.asarray(t_eval, dtype=np.float64).ravel()
-    if t_eval.size and np.any(np.diff(t_eval) * (t1 - t0) < 0):
-        raise ValueError("t_eval must be monotone in the direction of integration")
+    t_fine = np.zeros(0) if t_fine is None else np.asarray(t_fine, dtype=np.float64).ravel()
+    for grid in (t_eval, t_fine):
+        if grid.size and np.any(np.diff(grid) * (t1 - t0) < 0):
+            raise ValueError("t_eval and t_fine must be monotone in the direction of "
+                             "integration")
     n_eval = state.size if sample_tangents else n
     n_err = n * (1 + n_tan) if control_tangents else n
     m, d = system.masses.copy(), system.dim
@@ -950,8 +985,9 @@ def integrate(system: System, y0, t_span, *, tangents=None, megno=False, rtol=1e
                  float(rtol), float(atol), n_err, int(max_steps), float(first_step),
                  float(max_step), float(min_step), encode_events(events, system),
                  int(max_events), int(event_substeps), t_eval, n_eval, float(renorm_interval),
-                 float(time_limit))
-    (status, t, y, counts, h_range, ev_i, ev_t, ev_y, samples, s_log, log_g, max_log) = res
+                 float(time_limit), t_fine)
+    (status, t, y, counts, h_range, ev_i, ev_t, ev_y, samples, s_log, log_g, max_log, fine,
+     wba) = res
     tans = y[n:n * (1 + n_tan)].reshape(n_tan, n)
     norms = np.linalg.norm(tans, axis=1)
     if n_tan and sample_tangents:
@@ -968,4 +1004,5 @@ def integrate(system: System, y0, t_span, *, tangents=None, megno=False, rtol=1e
         n_steps=int(counts[0]), n_rejected=int(counts[1]), n_rhs=int(counts[2]),
         h_min=float(h_range[0]), h_max=float(h_range[1]),
         crossings=Crossings(ev_i[:kept].copy(), ev_t[:kept].copy(), ev_y[:kept].copy()),
-        n_crossings=int(counts[3]), t_eval=t_eval, samples=samples, sample_log_growth=s_log)
+        n_crossings=int(counts[3]), t_eval=t_eval, samples=samples, sample_log_growth=s_log,
+        fine=fine, ftle_wba=float(wba[0] / wba[1]) if wba[1] != 0 else np.nan)

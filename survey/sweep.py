@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import archive
+from . import archive, tori
 from .archive import CellResult
 from .config import (Config, ConfigError, build_system, indicator_options, load_config,
                      section_event_for, _check_address)
@@ -72,13 +72,15 @@ class CellTask:
     integration: dict
     indicators: dict
     section: dict | None
+    tori: dict
     slots: tuple
 
     @classmethod
     def of(cls, config: Config) -> "CellTask":
         t = config.tables
         return cls(t["system"], t["integration"], t["indicators"],
-                   t["section"] if t["section_enabled"] else None, archive.layout(config))
+                   t["section"] if t["section_enabled"] else None, t["tori"],
+                   archive.layout(config))
 
     def short(self) -> "CellTask":
         """The same task with a tiny t_final: compiles (or loads) every kernel a cell uses."""
@@ -104,9 +106,12 @@ def compute_cell(task: CellTask, system, events, cell: int, y0) -> CellResult:
     clock = time.perf_counter()
     if np.isnan(y0[0]):
         return CellResult(Status.INACCESSIBLE, time.perf_counter() - clock)
-    integ, ind = task.integration, task.indicators
+    integ, ind, tor = task.integration, task.indicators, task.tori
     kw = dict(rtol=integ["rtol"], atol=integ["atol"], max_steps=integ["max_steps"],
               time_limit=integ["cell_time_limit"])
+    dt = tor["sample_interval"]
+    if tor["analyse"]:    # midpoints of equal intervals: the Birkhoff sums' quadrature
+        kw["t_fine"] = (np.arange(int(integ["t_final"] / dt)) + 0.5) * dt
     if task.section:
         kw["max_events"] = task.section["max_crossings"]
     indicators = None
@@ -123,11 +128,16 @@ def compute_cell(task: CellTask, system, events, cell: int, y0) -> CellResult:
         done = ~np.isnan(out.samples[:, 0])
         errors = conservation_errors(system, y0, np.concatenate([out.samples[done], [out.y]]))
     planar3 = system.n_bodies == 3 and system.dim == 2
+    evidence = None
+    if tor["analyse"] and status.finished:
+        evidence = tori.analyse(system, out.fine, dt, errors[0], tor["observables"],
+                                tor["lines"], tor["resonance_order"])
     return CellResult(
         status=status, wall_time=time.perf_counter() - clock, n_steps=out.n_steps,
         n_rhs=out.n_rhs, start=y0, t_end=out.t, energy=system.energy(y0),
         angular_momentum=system.angular_momentum(y0), energy_error=errors[0],
-        angular_momentum_error=errors[1], indicators=indicators, n_crossings=out.n_crossings,
+        angular_momentum_error=errors[1], indicators=indicators, tori=evidence,
+        n_crossings=out.n_crossings,
         crossing_time=out.crossings.t, crossing_state=out.crossings.y,
         reduced=reduced(system, out.crossings.y) if planar3 else None)
 
@@ -434,15 +444,18 @@ def _start(stack, config, task, starts, todo, workers, address, clock):
     """Compile (or load from the disk cache) the kernels once, then start the cluster and
     let every worker load them before the first task."""
     first = todo[~np.isnan(starts[todo, 0])][:1]
-    short = task.short()
-    if first.size:
-        run_cells(short, first, starts[first])
+    warm_up(task, first, starts[first])
     clock["prepared"] = time.perf_counter()
     client = stack.enter_context(_client(config, workers, address))
-    if first.size:
-        client.run(run_cells, short, first, starts[first])
+    client.run(warm_up, task, first, starts[first])
     clock["cluster"] = time.perf_counter()
     return client
+
+
+def warm_up(task: CellTask, first, starts):
+    """Load every compiled kernel a cell uses from numba's disk cache."""
+    if first.size:
+        run_cells(task.short(), first, starts)
 
 
 def _compute(client, task, starts, todo, folder, key, config, bar, round_):
@@ -503,7 +516,11 @@ def verify(path, cells: int = 8, seed: int = 0):
         sample = np.unique(np.concatenate([[0, n - 1], others]))   # first, last, random
         try:
             stored = {v.name: ds[v.name].values.reshape((n,) + ds[v.name].shape[len(config.shape):])
-                      for v in archive.variables(config) if v.reproducible}
+                      for v in archive.variables(config) if v.reproducible and not v.derived}
+            derived = archive.derive(ds)
+            rederived = [v.name for v in archive.variables(config) if v.derived and
+                         np.asarray(derived[v.name], dtype=v.dtype).tobytes()
+                         != ds[v.name].values.astype(v.dtype).tobytes()]
         except (OSError, RuntimeError, ValueError) as exc:
             raise archive.ArchiveError(f"{path}: its data cannot be read ({exc}); the file "
                                        "may be truncated") from None
@@ -516,6 +533,10 @@ def verify(path, cells: int = 8, seed: int = 0):
         if a.tobytes() != b.tobytes():
             ok = False
             lines.append(f"{name}: differs in {np.sum(~_equal(a, b))} of {len(sample)} cells")
+    for name in rederived:
+        ok = False
+        lines.append(f"{name}: differs from what its evidence in the archive gives "
+                     "(tori.classify)")
     lines.insert(0, f"recomputed cells {', '.join(map(str, sample))} of {n}: "
                     + ("all reproducible variables match bit for bit" if ok else "MISMATCH"))
     if timed_out.any():
