@@ -172,6 +172,55 @@ def indicator_overhead(t_final=2000.0, repeats=7, deviations=2, out=print):
     return rows
 
 
+def torus_overhead(t_final=2000.0, repeats=6, out=print):
+    """The torus analysis (Birkhoff digits, frequencies, resonance) per default survey cell
+    -- 2 deviation vectors, 2 perturbed orbits, the phi section, histories -- against the
+    same cell without it, through the worker's own code path (run_cells), best of
+    `repeats` interleaved runs; and the classification of a 10^4-cell grid (target: the
+    analysis adds < 15% per cell)."""
+    import xarray as xr
+    from .config import load_config
+    from .sweep import CellTask, build_starts, run_cells
+    from .tori import classify
+    rows = []
+    for label, fam, params in CASES:
+        best = {}
+        for analyse in (False, True):
+            config = load_config({"survey": {"output": "results/bench/tori.nc"},
+                                  "initial": {"family": fam, **params},
+                                  "integration": {"t_final": t_final},
+                                  "section": {"coordinate": "phi"},
+                                  "tori": {"analyse": analyse}})
+            task, starts = CellTask.of(config), build_starts(config)
+            run_cells(task.short(), [0], starts)
+            best[analyse] = (task, starts, math.inf)
+        for _ in range(repeats):
+            for analyse, (task, starts, b) in best.items():
+                t = time.perf_counter()
+                run_cells(task, [0], starts)
+                best[analyse] = (task, starts, min(b, time.perf_counter() - t))
+        rows.append((label, best[False][2], best[True][2]))
+    n = 10_000
+    rng = np.random.default_rng(0)
+    grid = xr.Dataset({"status": ("cell", np.zeros(n, np.int8)),
+                       **{k: ("cell", rng.uniform(0, 10, n)) for k in
+                          ("birkhoff_digits", "birkhoff_digits_half", "megno", "sali",
+                           "frequency_diffusion")},
+                       "ftle": ("cell", rng.uniform(0, 0.2, n)),
+                       "t_end": ("cell", np.full(n, t_final))})
+    t = time.perf_counter()
+    classify(grid)
+    classified = time.perf_counter() - t
+    out("")
+    out(f"Torus analysis per default cell (t = {t_final:g}, best of {repeats} interleaved "
+        "runs; target: < +15%)")
+    out(f"{'case':26s} {'without s':>10s} {'with s':>8s} {'extra':>7s}")
+    for label, without, with_ in rows:
+        out(f"{label:26s} {without:10.3f} {with_:8.3f} {100 * (with_ / without - 1):+6.1f}%")
+    out(f"classifying {n} cells: {classified * 1e3:.0f} ms")
+    return rows
+
+
 def survey_scaling(cells=200, t_final=2000.0, repeats=2, folder="results/bench", out=print):
     """End-to-end survey of `cells` cells of the equilateral family on 1 and 2 local
     workers, interleaved `repeats` times (this kind of machine drifts by 20% from run to

@@ -7,11 +7,13 @@ import sys
 
 def _bench(args):
     from . import bench
-    parts = set(args.only or ["integrator", "indicators", "survey", "memory"])
+    parts = set(args.only or ["integrator", "indicators", "tori", "survey", "memory"])
     if "integrator" in parts:
         bench.run(t_final=args.t_final, t_scipy=args.t_scipy, repeats=args.repeats)
     if "indicators" in parts:
         bench.indicator_overhead(t_final=args.t_final)
+    if "tori" in parts:
+        bench.torus_overhead(t_final=args.t_final)
     if "survey" in parts:
         bench.survey_scaling()
     if "memory" in parts:
@@ -136,8 +138,8 @@ def build_parser():
     b.add_argument("--t-scipy", type=float, default=50.0,
                    help="span scipy is run over before extrapolating (default 50)")
     b.add_argument("--repeats", type=int, default=2)
-    b.add_argument("--only", action="append", choices=["integrator", "indicators", "survey",
-                                                       "memory"],
+    b.add_argument("--only", action="append", choices=["integrator", "indicators", "tori",
+                                                       "survey", "memory"],
                    help="run only these parts (repeatable)")
     b.set_defaults(func=_bench)
     o = sub.add_parser("orbit", help="integrate one orbit of a paper family and report "

@@ -140,22 +140,32 @@ def naff(z: np.ndarray, count: int):
     freqs, amps = np.zeros(count), np.zeros(count, dtype=complex)
     for line in range(count):
         zw = z * w
+        moments = np.stack([zw, zw * n, zw * n * n])
         k = int(np.argmax(np.abs(np.fft.fft(zw))))
         f = k / N if k <= N // 2 else k / N - 1.0
         for _ in range(30):
-            e = np.exp(-2j * np.pi * f * n)
-            F, F1, F2 = zw @ e, -2j * np.pi * ((zw * n) @ e), -4 * np.pi ** 2 * ((zw * n * n) @ e)
+            F, F1, F2 = moments @ _phasors(-f, N)
+            F1, F2 = -2j * np.pi * F1, -4 * np.pi ** 2 * F2
             grad = 2.0 * (np.conj(F) * F1).real            # d|F|^2/df
             curv = 2.0 * (abs(F1) ** 2 + (np.conj(F) * F2).real)
             step = -grad / curv if curv < 0 else 0.25 * np.sign(grad) / N
             step = float(np.clip(step, -0.5 / N, 0.5 / N))
             f += step
-            if abs(step) < 1e-14 * max(1.0, abs(f)):
+            if abs(step) < 1e-15:
                 break
-        amp = (zw @ np.exp(-2j * np.pi * f * n)) / wsum
+        e = _phasors(f, N)
+        amp = (zw @ np.conj(e)) / wsum
         freqs[line], amps[line] = f, amp
-        z -= amp * np.exp(2j * np.pi * f * n)
+        z -= amp * e
     return freqs, amps
+
+
+def _phasors(f: float, N: int) -> np.ndarray:
+    """exp(2 pi i f n), n = 0..N-1, as powers of exp(2 pi i f): a fifth of the cost of N
+    complex exponentials; the phase drifts by ~N eps, far below the window's resolution."""
+    r = np.full(N, np.exp(2j * np.pi * f))
+    r[0] = 1.0
+    return np.cumprod(r)
 
 
 def spectral_lines(z: np.ndarray, dt: float, count: int):
