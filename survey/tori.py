@@ -372,39 +372,31 @@ class Thresholds:
         return cls(**{k: v for k, v in (table or {}).items() if k in names})
 
 
-def _vote(x, regular_if, chaotic_if):
-    """+1 regular, -1 chaotic, 0 no vote, NaN where the evidence is missing."""
-    out = np.where(regular_if(x), 1.0, np.where(chaotic_if(x), -1.0, 0.0))
-    return np.where(np.isfinite(x), out, np.nan)
+# each line of evidence: its name, the archive variable, whether larger values are more
+# regular (+1) or more chaotic (-1), and the prefix of its thresholds
+EVIDENCE = (("wba", "birkhoff_digits", +1, "digits"), ("megno", "megno", -1, "megno"),
+            ("ftle", "ftle", -1, "ftle"), ("sali", "sali", +1, "sali"),
+            ("diffusion", "frequency_diffusion", -1, "diffusion"))
 
 
 def evidence_votes(ds, th: Thresholds) -> dict[str, np.ndarray]:
-    """Each line of evidence present in the archive, as votes."""
-    def get(name):
-        return ds[name].values.astype(float) if name in ds else None
+    """Each line of evidence present in the archive as votes: +1 regular, -1 chaotic, 0 no
+    vote (between the thresholds), NaN where the evidence is missing. The FTLE is measured
+    in units of ln(T)/T, a torus's FTLE at the time reached."""
     votes = {}
-    digits = get("birkhoff_digits")
-    if digits is not None:
-        votes["wba"] = _vote(digits, lambda x: x >= th.digits_regular,
-                             lambda x: x <= th.digits_chaotic)
-    megno = get("megno")
-    if megno is not None:
-        votes["megno"] = _vote(megno, lambda x: x <= th.megno_regular,
-                               lambda x: x >= th.megno_chaotic)
-    ftle, t_end = get("ftle"), get("t_end")
-    if ftle is not None and t_end is not None:
-        with np.errstate(invalid="ignore", divide="ignore"):
-            ratio = ftle / (np.log(t_end) / t_end)
-        votes["ftle"] = _vote(ratio, lambda x: x <= th.ftle_regular,
-                              lambda x: x >= th.ftle_chaotic)
-    sali = get("sali")
-    if sali is not None:
-        votes["sali"] = _vote(sali, lambda x: x >= th.sali_regular,
-                              lambda x: x <= th.sali_chaotic)
-    diffusion = get("frequency_diffusion")
-    if diffusion is not None:
-        votes["diffusion"] = _vote(diffusion, lambda x: x <= th.diffusion_regular,
-                                   lambda x: x >= th.diffusion_chaotic)
+    for key, name, sign, prefix in EVIDENCE:
+        if name not in ds:
+            continue
+        x = ds[name].values.astype(float)
+        if name == "ftle":
+            t_end = ds["t_end"].values
+            with np.errstate(invalid="ignore", divide="ignore"):
+                x = x / (np.log(t_end) / t_end)
+        regular, chaotic = (sign * getattr(th, f"{prefix}_{side}")
+                            for side in ("regular", "chaotic"))
+        with np.errstate(invalid="ignore"):
+            vote = np.where(sign * x >= regular, 1.0, np.where(sign * x <= chaotic, -1.0, 0.0))
+        votes[key] = np.where(np.isfinite(x), vote, np.nan)
     return votes
 
 
