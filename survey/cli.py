@@ -22,19 +22,18 @@ def _bench(args):
 
 
 def _orbit(args):
-    """Integrate one family member with a tangent vector and report what it conserved."""
-    import time
-
+    """One orbit of a paper family (or every orbit of a workflow file): what it conserved,
+    its Lyapunov exponent, and with --plot the paper's single-orbit figures."""
     import numpy as np
 
-    from .dynamics import System
-    from .families import initial_state
-    from .indicators import deviation_vectors
-    from .integrator import integrate
-
+    from . import orbits
     from .config import ConfigError
-    from .integrator import RTOL_MIN
-
+    if args.workflow:
+        if not args.plot:
+            raise ConfigError("--plot", "an orbit workflow draws figures: give --plot DIR")
+        for path in orbits.run_workflow(args.workflow, args.plot):
+            print(f"wrote {path}")
+        return 0
     params = {}
     for item in args.param:
         key, _, value = item.partition("=")
@@ -46,34 +45,66 @@ def _orbit(args):
             raise ConfigError(f"--param {item}", "the value must be a finite number")
     if not (np.isfinite(args.t_final) and args.t_final > 0):
         raise ConfigError("--t-final", f"must be a finite number > 0, got {args.t_final!r}")
-    if not RTOL_MIN <= args.tol < 1:
-        raise ConfigError("--tol", f"must be in [{RTOL_MIN:.2g}, 1) (double precision cannot "
-                                   f"honour less), got {args.tol!r}")
-    try:
-        system = System.create(potential=args.potential)
-        y0 = initial_state(system, args.family, **params)
-    except ValueError as exc:
-        raise ConfigError("orbit", str(exc)) from None
-    E0, J0 = system.energy(y0), system.angular_momentum(y0)
-    t_eval = np.linspace(0.0, args.t_final, 1001)
-    start = time.perf_counter()
-    w0 = deviation_vectors(system, y0, 1, seed=0)[0]
-    integrate(system, y0, 1e-3, tangents=w0, t_eval=t_eval[:1])
-    print(f"compiled kernels ready in {time.perf_counter() - start:.1f} s "
-          "(cached on disk after the first run)")
-    start = time.perf_counter()
-    out = integrate(system, y0, args.t_final, tangents=w0,
-                    t_eval=t_eval, rtol=args.tol, atol=args.tol)
-    wall = time.perf_counter() - start
-    done = ~np.isnan(out.samples[:, 0])
-    s = out.samples[done]
-    print(f"{args.family} {params or ''} with {system.potential.describe()}")
-    print(f"E = {E0:.10g}, J = {J0:.10g}; integrated to t = {out.t:g}: {out.status.name}, "
-          f"{out.n_steps} steps, {out.n_rhs} RHS evaluations, {wall:.2f} s")
-    print(f"max |E/E0 - 1| = {np.abs(system.energy(s) / E0 - 1).max():.2e}, "
-          f"max |J - J0| = {np.abs(system.angular_momentum(s) - J0).max():.2e}, "
-          f"max |p_total| = {np.abs(system.momentum(s)).max():.2e}")
-    print(f"finite-time Lyapunov exponent ln(|w(t)|/|w0|)/t = {out.log_growth[0] / out.t:.5f}")
+    spec = orbits.check(orbits.OrbitSpec(name=args.family, family=args.family, params=params,
+                                         potential=args.potential, t_final=args.t_final,
+                                         tol=args.tol), "orbit")
+    if args.plot:
+        from . import plots
+        figs, text = orbits.figures(spec)
+        print("\n".join(text))
+        for path in plots.save(figs, args.plot, spec.name):
+            print(f"wrote {path}")
+    else:
+        print("\n".join(orbits.describe(spec, *orbits.integrate_orbit(spec))))
+    return 0
+
+
+def _plot(args):
+    from . import plots
+    from .archive import open_archive
+    from pathlib import Path
+    with open_archive(args.archive) as ds:
+        figs = plots.figures(ds, args.var or None)
+        out = Path(args.out or Path(args.archive).parent)
+        for path in plots.save(figs, out, Path(args.archive).stem):
+            print(f"wrote {path}")
+    return 0
+
+
+def _report(args):
+    from . import report
+    from .archive import open_archive
+    from pathlib import Path
+    with open_archive(args.archive) as ds:
+        path = report.write(ds, args.out or Path(args.archive).parent, Path(args.archive).stem)
+    print(f"wrote {path} and its figures")
+    return 0
+
+
+def _reproduce(args):
+    """Every workflow in workflows/: surveys to their archives, figures and reports; orbit
+    workflows to their figures -- all of results/."""
+    from pathlib import Path
+
+    from . import orbits, report
+    from .config import load_config
+    from .sweep import run_survey
+    import xarray as xr
+    paths = sorted(Path(args.workflows).glob("*.toml"))
+    if args.only:
+        paths = [p for p in paths if p.stem in args.only]
+    for path in paths:
+        print(f"== {path}")
+        if orbits.is_orbit_workflow(path):
+            for out in orbits.run_workflow(path, args.results):
+                print(f"wrote {out}")
+            continue
+        config = load_config(path)
+        archive = run_survey(config, progress=False if args.no_progress else None,
+                             command=f"python -m survey reproduce ({path})")
+        with xr.open_dataset(archive) as ds:
+            written = report.write(ds, archive.parent, archive.stem)
+        print(f"wrote {archive}, {written} and its figures")
     return 0
 
 
@@ -96,9 +127,13 @@ def _run(args):
     print(f"wrote {path} ({config.n_cells} cells)")
     import xarray as xr
 
+    from . import report
     from .tori import summary
     with xr.open_dataset(path) as ds:
         print("\n".join(summary(ds)))
+        if not args.no_report:
+            written = report.write(ds, path.parent, path.stem)
+            print(f"report and figures: {written} (and {path.stem}_*.png beside it)")
     return 0
 
 
@@ -127,7 +162,27 @@ def build_parser():
     r.add_argument("--scheduler", help="address of an existing dask scheduler")
     r.add_argument("--output", help="archive path (overrides [survey] output)")
     r.add_argument("--no-progress", action="store_true", help="no progress bar")
+    r.add_argument("--no-report", action="store_true", help="no figures and report beside "
+                                                           "the archive")
     r.set_defaults(func=_run)
+    pl = sub.add_parser("plot", help="figures of an archive: maps, scans, the section, "
+                                     "convergence histories, the frequency map")
+    pl.add_argument("archive")
+    pl.add_argument("--out", help="folder (default: the archive's)")
+    pl.add_argument("--var", action="append", help="only these indicators (repeatable)")
+    pl.set_defaults(func=_plot)
+    rp = sub.add_parser("report", help="the KAM-torus detection report of an archive "
+                                       "(Markdown, with its figures)")
+    rp.add_argument("archive")
+    rp.add_argument("--out", help="folder (default: the archive's)")
+    rp.set_defaults(func=_report)
+    rr = sub.add_parser("reproduce", help="run every workflow in workflows/ and write "
+                                          "results/: archives, figures, reports")
+    rr.add_argument("--workflows", default="workflows")
+    rr.add_argument("--results", default="results", help="folder of the orbit figures")
+    rr.add_argument("--only", action="append", help="only these workflows (file stem)")
+    rr.add_argument("--no-progress", action="store_true")
+    rr.set_defaults(func=_reproduce)
     v = sub.add_parser("verify", help="recompute a sample of an archive's cells from its "
                                       "stored config and compare bit for bit")
     v.add_argument("archive")
@@ -143,7 +198,10 @@ def build_parser():
                    help="run only these parts (repeatable)")
     b.set_defaults(func=_bench)
     o = sub.add_parser("orbit", help="integrate one orbit of a paper family and report "
-                                     "conservation and its Lyapunov exponent")
+                                     "conservation and its Lyapunov exponent; --plot DIR "
+                                     "draws the paper's single-orbit figures")
+    o.add_argument("workflow", nargs="?", help="an orbit workflow file ([[orbit]] tables)")
+    o.add_argument("--plot", metavar="DIR", help="write the figures into DIR")
     o.add_argument("--family", default="sides")
     o.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="family parameter, e.g. --param delta=3 (repeatable)")

@@ -495,11 +495,14 @@ def run(source, **kw):
 
 # ---------------------------------------------------------------- verification
 
-def verify(path, cells: int = 8, seed: int = 0):
+def verify(path, cells: int = 8, seed: int = 0, differences: dict | None = None):
     """Check an archive against its stored config -- the config's sha256, the grid
     coordinates, the variables, their dimensions and attributes -- then recompute a sample
     of cells and compare every variable the schema declares reproducible, bit for bit.
-    Returns (ok, report lines); a file that is not a survey archive raises ArchiveError."""
+    Returns (ok, report lines), each mismatch with its largest difference relative to the
+    value (rounding on another machine shows as ~1e-16, a real change as much more);
+    `differences`, if given, receives those per variable. A file that is not a survey
+    archive raises ArchiveError."""
     from .config import parse_config
     with archive.open_archive(path) as ds:
         try:
@@ -532,7 +535,11 @@ def verify(path, cells: int = 8, seed: int = 0):
         a, b = values[sample], fresh[name].astype(values.dtype)
         if a.tobytes() != b.tobytes():
             ok = False
-            lines.append(f"{name}: differs in {np.sum(~_equal(a, b))} of {len(sample)} cells")
+            worst = _relative_difference(a, b)
+            if differences is not None:
+                differences[name] = worst
+            lines.append(f"{name}: differs in {np.sum(~_equal(a, b))} of {len(sample)} cells; "
+                         f"largest difference {worst:.1e} of the value")
     for name in rederived:
         ok = False
         lines.append(f"{name}: differs from what its evidence in the archive gives "
@@ -543,6 +550,21 @@ def verify(path, cells: int = 8, seed: int = 0):
         lines.append(f"skipped {timed_out.sum()} sampled cells that hit cell_time_limit (not "
                      "reproducible)")
     return ok, lines
+
+
+def _relative_difference(a, b) -> float:
+    """max |a - b| / max(|a|, |b|) over the elements that differ (inf where only one is
+    NaN); integers by their absolute difference."""
+    if a.dtype.kind != "f":
+        return float(np.max(np.abs(a.astype(np.int64) - b.astype(np.int64))))
+    nan_a, nan_b = np.isnan(a), np.isnan(b)
+    if np.any(nan_a != nan_b):
+        return np.inf
+    both = ~nan_a & (a != b)
+    if not both.any():
+        return 0.0
+    return float(np.max(np.abs(a[both] - b[both]) / np.maximum(np.abs(a[both]),
+                                                                np.abs(b[both]))))
 
 
 def _equal(a, b):
