@@ -114,20 +114,11 @@ def _rgba(colour):
     return to_rgba(colour)
 
 
-def _histogram(ax, values, bins, colour="0.3", log=False):
-    values = values[np.isfinite(values)]
-    if values.size:
-        if log:
-            values = np.log10(values[values > 0])
-        ax.hist(values, bins=bins, orientation="horizontal", color=colour)
-    ax.set_xlabel("cells")
-
-
 # ---------------------------------------------------------------- two grid axes
 
 def _two_axis_figure(ds):
-    fig = Figure(figsize=(8.4, 4.8), layout="constrained")
-    gs = fig.add_gridspec(1, 2, width_ratios=[4, 1])
+    fig = Figure(figsize=(9.0, 5.0), layout="constrained")
+    gs = fig.add_gridspec(1, 2, width_ratios=[4, 1.1])
     ax, hist = fig.add_subplot(gs[0]), fig.add_subplot(gs[1])
     a, b = grid_axes(ds)
     ax.set_xlabel(label(a))
@@ -178,14 +169,25 @@ def indicator_map(ds, name, cmap="viridis", clip=None, log=False, overlay=False)
         ax.set_xlim(x.min(), x.max())
         ax.set_ylim(y.min(), y.max())
     where = f"clipped to [{lo:g}, {hi:g}]" if clip else f"range [{lo:.3g}, {hi:.3g}]"
-    cb = fig.colorbar(mesh, ax=ax, location="left", pad=0.12)
+    cb = fig.colorbar(mesh, ax=ax, location="right", pad=0.02)
     cb.set_label(f"{label(name)}, {where}" + (", log scale" if log else ""))
     if handles:
-        ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.02, 1),
-                  fontsize="small", title="masked cells")
-    _histogram(hist, shown.ravel(), 30, log=log)
-    hist.set_ylabel(("log10 " if log else "") + label(name))
+        ax.legend(handles=handles, loc="lower left", bbox_to_anchor=(0.0, 1.0), ncol=3,
+                  fontsize="small", title="masked cells", frameon=False)
+    values = shown.ravel()
+    values = values[np.isfinite(values)]
+    if log:
+        values = values[values > 0]
+    hist.hist(np.clip(values, norm.vmin, norm.vmax),
+              bins=np.geomspace(norm.vmin, norm.vmax, 31) if log
+              else np.linspace(norm.vmin, norm.vmax, 31),
+              orientation="horizontal", color="0.3")
+    hist.set_yscale("log" if log else "linear")
+    hist.set_ylim(norm.vmin, norm.vmax)
+    hist.set_xlabel("cells")
+    hist.set_ylabel(label(name) + (" (clipped)" if clip else ""))
     hist.yaxis.set_label_position("right")
+    hist.yaxis.tick_right()
     return fig
 
 
