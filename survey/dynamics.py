@@ -129,12 +129,9 @@ def potential_energy(q, N, d, measure, prof, par):
 
 
 @kernel
-def rhs(t, y, dy, masses, d, measure, prof, par, n_tan, megno, t_ref):
-    """Hamilton's equations, the variational equations of n_tan tangent vectors
-    (d dq/dt = M^-1 dp, d dp/dt = -Hess U dq) and, if megno, for the first tangent vector w
-    two accumulators: z1' = s (w'.w)/|w|^2 and z2' = 2 z1 / s, s = t - t_ref, so that
-    Y(t) = 2 z1 / s and <Y>(t) = z2 / s (Cincotta & Simo 2000). (Other tangent vectors of
-    the same orbit converge to the same MEGNO: they would add cost, not information.)"""
+def rhs(t, y, dy, masses, d, measure, prof, par, n_tan):
+    """Hamilton's equations and the variational equations of n_tan tangent vectors
+    (d dq/dt = M^-1 dp, d dp/dt = -Hess U dq)."""
     N = masses.size
     nq = N * d
     n = 2 * nq
@@ -159,16 +156,6 @@ def rhs(t, y, dy, masses, d, measure, prof, par, n_tan, megno, t_ref):
             for j in range(i + 1, N - 1):
                 for k in range(j + 1, N):
                     areal_forces(y, dy, i, j, k, d, n, n_tan, prof, par)
-    if megno:
-        off = n * (1 + n_tan)
-        ww = 0.0
-        wdw = 0.0
-        for c in range(n, 2 * n):
-            ww += y[c] * y[c]
-            wdw += y[c] * dy[c]
-        s = t - t_ref
-        dy[off] = s * wdw / ww
-        dy[off + 1] = 2.0 * y[off] / s if s != 0.0 else 0.0
 
 
 # ---------------------------------------------------------------- triangle geometry

@@ -96,8 +96,7 @@ def _constraints(system: System, y0, project_flow: bool) -> np.ndarray:
     if project_flow:
         f = np.zeros(n)
         m, dd, meas, prof, par = system.kernel_args
-        rhs(0.0, np.ascontiguousarray(y0, dtype=float), f, m.copy(), dd, meas, prof, par, 0,
-            False, 0.0)
+        rhs(0.0, np.ascontiguousarray(y0, dtype=float), f, m.copy(), dd, meas, prof, par, 0)
         rows += [f, np.concatenate([-f[n // 2:], f[:n // 2]])]
     q, r = np.linalg.qr(np.array(rows).T)
     return q[:, np.abs(np.diag(r)) > 1e-12 * np.abs(r).max()].T
@@ -172,7 +171,7 @@ def chaos_indicators(system: System, y0, t_final: float, options=IndicatorOption
     reached = ~np.isnan(history) & (history <= out.t)
     th = np.where(reached, history, np.nan)
     tang = out.samples[:, n:n * (1 + k)].reshape(-1, k, n)
-    z = out.samples[:, n * (1 + k):]
+    z = out.sample_megno
     ftle_h = out.sample_log_growth / th[:, None]
     megno_h = z[:, 1] / th
 

@@ -207,41 +207,41 @@ D7_16 = -149.72683625798564
 
 
 @kernel
-def _stages(masses, d, measure, prof, par, n_tan, megno, t_ref, nf, t, y, h, K, yt, ynew):
+def _stages(masses, d, measure, prof, par, n_tan, nf, t, y, h, K, yt, ynew):
     """Stages 2..12 (K[0] holds f(t, y)) and the 8th-order solution ynew."""
     for i in range(nf):
         yt[i] = y[i] + h * (A2_1 * K[0, i])
-    rhs(t + C2 * h, yt, K[1], masses, d, measure, prof, par, n_tan, megno, t_ref)
+    rhs(t + C2 * h, yt, K[1], masses, d, measure, prof, par, n_tan)
     for i in range(nf):
         yt[i] = y[i] + h * (A3_1 * K[0, i] + A3_2 * K[1, i])
-    rhs(t + C3 * h, yt, K[2], masses, d, measure, prof, par, n_tan, megno, t_ref)
+    rhs(t + C3 * h, yt, K[2], masses, d, measure, prof, par, n_tan)
     for i in range(nf):
         yt[i] = y[i] + h * (A4_1 * K[0, i] + A4_3 * K[2, i])
-    rhs(t + C4 * h, yt, K[3], masses, d, measure, prof, par, n_tan, megno, t_ref)
+    rhs(t + C4 * h, yt, K[3], masses, d, measure, prof, par, n_tan)
     for i in range(nf):
         yt[i] = y[i] + h * (A5_1 * K[0, i] + A5_3 * K[2, i] + A5_4 * K[3, i])
-    rhs(t + C5 * h, yt, K[4], masses, d, measure, prof, par, n_tan, megno, t_ref)
+    rhs(t + C5 * h, yt, K[4], masses, d, measure, prof, par, n_tan)
     for i in range(nf):
         yt[i] = y[i] + h * (A6_1 * K[0, i] + A6_4 * K[3, i] + A6_5 * K[4, i])
-    rhs(t + C6 * h, yt, K[5], masses, d, measure, prof, par, n_tan, megno, t_ref)
+    rhs(t + C6 * h, yt, K[5], masses, d, measure, prof, par, n_tan)
     for i in range(nf):
         yt[i] = y[i] + h * (A7_1 * K[0, i] + A7_4 * K[3, i] + A7_5 * K[4, i] + A7_6 * K[5, i])
-    rhs(t + C7 * h, yt, K[6], masses, d, measure, prof, par, n_tan, megno, t_ref)
+    rhs(t + C7 * h, yt, K[6], masses, d, measure, prof, par, n_tan)
     for i in range(nf):
         yt[i] = y[i] + h * (A8_1 * K[0, i] + A8_4 * K[3, i] + A8_5 * K[4, i] + A8_6 * K[5, i] + A8_7 * K[6, i])
-    rhs(t + C8 * h, yt, K[7], masses, d, measure, prof, par, n_tan, megno, t_ref)
+    rhs(t + C8 * h, yt, K[7], masses, d, measure, prof, par, n_tan)
     for i in range(nf):
         yt[i] = y[i] + h * (A9_1 * K[0, i] + A9_4 * K[3, i] + A9_5 * K[4, i] + A9_6 * K[5, i] + A9_7 * K[6, i] + A9_8 * K[7, i])
-    rhs(t + C9 * h, yt, K[8], masses, d, measure, prof, par, n_tan, megno, t_ref)
+    rhs(t + C9 * h, yt, K[8], masses, d, measure, prof, par, n_tan)
     for i in range(nf):
         yt[i] = y[i] + h * (A10_1 * K[0, i] + A10_4 * K[3, i] + A10_5 * K[4, i] + A10_6 * K[5, i] + A10_7 * K[6, i] + A10_8 * K[7, i] + A10_9 * K[8, i])
-    rhs(t + C10 * h, yt, K[9], masses, d, measure, prof, par, n_tan, megno, t_ref)
+    rhs(t + C10 * h, yt, K[9], masses, d, measure, prof, par, n_tan)
     for i in range(nf):
         yt[i] = y[i] + h * (A11_1 * K[0, i] + A11_4 * K[3, i] + A11_5 * K[4, i] + A11_6 * K[5, i] + A11_7 * K[6, i] + A11_8 * K[7, i] + A11_9 * K[8, i] + A11_10 * K[9, i])
-    rhs(t + C11 * h, yt, K[10], masses, d, measure, prof, par, n_tan, megno, t_ref)
+    rhs(t + C11 * h, yt, K[10], masses, d, measure, prof, par, n_tan)
     for i in range(nf):
         yt[i] = y[i] + h * (A12_1 * K[0, i] + A12_4 * K[3, i] + A12_5 * K[4, i] + A12_6 * K[5, i] + A12_7 * K[6, i] + A12_8 * K[7, i] + A12_9 * K[8, i] + A12_10 * K[9, i] + A12_11 * K[10, i])
-    rhs(t + C12 * h, yt, K[11], masses, d, measure, prof, par, n_tan, megno, t_ref)
+    rhs(t + C12 * h, yt, K[11], masses, d, measure, prof, par, n_tan)
     for i in range(nf):
         ynew[i] = y[i] + h * (B1 * K[0, i] + B6 * K[5, i] + B7 * K[6, i] + B8 * K[7, i] + B9 * K[8, i] + B10 * K[9, i] + B11 * K[10, i] + B12 * K[11, i])
 
@@ -264,20 +264,19 @@ def _error_norm(y, ynew, K, h, n_err, rtol, atol):
 
 
 @kernel
-def _dense_prepare(masses, d, measure, prof, par, n_tan, megno, t_ref, nd, full, t, y, ynew, h, K, yt, F):
+def _dense_prepare(masses, d, measure, prof, par, n_tan, nd, full, t, y, ynew, h, K, yt, F):
     """Coefficients of the 7th-order interpolant on [t, t+h] for components < nd; K[12]
     must hold f(t+h, ynew). Stages 14-16 are evaluated for the orbit alone unless full."""
     nt = n_tan if full else 0
-    mg = megno and full
     for i in range(nd):
         yt[i] = y[i] + h * (A14_1 * K[0, i] + A14_7 * K[6, i] + A14_8 * K[7, i] + A14_9 * K[8, i] + A14_10 * K[9, i] + A14_11 * K[10, i] + A14_12 * K[11, i] + A14_13 * K[12, i])
-    rhs(t + C14 * h, yt, K[13], masses, d, measure, prof, par, nt, mg, t_ref)
+    rhs(t + C14 * h, yt, K[13], masses, d, measure, prof, par, nt)
     for i in range(nd):
         yt[i] = y[i] + h * (A15_1 * K[0, i] + A15_6 * K[5, i] + A15_7 * K[6, i] + A15_8 * K[7, i] + A15_11 * K[10, i] + A15_12 * K[11, i] + A15_13 * K[12, i] + A15_14 * K[13, i])
-    rhs(t + C15 * h, yt, K[14], masses, d, measure, prof, par, nt, mg, t_ref)
+    rhs(t + C15 * h, yt, K[14], masses, d, measure, prof, par, nt)
     for i in range(nd):
         yt[i] = y[i] + h * (A16_1 * K[0, i] + A16_6 * K[5, i] + A16_7 * K[6, i] + A16_8 * K[7, i] + A16_9 * K[8, i] + A16_13 * K[12, i] + A16_14 * K[13, i] + A16_15 * K[14, i])
-    rhs(t + C16 * h, yt, K[15], masses, d, measure, prof, par, nt, mg, t_ref)
+    rhs(t + C16 * h, yt, K[15], masses, d, measure, prof, par, nt)
     for i in range(nd):
         dy = ynew[i] - y[i]
         F[0, i] = dy
@@ -489,7 +488,7 @@ def _norm_block(y, off, n):
 def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, n_err,
            max_steps, h0, h_max, h_min, events, max_events, n_sub, t_eval, n_eval, renorm_dt,
            time_limit, t_fine):
-    """Integrate the orbit (+ n_tan tangent vectors, + MEGNO accumulators) from t0 to t1.
+    """Integrate the orbit (+ n_tan tangent vectors) from t0 to t1.
 
     events: (offsets, records, direction, terminal, guard, watch) arrays; a watched
     event e records every crossing of g_e = 0 in its direction (+1 rising in time, -1
@@ -501,9 +500,19 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
     reads. Tangent vectors are rescaled to unit norm every renorm_dt (<= 0: every step),
     their logs accumulated in log_growth, which starts at -ln|w(t0)|.
 
+    MEGNO (if megno, for the first tangent vector; Cincotta & Simo 2000): with
+    L(t) = ln(|w(t)|/|w0|) and s = t - t0, Y(s) = (2/s) int_0^s u dL(u) and <Y> =
+    (1/s) int_0^s Y. Integrating by parts, int_0^s u dL = s L(s) - int_0^s L: MEGNO needs
+    only L, known exactly at every step end, never the rate dL/dt = w'.w/|w|^2, which near a
+    close approach spikes within a single step (the Hessian grows like a power of 1/r) and
+    wrecks any quadrature of it. int L and int Y are trapezoid sums over the steps (and at
+    output times, over the part of the step before them, with L from the dense output).
+
     Returns (status, t, y, counts[accepted, rejected, rhs evaluations, events found],
     h_range[min, max accepted step], ev_index, ev_t, ev_y, samples, sample_log, log_growth,
-    max_log, fine, wba): max_log is the largest ln(|w|/|w0|) seen at step ends (the FLI);
+    max_log, fine, wba, megno_sums, sample_megno): max_log is the largest ln(|w|/|w0|) seen
+    at step ends (the FLI); megno_sums = (s L - int L, int Y) at the end, sample_megno the
+    same at the output times (their ratios to s are Y/2 and <Y>);
     wba = (sum of g dL, sum of g dt) over the steps for the first tangent vector, L = ln|w|
     and g(s) = exp(-1/(s(1-s))) at the step's mid-time s = (t - t0)/(t1 - t0): their ratio
     is the weighted Birkhoff average of the growth rate (Sander & Meiss 2025).
@@ -527,6 +536,10 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
     sample_log = np.full((t_eval.size, n_tan), np.nan)
     fine = np.full((t_fine.size, n), np.nan)
     wba = np.zeros(2)
+    megno_sums = np.zeros(2)
+    sample_megno = np.full((t_eval.size, 2), np.nan)
+    int_L = 0.0           # int_0^t L of the first tangent vector, to the last step end
+    Y_prev = 0.0          # Y at the last step end
     log_growth = np.zeros(n_tan)
     max_log = np.zeros(n_tan)
     eoff, ep, direc, terminal, guard, watch = events
@@ -544,16 +557,16 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
     for a in range(nf):
         if not math.isfinite(y[a]):
             return (NONFINITE_, t, y, counts, h_range, ev_index, ev_t, ev_y, samples,
-                    sample_log, log_growth, max_log, fine, wba)
+                    sample_log, log_growth, max_log, fine, wba, megno_sums, sample_megno)
     for tt in range(n_tan):
         w0 = _norm_block(y, n * (1 + tt), n)
         log_growth[tt] = -math.log(w0)
-    rhs(t, y, K[0], masses, d, measure, prof, par, n_tan, megno, t0)
+    rhs(t, y, K[0], masses, d, measure, prof, par, n_tan)
     counts[2] += 1
     for a in range(nf):
         if not math.isfinite(K[0, a]):
             return (NONFINITE_, t, y, counts, h_range, ev_index, ev_t, ev_y, samples,
-                    sample_log, log_growth, max_log, fine, wba)
+                    sample_log, log_growth, max_log, fine, wba, megno_sums, sample_megno)
     i_eval = 0
     while i_eval < t_eval.size and t_eval[i_eval] == t0:
         samples[i_eval, :] = y[:n_eval]
@@ -572,7 +585,7 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
     span = abs(t1 - t0)
     if span == 0.0:
         return (OK_, t, y, counts, h_range, ev_index, ev_t, ev_y, samples, sample_log,
-                log_growth, max_log, fine, wba)
+                log_growth, max_log, fine, wba, megno_sums, sample_megno)
     h_max = min(h_max, span) if h_max > 0.0 else span
 
     # initial step (Hairer's hinit)
@@ -589,7 +602,7 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
         h = min(h, h_max)
         for a in range(nf):
             yt[a] = y[a] + direction * h * K[0, a]
-        rhs(t + direction * h, yt, K[1], masses, d, measure, prof, par, n_tan, megno, t0)
+        rhs(t + direction * h, yt, K[1], masses, d, measure, prof, par, n_tan)
         counts[2] += 1
         der2 = 0.0
         for a in range(n_err):
@@ -623,12 +636,12 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
         last = direction * (t + h - t1) >= 0.0
         if last:
             h = t1 - t
-        _stages(masses, d, measure, prof, par, n_tan, megno, t0, nf, t, y, h, K, yt, ynew)
+        _stages(masses, d, measure, prof, par, n_tan, nf, t, y, h, K, yt, ynew)
         counts[2] += 11
         err = _error_norm(y, ynew, K, h, n_err, rtol, atol)
         ok = math.isfinite(err)
         if ok and err <= 1.0:
-            rhs(t + h, ynew, K[12], masses, d, measure, prof, par, n_tan, megno, t0)
+            rhs(t + h, ynew, K[12], masses, d, measure, prof, par, n_tan)
             counts[2] += 1
             for a in range(nf):
                 if not (math.isfinite(ynew[a]) and math.isfinite(K[12, a])):
@@ -667,7 +680,7 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
                     scan = scan or todo[e] > 0
             n_found = 0
             if scan:
-                _dense_prepare(masses, d, measure, prof, par, n_tan, megno, t0, n, False, t, y,
+                _dense_prepare(masses, d, measure, prof, par, n_tan, n, False, t, y,
                                ynew, h, K, yt, F)
                 counts[2] += 3
                 nd_ready = n
@@ -700,7 +713,7 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
         if i_fine < t_fine.size and direction * (t_fine[i_fine] - t_stop) <= 0.0:
             need = max(need, n)
         if need > nd_ready:
-            _dense_prepare(masses, d, measure, prof, par, n_tan, megno, t0, need, need > n, t, y, ynew, h, K, yt, F)
+            _dense_prepare(masses, d, measure, prof, par, n_tan, need, need > n, t, y, ynew, h, K, yt, F)
             counts[2] += 3
             nd_ready = need
         while i_eval < t_eval.size and direction * (t_eval[i_eval] - t_stop) <= 0.0:
@@ -710,6 +723,14 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
                 _dense_eval(F, y, (t_eval[i_eval] - t) / h, n_eval, yd)
                 samples[i_eval, :] = yd[:n_eval]
             sample_log[i_eval, :] = log_growth
+            if megno and n_eval >= 2 * n:
+                part = t_eval[i_eval] - t
+                L_at = log_growth[0] + math.log(_norm_block(samples[i_eval], n, n))
+                elapsed = t_eval[i_eval] - t0
+                int_at = int_L + 0.5 * part * (L_prev + L_at)
+                Y_at = 2.0 * (elapsed * L_at - int_at) / elapsed if elapsed != 0.0 else 0.0
+                sample_megno[i_eval, 0] = elapsed * L_at - int_at
+                sample_megno[i_eval, 1] = megno_sums[1] + 0.5 * part * (Y_prev + Y_at)
             i_eval += 1
         while i_fine < t_fine.size and direction * (t_fine[i_fine] - t_stop) <= 0.0:
             if t_fine[i_fine] == t_new:
@@ -745,6 +766,13 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
                     g = math.exp(-1.0 / (x * (1.0 - x))) if 0.0 < x < 1.0 else 0.0
                     wba[0] += g * (L - L_prev)
                     wba[1] += g * (t - t_old)
+                    if megno:
+                        int_L += 0.5 * (t - t_old) * (L_prev + L)
+                        elapsed = t - t0
+                        Y_new = 2.0 * (elapsed * L - int_L) / elapsed
+                        megno_sums[0] = elapsed * L - int_L
+                        megno_sums[1] += 0.5 * (t - t_old) * (Y_prev + Y_new)
+                        Y_prev = Y_new
                     L_prev = L
                 if due or wn > 1e100 or wn < 1e-100:
                     inv = 1.0 / wn
@@ -765,7 +793,7 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
 
     counts[3] = n_ev_total
     return (status, t, y, counts, h_range, ev_index, ev_t, ev_y, samples, sample_log,
-            log_growth, max_log, fine, wba)
+            log_growth, max_log, fine, wba, megno_sums, sample_megno)
 
 
 # ---------------------------------------------------------------- Python interface
@@ -912,7 +940,7 @@ class Outcome(NamedTuple):
     y: np.ndarray             # final orbit state (n,)
     tangents: np.ndarray      # final tangent vectors, rescaled (n_tan, n)
     tangent_norms0: np.ndarray  # |w(t0)| per tangent vector
-    megno_sums: np.ndarray    # final MEGNO accumulators (z1, z2) of the first tangent vector
+    megno_sums: np.ndarray    # MEGNO of the first tangent vector: (s Y/2, s <Y>) at the end
     log_growth: np.ndarray    # ln(|w(t)| / |w(t0)|) per tangent vector
     fli: np.ndarray           # max over step ends of ln(|w| / |w0|) per tangent vector
     n_steps: int              # accepted steps
@@ -925,6 +953,7 @@ class Outcome(NamedTuple):
     t_eval: np.ndarray
     samples: np.ndarray       # dense-output states at t_eval (NaN beyond the end reached)
     sample_log_growth: np.ndarray  # ln(|w|/|w0|) at t_eval, per tangent vector
+    sample_megno: np.ndarray  # (s Y/2, s <Y>) at t_eval (NaN unless megno and tangents sampled)
     fine: np.ndarray          # orbit states at t_fine (NaN beyond the end reached)
     ftle_wba: float           # weighted Birkhoff average of d ln|w|/dt, first tangent vector
 
@@ -949,7 +978,7 @@ def integrate(system: System, y0, t_span, *, tangents=None, megno=False, rtol=1e
     """Integrate an orbit of `system` (and optionally tangent vectors) over t_span.
 
     y0: orbit state (n,). t_span: t_final or (t0, t_final); backwards if t_final < t0.
-    tangents: initial deviation vectors (n_tan, n). megno: also integrate the MEGNO
+    tangents: initial deviation vectors (n_tan, n). megno: also compute the MEGNO
     accumulators of the first tangent vector. control_tangents: include tangent vectors in the
     error norm. t_eval: output times sampled from the dense output (orbit only unless
     sample_tangents). t_fine: output times of the orbit alone, usually many (the torus
@@ -970,7 +999,7 @@ def integrate(system: System, y0, t_span, *, tangents=None, megno=False, rtol=1e
     if n_tan and not np.all(np.linalg.norm(tan, axis=1) > 0):
         raise ValueError("tangent vectors must be nonzero")
     megno = bool(megno and n_tan)
-    state = np.concatenate([y0, tan.ravel(), np.zeros(2 if megno else 0)])
+    state = np.concatenate([y0, tan.ravel()])
     t_eval = np.zeros(0) if t_eval is None else np.asarray(t_eval, dtype=np.float64).ravel()
     t_fine = np.zeros(0) if t_fine is None else np.asarray(t_fine, dtype=np.float64).ravel()
     for grid in (t_eval, t_fine):
@@ -987,7 +1016,7 @@ def integrate(system: System, y0, t_span, *, tangents=None, megno=False, rtol=1e
                  int(max_events), int(event_substeps), t_eval, n_eval, float(renorm_interval),
                  float(time_limit), t_fine)
     (status, t, y, counts, h_range, ev_i, ev_t, ev_y, samples, s_log, log_g, max_log, fine,
-     wba) = res
+     wba, megno_sums, sample_megno) = res
     tans = y[n:n * (1 + n_tan)].reshape(n_tan, n)
     norms = np.linalg.norm(tans, axis=1)
     if n_tan and sample_tangents:
@@ -999,7 +1028,7 @@ def integrate(system: System, y0, t_span, *, tangents=None, megno=False, rtol=1e
     return Outcome(
         status=Status(status), t=float(t), y=y[:n].copy(), tangents=tans.copy(),
         tangent_norms0=np.linalg.norm(tan, axis=1),
-        megno_sums=y[n * (1 + n_tan):].copy(),
+        megno_sums=megno_sums if megno else np.zeros(0), sample_megno=sample_megno,
         log_growth=log_g + np.log(norms), fli=np.maximum(max_log, log_g + np.log(norms)),
         n_steps=int(counts[0]), n_rejected=int(counts[1]), n_rhs=int(counts[2]),
         h_min=float(h_range[0]), h_max=float(h_range[1]),

@@ -164,8 +164,8 @@ def indicator_map(ds, name, cmap="viridis", clip=None, log=False, overlay=False)
     if overlay:
         a, b = grid_axes(ds)
         ax.scatter(ds[f"crossing_{a}"].values.ravel(), ds[f"crossing_{b}"].values.ravel(),
-                   s=0.3, lw=0, color="white", alpha=0.7, rasterized=True)
-        handles.append(Patch(color="white", ec="0.5", label="section crossings"))
+                   s=0.4, lw=0, color="black", alpha=0.35, rasterized=True)
+        handles.append(Patch(color="black", alpha=0.5, label="section crossings"))
         ax.set_xlim(x.min(), x.max())
         ax.set_ylim(y.min(), y.max())
     where = f"clipped to [{lo:g}, {hi:g}]" if clip else f"range [{lo:.3g}, {hi:.3g}]"
@@ -226,8 +226,9 @@ def scan(ds, names) -> Figure:
         present = [r for r in Regime if np.any(regime == r)]
         axes[0].legend(handles=[Patch(color=REGIME_COLOURS[r], alpha=0.4,
                                       label=f"{r.name.lower()} ({int(np.sum(regime == r))})")
-                                for r in present], loc="upper left", fontsize="small",
-                       ncol=min(len(present), 4), title="regime (cells)")
+                                for r in present], loc="lower left", fontsize="small",
+                       bbox_to_anchor=(0.0, 1.02), ncol=min(len(present), 4),
+                       title="regime (cells)", frameon=False)
     return fig
 
 

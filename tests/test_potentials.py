@@ -26,10 +26,10 @@ def make_case(name, N, d, seed=0):
     return system, y
 
 
-def full_rhs(system, y, n_tan=0, megno=False):
+def full_rhs(system, y, n_tan=0):
     dy = np.zeros_like(y)
     m, d, meas, prof, par = system.kernel_args
-    rhs(0.0, y, dy, m.copy(), d, meas, prof, par, n_tan, megno, 0.0)
+    rhs(0.0, y, dy, m.copy(), d, meas, prof, par, n_tan)
     return dy
 
 
@@ -106,18 +106,6 @@ def test_areal_forces_are_parallel_to_altitudes():
         j, k = (i + 1) % 3, (i + 2) % 3
         assert abs(np.dot(F[i], q[k] - q[j])) < 1e-13 * np.linalg.norm(F[i])
     np.testing.assert_allclose(F.sum(axis=0), 0.0, atol=1e-14)
-
-
-def test_megno_accumulator_rates():
-    system, y = make_case("perimetric_power", 3, 2)
-    w = np.random.default_rng(5).normal(size=system.n)
-    state = np.concatenate([y, w, [0.3, 0.0]])
-    dy = np.zeros_like(state)
-    m, d, meas, prof, par = system.kernel_args
-    rhs(2.5, state, dy, m.copy(), d, meas, prof, par, 1, True, 0.5)
-    wdot = dy[system.n:2 * system.n]
-    assert dy[-2] == pytest.approx(2.0 * np.dot(wdot, w) / np.dot(w, w), rel=1e-14)
-    assert dy[-1] == pytest.approx(2 * 0.3 / 2.0, rel=1e-14)
 
 
 @pytest.mark.parametrize("bad,match", [
