@@ -43,11 +43,9 @@ def _orbit(args):
             raise ConfigError(f"--param {item}", "expected KEY=NUMBER") from None
         if not np.isfinite(params[key]):
             raise ConfigError(f"--param {item}", "the value must be a finite number")
-    if not (np.isfinite(args.t_final) and args.t_final > 0):
-        raise ConfigError("--t-final", f"must be a finite number > 0, got {args.t_final!r}")
     spec = orbits.check(orbits.OrbitSpec(name=args.family, family=args.family, params=params,
                                          potential=args.potential, t_final=args.t_final,
-                                         tol=args.tol), "orbit")
+                                         tol=args.tol), "orbit", cli=True)
     if args.plot:
         from . import plots
         figs, text = orbits.figures(spec)

@@ -47,18 +47,23 @@ class OrbitSpec:
         return System.create(potential=self.potential, **self.potential_params)
 
 
-def check(spec: OrbitSpec, where: str = "orbit") -> OrbitSpec:
-    """A ConfigError naming the key for anything that would fail later."""
+def check(spec: OrbitSpec, where: str = "orbit", cli: bool = False) -> OrbitSpec:
+    """A ConfigError naming the key (the command-line option if cli) for anything that
+    would fail later."""
+    def key_name(key):
+        return f"--{key.replace('_', '-')}" if cli else f"{where}.{key}"
     for key in ("t_final", "tol", "zoom_until"):
         value = getattr(spec, key)
         if isinstance(value, bool) or not isinstance(value, (int, float)) or \
                 not math.isfinite(value):
-            raise ConfigError(f"{where}.{key}", f"must be a finite number, got {value!r}")
+            raise ConfigError(key_name(key), f"must be a finite number{' > 0' * (key == 't_final')}"
+                                             f", got {value!r}")
     if spec.t_final <= 0:
-        raise ConfigError(f"{where}.t_final", f"must be > 0, got {spec.t_final!r}")
+        raise ConfigError(key_name("t_final"), f"must be a finite number > 0, got "
+                                               f"{spec.t_final!r}")
     if not RTOL_MIN <= spec.tol < 1:
-        raise ConfigError(f"{where}.tol", f"must be in [{RTOL_MIN:.2g}, 1) (double precision "
-                                          f"cannot honour less), got {spec.tol!r}")
+        raise ConfigError(key_name("tol"), f"must be in [{RTOL_MIN:.2g}, 1) (double "
+                                           f"precision cannot honour less), got {spec.tol!r}")
     for key, value in spec.params.items():
         values = value if isinstance(value, list) else [value]
         if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)

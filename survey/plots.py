@@ -71,8 +71,10 @@ def figures(ds, variables=None) -> dict[str, Figure]:
         out["section"] = section(ds)
     if "megno_history" in ds:
         out["convergence"] = convergence(ds)
-    if "frequency" in ds and np.isfinite(ds["frequency"].values).any():
-        out["frequency_map"] = frequency_map(ds)
+    if "frequency" in ds and "regime" in ds:     # frequencies mean something on regular cells
+        regular = np.isin(ds["regime"].values, [Regime.TORUS, Regime.RESONANT, Regime.PERIODIC])
+        if np.isfinite(ds["frequency"].values[regular]).any():
+            out["frequency_map"] = frequency_map(ds)
     return out
 
 
