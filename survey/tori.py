@@ -315,8 +315,8 @@ class Regime(enum.IntEnum):
 
 REGIME_MEANINGS = {
     Regime.TORUS: "quasi-periodic: every line of evidence regular",
-    Regime.RESONANT: "regular, with frequencies on a low-order resonance m . nu = 0 to within "
-                     "their precision",
+    Regime.RESONANT: "regular, with frequencies on a low-order resonance m . nu = 0 (to "
+                     "resonance_width)",
     Regime.PERIODIC: "regular with at most one shape frequency (a relative equilibrium or a "
                      "periodic orbit of the shape)",
     Regime.STICKY: "regular in the first half, chaotic by T: an orbit that clung to tori",
