@@ -290,7 +290,7 @@ def convergence(ds, cells=None) -> Figure:
                  and r not in (Regime.INACCESSIBLE, Regime.COLLISION)][:6]
     fig = Figure(figsize=(7.5, 2.4 * len(flat) + 0.5), layout="constrained")
     axes = fig.subplots(len(flat), 1, sharex=True, squeeze=False)[:, 0]
-    coords = _cell_coordinates(ds)
+    coords = cell_labels(ds)
     for ax, (name, values) in zip(axes, flat.items()):
         for c in cells:
             colour = REGIME_COLOURS[Regime(regime[c])] if regime is not None else None
@@ -307,7 +307,8 @@ def convergence(ds, cells=None) -> Figure:
     return fig
 
 
-def _cell_coordinates(ds) -> list[str]:
+def cell_labels(ds) -> list[str]:
+    """'delta=4.2, energy=90' for every cell, in flat C order."""
     axes = grid_axes(ds)
     mesh = np.meshgrid(*[ds[a].values for a in axes], indexing="ij")
     return [", ".join(f"{a}={m.ravel()[i]:.4g}" for a, m in zip(axes, mesh))

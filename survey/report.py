@@ -161,7 +161,7 @@ def _tori_table(ds, axes, regime, rows: int = 15) -> list[str]:
     m = ds["resonance"].values.reshape(-1, len(names))
     dist = ds["resonance_distance"].values.ravel()
     digits = ds["birkhoff_digits"].values.ravel()
-    coords = plots._cell_coordinates(ds)
+    coords = plots.cell_labels(ds)
     pick = cells if cells.size <= rows else cells[np.linspace(0, cells.size - 1, rows).astype(int)]
     out = ["## Tori found", "",
            f"{cells.size} regular cells; {'all' if cells.size <= rows else f'{rows} evenly chosen'} "
