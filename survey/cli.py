@@ -88,7 +88,8 @@ def _reproduce(args):
     from .config import load_config
     from .sweep import run_survey
     import xarray as xr
-    paths = sorted(Path(args.workflows).glob("*.toml"))
+    paths = sorted(Path(args.workflows).glob("*.toml")) + [Path(__file__).parent /
+                                                             "default.toml"]
     if args.only:
         paths = [p for p in paths if p.stem in args.only]
     for path in paths:
@@ -174,8 +175,9 @@ def build_parser():
     rp.add_argument("archive")
     rp.add_argument("--out", help="folder (default: the archive's)")
     rp.set_defaults(func=_report)
-    rr = sub.add_parser("reproduce", help="run every workflow in workflows/ and write "
-                                          "results/: archives, figures, reports")
+    rr = sub.add_parser("reproduce", help="run every workflow in workflows/ and the "
+                                          "embedded default, and write results/: archives, "
+                                          "figures, reports")
     rr.add_argument("--workflows", default="workflows")
     rr.add_argument("--results", default="results", help="folder of the orbit figures")
     rr.add_argument("--only", action="append", help="only these workflows (file stem)")

@@ -50,6 +50,14 @@ def onset(x: np.ndarray, regime: np.ndarray) -> dict | None:
             "all_irregular_from": float(x[solid]) if solid < x.size else None}
 
 
+def runs(values) -> list[tuple[int, int]]:
+    """(first, last) index of each run of equal values."""
+    edges = np.flatnonzero(np.diff(values)) + 1
+    starts = np.concatenate([[0], edges])
+    ends = np.concatenate([edges - 1, [len(values) - 1]])
+    return list(zip(starts.tolist(), ends.tolist()))
+
+
 def write(ds, folder, stem: str | None = None, figures: bool = True) -> Path:
     """Write STEM_report.md and its figures into `folder`; returns the report's path."""
     folder = Path(folder)
@@ -119,6 +127,10 @@ def _onsets(ds, axes, regime) -> list[str]:
     out = []
     if len(axes) == 1:
         x = ds[axes[0]].values
+        out += [f"## Regimes along {axes[0]}", ""] + [
+            f"- {axes[0]} = {x[i]:g}" + (f" to {x[j]:g}" if j > i else "") +
+            f": {Regime(regime[i]).name.lower()} ({j - i + 1} cell{'s' * (j > i)})"
+            for i, j in runs(regime)] + [""]
         found = onset(x, regime)
         out += ["## Where chaos sets in", ""]
         if found is None:

@@ -96,6 +96,7 @@ def test_report_states_what_was_run_regimes_onset_and_thresholds(grid1, tmp_path
                     "## Conservation and failures", "## Figures"):
         assert heading in text, heading
     assert "family `equilateral`" in text and "t = 300" in text
+    assert "## Regimes along delta" in text and "- delta = 3 to " in text
     for name in ("g1_scan.png", "g1_convergence.png"):
         assert (tmp_path / name).exists() and f"({name})" in text
     lo, hi = report.wilson(5, 20)
