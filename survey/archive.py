@@ -461,11 +461,11 @@ def problems(ds, config) -> list[str]:
         if name not in ds.variables:
             found.append(f"coordinate {name} is missing")
             continue
-        stored = ds[name].values
-        values = np.asarray(values)
-        if stored.shape != values.shape or (stored.dtype.kind == "f" and
-                                            stored.tobytes() != values.astype(stored.dtype).tobytes()) \
-                or (stored.dtype.kind != "f" and not np.array_equal(stored.astype(values.dtype), values)):
+        stored, values = ds[name].values, np.asarray(values)
+        same = stored.shape == values.shape and (
+            stored.tobytes() == values.astype(stored.dtype).tobytes() if stored.dtype.kind == "f"
+            else np.array_equal(stored.astype(str), values.astype(str)))
+        if not same:
             found.append(f"coordinate {name} differs from the grid of the stored config")
     expected = {v.name: v for v in variables(config)}
     for name in sorted(set(ds.data_vars) - set(expected)):

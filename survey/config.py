@@ -509,10 +509,10 @@ def _validate_names(tables: dict):
                                            "characters or '..'; e.g. name = \"delta-map\"")
     address = tables["dask"]["scheduler"]
     if address:
-        _check_address(address)
+        check_address(address)
 
 
-def _check_address(address: str):
+def check_address(address: str):
     """A dask scheduler address, checked for form (the connection is tried later, bounded by
     connect_timeout)."""
     from distributed.comm.addressing import parse_address, parse_host_port

@@ -30,7 +30,7 @@ import numpy as np
 from . import archive, tori
 from .archive import CellResult
 from .config import (Config, ConfigError, build_system, indicator_options, load_config,
-                     section_event_for, _check_address)
+                     section_event_for, check_address)
 from .coordinates import reduced
 from .families import Inaccessible, initial_state
 from .indicators import chaos_indicators, conservation_errors, history_times
@@ -434,7 +434,7 @@ def _api_arguments(workers, scheduler, progress):
         if not isinstance(scheduler, str):
             raise ConfigError("scheduler", f"must be an address string, got {scheduler!r}")
         if scheduler:
-            _check_address(scheduler)
+            check_address(scheduler)
     if progress is not None and not isinstance(progress, (bool, np.bool_)):
         raise ConfigError("progress", f"must be true, false or None, got {progress!r}")
     return workers, scheduler or None, None if progress is None else bool(progress)
