@@ -25,7 +25,7 @@ from typing import Any, Callable, NamedTuple
 import numpy as np
 
 from .status import Status
-from .tori import OBSERVABLES, Regime, fundamental_names
+from .tori import Regime, fundamental_names
 
 # which cells a variable has values for; elsewhere it holds its fill value
 ALL, STARTED, FINISHED = "all cells", "cells with a start", "cells with status ok or event"

@@ -6,7 +6,7 @@ import sys
 import pytest
 
 from survey.cli import main
-from survey.config import SCHEMA, load_config
+from survey.config import load_config
 
 GOOD = """
 [survey]

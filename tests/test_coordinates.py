@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from survey.coordinates import (Reduced, jacobi, reduced, reduced_energy, section_event,
+from survey.coordinates import (jacobi, reduced, reduced_energy, section_event,
                                 to_cartesian)
 from survey.dynamics import System, area, inequities, perimeter, sides
 from survey.families import Inaccessible, initial_state
