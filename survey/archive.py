@@ -366,10 +366,16 @@ def attributes(config, command: str) -> dict:
 
 # ---------------------------------------------------------------- writing
 
-def write(config, load: Callable[[str], np.ndarray], command: str) -> Path:
-    """Write the archive atomically: to a temporary file beside the output, variable by
-    variable (peak memory: one variable), then renamed into place. `load(name)` returns a
-    variable over all cells in flat C order, shape (n_cells, ...)."""
+# the archive is written a group of variables at a time, each group at most this large
+# in memory: one pass over the checkpoint files per group, not per variable
+GROUP_BYTES = 256 * 2 ** 20
+
+
+def write(config, load: Callable[[list[str]], dict], command: str) -> Path:
+    """Write the archive atomically: to a temporary file beside the output, in groups of
+    variables of at most GROUP_BYTES (the peak memory beyond one variable), then renamed
+    into place. `load(names)` returns those variables over all cells in flat C order, each
+    of shape (n_cells, ...)."""
     import xarray as xr
     out = config.output
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -381,15 +387,14 @@ def write(config, load: Callable[[str], np.ndarray], command: str) -> Path:
                           attrs=attributes(config, command))
         base.to_netcdf(tmp, mode="w", engine="netcdf4",
                        encoding={k: {"_FillValue": None} for k in coords})
-        for v in variables(config):
-            if not v.derived:
-                _append(tmp, v, load(v.name).reshape(config.shape + cell_shape(config, v)),
-                        dims + v.extra)
+        for group in _groups(config, [v for v in variables(config) if not v.derived]):
+            data = load([v.name for v in group])
+            _append(tmp, [(v, data.pop(v.name).reshape(config.shape + cell_shape(config, v)),
+                           dims + v.extra, {}) for v in group])
         with xr.open_dataset(tmp, engine="netcdf4") as ds:    # reads only what it needs
             derived = derive(ds)
-        for v in variables(config):
-            if v.derived:
-                _append(tmp, v, derived[v.name], dims, derived.get(v.name + ":attrs", {}))
+        _append(tmp, [(v, derived[v.name], dims, derived.get(v.name + ":attrs", {}))
+                      for v in variables(config) if v.derived])
         with open(tmp, "rb+") as fh:
             os.fsync(fh.fileno())
         os.replace(tmp, out)
@@ -399,11 +404,29 @@ def write(config, load: Callable[[str], np.ndarray], command: str) -> Path:
     return out
 
 
-def _append(path, v: Var, data, dims, extra_attrs=None):
+def _groups(config, vs: list[Var]):
+    """Consecutive runs of variables whose arrays over all cells fit in GROUP_BYTES
+    together (a larger variable goes alone)."""
+    group, size = [], 0
+    for v in vs:
+        nbytes = config.n_cells * int(np.prod(cell_shape(config, v))) * np.dtype(v.dtype).itemsize
+        if group and size + nbytes > GROUP_BYTES:
+            yield group
+            group, size = [], 0
+        group.append(v)
+        size += nbytes
+    if group:
+        yield group
+
+
+def _append(path, entries):
+    """Append variables (Var, data, dims, extra attributes) to the file in one opening."""
     import xarray as xr
-    one = xr.Dataset({v.name: xr.Variable(dims, data, {**v.attrs(), **(extra_attrs or {})})})
+    one = xr.Dataset({v.name: xr.Variable(dims, data, {**v.attrs(), **extra})
+                      for v, data, dims, extra in entries})
     enc = {v.name: {"zlib": True, "complevel": 4,
-                    "_FillValue": None if v.dtype.startswith("i") else np.nan}}
+                    "_FillValue": None if v.dtype.startswith("i") else np.nan}
+           for v, *_ in entries}
     one.to_netcdf(path, mode="a", engine="netcdf4", encoding=enc)
 
 

@@ -63,9 +63,12 @@ def numpy_rhs(system: System, tangent: bool):
     return f
 
 
-def heyoka_integrator(system: System, y0, tangent_vector, tol):
+def heyoka_integrator(system: System, y0, tangent_vector, tol, megno=False, batch=0):
     """heyoka Taylor integrator of the same system (U = c P^k / k); the tangent dynamics are
-    the symbolic derivative of the forces applied to one deviation vector."""
+    the symbolic derivative of the forces applied to one deviation vector. megno adds the two
+    accumulators of MEGNO as ODE components, x' = t (w.w')/|w|^2 and z' = x / (t + 1) (the
+    work of survey's MEGNO: heyoka has no step-end hook to do it our way); batch > 0 builds
+    the SIMD batch integrator of that width, every lane starting from the same state."""
     import heyoka as hy
     N, d = system.n_bodies, system.dim
     c, k = system.potential.params
@@ -86,6 +89,15 @@ def heyoka_integrator(system: System, y0, tangent_vector, tol):
         sys += [(dp[i], sum(hy.diff(force[i], q[j]) * dq[j] for j in range(N * d)))
                 for i in range(N * d)]
         state += list(tangent_vector)
+        if megno:
+            x, z = hy.make_vars("x", "z")
+            w = dq + dp
+            rate = sum(wi * r for wi, (_, r) in zip(w, sys[2 * N * d:])) / sum(wi * wi for wi in w)
+            sys += [(x, hy.time * rate), (z, x / (hy.time + 1.0))]
+            state += [0.0, 0.0]
+    if batch:
+        return hy.taylor_adaptive_batch(sys, np.repeat(np.array(state)[:, None], batch, 1),
+                                        tol=tol)
     return hy.taylor_adaptive(sys, state, tol=tol)
 
 
@@ -347,3 +359,167 @@ def _print_table(rows, t_scipy, t_final, out):
         "orbit+tangent heyoka x >= 1.")
     if not any("hy12_s" in r for r in rows):
         out("heyoka is not installed (pip install 'survey[bench]'): its columns are empty.")
+
+
+def scan_vs_heyoka(cells=101, t_final=2000.0, tol=1e-12, repeats=2, folder="results/bench",
+                   out=print):
+    """The issue's grid: `cells` orbits of the equilateral family, delta in [0, 10], one
+    tangent vector + MEGNO, no section, no torus analysis, end to end through
+    `run_survey` on 2 local workers (cluster start and archive included), against heyoka's
+    SIMD batch integrator over the same starts and deviation vectors in
+    `ensemble_propagate_until_batch` on 2 threads (its JIT compilation timed apart).
+    Interleaved `repeats` times, best of each (target: survey <= 0.7x heyoka)."""
+    from .sweep import run_survey
+    cfg = {"survey": {"name": "bench-scan", "output": f"{folder}/bench-scan.nc"},
+           "initial": {"family": "equilateral",
+                       "delta": {"start": 0.0, "stop": 10.0, "num": cells}},
+           "integration": {"t_final": t_final, "rtol": tol, "atol": tol},
+           "indicators": {"deviations": 1, "perturbations": 0,
+                          "which": ["ftle", "megno", "fli"]},
+           "tori": {"analyse": False},
+           "dask": {"workers": 2}}
+    run_survey(cfg, progress=False)     # numba's disk cache is warm from here on
+    hy = _heyoka_scan(cells, t_final, tol)
+    best = {"survey": math.inf, "heyoka": math.inf}
+    phases = {}
+    for _ in range(repeats):
+        timings = {}
+        t = time.perf_counter()
+        run_survey(cfg, progress=False, timings=timings)
+        wall = time.perf_counter() - t
+        if wall < best["survey"]:
+            best["survey"], phases = wall, timings
+        if hy:
+            best["heyoka"] = min(best["heyoka"], hy["run"]())
+    out("")
+    out(f"Scan of {cells} orbits (equilateral, delta in [0, 10], t = {t_final:g}, tol = "
+        f"{tol:g}, one tangent vector + MEGNO, 2 workers / threads; best of {repeats} "
+        "interleaved runs): seconds")
+    out(f"survey end to end {best['survey']:7.2f}  ("
+        + ", ".join(f"{k} {v:.2f}" for k, v in phases.items() if k != "total") + ")")
+    if not hy:
+        out("heyoka is not installed (pip install 'survey[bench]'): no baseline.")
+        return dict(survey=best["survey"], phases=phases)
+    out(f"heyoka batch       {best['heyoka']:7.2f}  (SIMD width {hy['width']}, "
+        f"{hy['batches']} batches; JIT {hy['compile']:.2f} s not counted)")
+    import xarray as xr
+    with xr.open_dataset(cfg["survey"]["output"]) as ds:
+        ftle = ds.ftle.values
+    other = hy["run"].ftle
+    agree = np.mean((ftle > 0.02) == (other > 0.02))
+    regular = (ftle < 0.02) & (other < 0.02)
+    out(f"same physics: FTLE > 0.02 in both or neither in {100 * agree:.0f}% of the cells; "
+        f"largest FTLE difference where both are below 0.02: "
+        f"{np.max(np.abs(ftle - other)[regular], initial=0.0):.1e}")
+    ratio = best["survey"] / best["heyoka"]
+    out(f"survey / heyoka = {ratio:.2f}x wall (target <= 0.70x)")
+    return dict(survey=best["survey"], heyoka=best["heyoka"], ratio=ratio, phases=phases)
+
+
+def _heyoka_scan(cells, t_final, tol, segment=10.0):
+    """heyoka's batch ensemble over the scan's starts: returns a timed runner, or {}.
+
+    Run as `ensemble_propagate_until_batch` calls over segments of `segment` time units,
+    the tangent vectors renormalised between them (the FTLE keeps the logs) as survey does
+    every renorm_interval: without it a chaotic lane's vector overflows near t = 1200-1600
+    and stops its whole batch (err_nf_state), which is not finishing the scan. A per-step
+    Python callback would cost the GIL on ~10^5 steps per batch."""
+    try:
+        import heyoka as hy
+    except ImportError:
+        return {}
+    from .indicators import IndicatorOptions
+    system = System.create()
+    n = system.n
+    seed = IndicatorOptions().seed
+    starts = []
+    for cell, delta in enumerate(np.linspace(0.0, 10.0, cells)):
+        y0 = initial_state(system, "equilateral", delta=float(delta))
+        w0 = deviation_vectors(system, y0, 1, seed, cell)[0]
+        starts.append(np.concatenate([y0, w0, [0.0, 0.0]]))
+    width = hy.recommended_simd_size()
+    t = time.perf_counter()
+    ta = heyoka_integrator(system, starts[0][:n], starts[0][n:2 * n], tol, megno=True,
+                           batch=width)
+    compile_s = time.perf_counter() - t
+    batches = -(-cells // width)
+    padded = np.array(starts + [starts[-1]] * (batches * width - cells))
+    first = padded.reshape(batches, width, -1).transpose(0, 2, 1)
+    ends = np.append(np.arange(segment, t_final, segment), t_final)
+
+    def run():
+        state, log_w, t_now = first.copy(), np.zeros((batches, width)), 0.0
+
+        def gen(ta_copy, i):
+            ta_copy.set_time(t_now)
+            ta_copy.state[:] = state[i]
+            return ta_copy
+        clock = time.perf_counter()
+        for t_end in ends:
+            for i, r in enumerate(hy.ensemble_propagate_until_batch(ta, t_end, batches, gen,
+                                                                    max_workers=2)):
+                y = np.array(r[0].state)
+                norm = np.linalg.norm(y[n:2 * n], axis=0)
+                y[n:2 * n] /= norm
+                log_w[i] += np.log(norm)
+                state[i] = y
+            t_now = t_end
+        wall = time.perf_counter() - clock
+        run.ftle = (log_w / t_final).ravel()[:cells]    # batch i holds cells i*width...
+        return wall
+    return dict(run=run, width=width, batches=batches, compile=compile_s)
+
+
+def default_cell(t_final=2000.0, repeats=5, folder="results/bench", out=print):
+    """A default survey cell (the README's defaults: 2 deviation vectors, 2 perturbed
+    orbits, the phi section, histories, the torus analysis) through the worker's code path,
+    against the same orbit with one tangent vector alone (`integrate`), best of `repeats`
+    interleaved runs (target: at most 1.5x)."""
+    from .config import load_config
+    from .sweep import CellTask, build_starts, run_cells
+    system = System.create()
+    rows = []
+    for label, fam, params in CASES:
+        config = load_config({"survey": {"output": f"{folder}/cell.nc"},
+                              "initial": {"family": fam, **params},
+                              "integration": {"t_final": t_final},
+                              "section": {"coordinate": "phi"}})
+        task, starts = CellTask.of(config), build_starts(config)
+        y0 = starts[0]
+        w0 = deviation_vectors(system, y0, 1, seed=0)
+        run_cells(task.short(), [0], starts)
+        best = [math.inf, math.inf]
+        for _ in range(repeats):
+            for k, go in enumerate((lambda: run_cells(task, [0], starts),
+                                    lambda: integrate(system, y0, t_final, tangents=w0))):
+                t = time.perf_counter()
+                go()
+                best[k] = min(best[k], time.perf_counter() - t)
+        rows.append((label, *best))
+    out("")
+    out(f"Default survey cell against its orbit with one tangent vector (t = {t_final:g}, best "
+        f"of {repeats} interleaved runs; target: <= 1.5x)")
+    out(f"{'case':26s} {'cell s':>8s} {'orbit+1 s':>10s} {'ratio':>7s}")
+    for label, cell, orbit in rows:
+        out(f"{label:26s} {cell:8.3f} {orbit:10.3f} {cell / orbit:6.2f}x")
+    return rows
+
+
+def fixed_costs(folder="results/bench", repeats=3, out=print):
+    """What a survey costs beside its cells: a 1-cell survey ('sides', default settings
+    otherwise, t = 10) end to end with numba's disk cache warm, by phase, best of
+    `repeats`."""
+    from .sweep import run_survey
+    cfg = {"survey": {"name": "bench-1cell", "output": f"{folder}/bench-1cell.nc"},
+           "initial": {"family": "sides"}, "integration": {"t_final": 10.0}}
+    best = None
+    for _ in range(repeats):
+        timings = {}
+        run_survey(cfg, progress=False, timings=timings)
+        if best is None or timings["total"] < best["total"]:
+            best = timings
+    out("")
+    out(f"Fixed costs: a 1-cell survey ('sides', t = 10, warm cache, best of {repeats}), "
+        "seconds")
+    out("  ".join(f"{k} {v:.2f}" for k, v in best.items()))
+    return best

@@ -362,7 +362,8 @@ def run_survey(source, *, workers: int | None = None, scheduler: str | None = No
     """Run a survey (config path or dict, or a Config) to its archive; returns the archive
     path. Resumes from checkpoints of an interrupted run of the same config. `timings`, if
     given, receives the seconds spent preparing cells, starting the cluster, computing
-    (first task submitted to last result saved) and writing the archive."""
+    (first task submitted to last result saved), stopping the cluster and writing the
+    archive."""
     clock = {"start": time.perf_counter()}
     config = source if isinstance(source, Config) else load_config(source)
     workers, scheduler, progress = _api_arguments(workers, scheduler, progress)
@@ -419,6 +420,7 @@ def run_survey(source, *, workers: int | None = None, scheduler: str | None = No
         timings.update(prepare=c.get("prepared", c["archive"]) - c["start"],
                        cluster=c.get("cluster", c["archive"]) - c.get("prepared", c["archive"]),
                        compute=c.get("computed", c["archive"]) - c.get("cluster", c["archive"]),
+                       shutdown=c["archive"] - c.get("computed", c["archive"]),
                        archive=now - c["archive"], total=now - c["start"])
     return path
 
@@ -474,16 +476,18 @@ def _compute(client, task, starts, todo, folder, key, config, bar, round_):
 
 
 def _loader(config: Config, files: dict[Path, np.ndarray]):
-    """Reads one variable over all cells from the checked checkpoint files."""
+    """Reads variables over all cells from the checked checkpoint files, opening each file
+    once per call."""
     specs = {v.name: v for v in archive.variables(config)}
 
-    def load(name):
-        v = specs[name]
-        arr = np.full((config.n_cells,) + archive.cell_shape(config, v), v.fill, v.dtype)
+    def load(names):
+        out = {name: np.full((config.n_cells,) + archive.cell_shape(config, specs[name]),
+                             specs[name].fill, specs[name].dtype) for name in names}
         for path, ids in files.items():
             with np.load(path) as z:
-                arr[ids] = z[name]
-        return arr
+                for name in names:
+                    out[name][ids] = z[name]
+        return out
     return load
 
 

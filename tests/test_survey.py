@@ -223,7 +223,7 @@ def test_a_crash_while_writing_leaves_no_archive(tmp_path, monkeypatch):
 
     def flaky(self, *args, **kw):
         calls["n"] += 1
-        if calls["n"] == 5:
+        if calls["n"] == 2:
             raise OSError("disk full")
         return original(self, *args, **kw)
 

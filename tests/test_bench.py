@@ -1,0 +1,16 @@
+"""The benchmark's parts in miniature: they run, and print the rows the performance issue
+asks for (the speed numbers themselves are never asserted: they live in the bench)."""
+from survey import bench
+
+
+def test_bench_parts_run_and_print_their_ratios(tmp_path):
+    lines = []
+    bench.scan_vs_heyoka(cells=3, t_final=2.0, repeats=1, folder=str(tmp_path),
+                         out=lines.append)
+    bench.default_cell(t_final=2.0, repeats=1, folder=str(tmp_path), out=lines.append)
+    bench.fixed_costs(folder=str(tmp_path), repeats=1, out=lines.append)
+    text = "\n".join(lines)
+    assert "survey end to end" in text and "cluster" in text and "archive" in text
+    assert "heyoka is not installed" in text or "survey / heyoka =" in text
+    assert text.count("x\n") >= 1 and "Default survey cell" in text
+    assert "Fixed costs" in text and "shutdown" in text
