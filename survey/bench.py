@@ -262,11 +262,11 @@ def survey_scaling(cells=200, t_final=2000.0, repeats=2, folder="results/bench",
     out("")
     out(f"Survey of {cells} cells (equilateral family, t = {t_final:g}, default chunks; best "
         f"of {repeats} interleaved runs): seconds")
-    out(f"{'workers':>8s} {'prepare':>8s} {'cluster':>8s} {'compute':>8s} {'archive':>8s} "
-        f"{'total':>8s} {'in cells':>9s} {'overhead':>9s}")
+    out(f"{'workers':>8s} {'prepare':>8s} {'cluster':>8s} {'compute':>8s} {'shutdown':>8s} "
+        f"{'archive':>8s} {'total':>8s} {'in cells':>9s} {'overhead':>9s}")
     for w, t in rows.items():
         out(f"{w:8d} {t['prepare']:8.2f} {t['cluster']:8.2f} {t['compute']:8.2f} "
-            f"{t['archive']:8.2f} {t['total']:8.2f} {t['in_cells']:9.2f} "
+            f"{t['shutdown']:8.2f} {t['archive']:8.2f} {t['total']:8.2f} {t['in_cells']:9.2f} "
             f"{100 * t['overhead']:8.1f}%")
     out(f"speed-up 2 vs 1 workers: {rows[1]['total'] / rows[2]['total']:.2f}x end to end, "
         f"{rows[1]['compute'] / rows[2]['compute']:.2f}x in the compute phase "
@@ -518,8 +518,23 @@ def fixed_costs(folder="results/bench", repeats=3, out=print):
         run_survey(cfg, progress=False, timings=timings)
         if best is None or timings["total"] < best["total"]:
             best = timings
+    import subprocess
+    import sys
+    from pathlib import Path
+    toml = Path(folder) / "bench-1cell.toml"
+    toml.write_text(f'[survey]\nname = "bench-1cell"\noutput = "{toml.with_suffix(".nc")}"\n'
+                    '[initial]\nfamily = "sides"\n[integration]\nt_final = 10.0\n')
+    command = math.inf
+    for _ in range(repeats):
+        t = time.perf_counter()
+        subprocess.run([sys.executable, "-m", "survey", "run", str(toml), "--no-report",
+                        "--no-progress"], check=True, capture_output=True)
+        command = min(command, time.perf_counter() - t)
     out("")
     out(f"Fixed costs: a 1-cell survey ('sides', t = 10, warm cache, best of {repeats}), "
         "seconds")
-    out("  ".join(f"{k} {v:.2f}" for k, v in best.items()))
+    out("in process: " + "  ".join(f"{k} {v:.2f}" for k, v in best.items()))
+    out(f"python -m survey run (interpreter, imports and regime summary included): "
+        f"{command:.2f}")
+    best["command"] = command
     return best

@@ -13,4 +13,4 @@ def test_bench_parts_run_and_print_their_ratios(tmp_path):
     assert "survey end to end" in text and "cluster" in text and "archive" in text
     assert "heyoka is not installed" in text or "survey / heyoka =" in text
     assert text.count("x\n") >= 1 and "Default survey cell" in text
-    assert "Fixed costs" in text and "shutdown" in text
+    assert "Fixed costs" in text and "shutdown" in text and "python -m survey run" in text
