@@ -151,8 +151,9 @@ def checkpoint_dir(config: Config) -> Path:
 
 def save_chunk(folder: Path, key: str, cell_ids, result: dict):
     """Write one finished chunk atomically (temporary file, fsync, rename), with the key it
-    was computed under. The folder is made again if it was deleted meanwhile."""
-    name = folder / f"chunk-{int(cell_ids[0]):012d}-{int(cell_ids[-1]):012d}-{len(cell_ids)}.npz"
+    was computed under, at chunk_path. The folder is made again if it was deleted
+    meanwhile."""
+    name = chunk_path(folder, cell_ids)
     tmp = folder / f".{name.name}.{os.getpid()}.tmp"
     try:
         folder.mkdir(parents=True, exist_ok=True)
@@ -166,6 +167,10 @@ def save_chunk(folder: Path, key: str, cell_ids, result: dict):
         with contextlib.suppress(OSError):
             tmp.unlink()
         raise _write_error(exc, name, folder) from None
+
+
+def chunk_path(folder: Path, cell_ids) -> Path:
+    return folder / f"chunk-{int(cell_ids[0]):012d}-{int(cell_ids[-1]):012d}-{len(cell_ids)}.npz"
 
 
 def _write_error(exc: OSError, path: Path, folder: Path) -> SurveyError:
@@ -378,9 +383,12 @@ def run_survey(source, *, workers: int | None = None, scheduler: str | None = No
     with output_lock(config.output):
         starts = build_starts(config)
         with contextlib.ExitStack() as stack:
-            client = bar = None
+            client = bar = done = None
             for round_ in range(4):     # rounds after the first only if checkpoints vanish
-                done = scan_checkpoints(folder, config, starts, key)
+                if done is None:
+                    done = scan_checkpoints(folder, config, starts, key)
+                else:       # checked when found or written here: are they still there?
+                    done = {path: ids for path, ids in done.items() if path.exists()}
                 have = np.zeros(config.n_cells, dtype=bool)
                 for ids in done.values():
                     have[ids] = True
@@ -404,7 +412,8 @@ def run_survey(source, *, workers: int | None = None, scheduler: str | None = No
                                                    smoothing=0.1))
                 bar.n = int(have.sum())
                 bar.refresh()
-                _compute(client, task, starts, todo, folder, key, config, bar, round_)
+                done.update(_compute(client, task, starts, todo, folder, key, config, bar,
+                                     round_))
                 clock["computed"] = time.perf_counter()
         clock["archive"] = time.perf_counter()
         try:
@@ -468,11 +477,14 @@ def _compute(client, task, starts, todo, folder, key, config, bar, round_):
                              key=f"cells-{key}-{round_}-{int(ids[0])}",
                              retries=config.tables["dask"]["retries"]): ids
                for ids in _chunks(todo, size)}
+    saved = {}
     for future in as_completed(futures):
         ids = futures.pop(future)
         save_chunk(folder, key, ids, future.result())
+        saved[chunk_path(folder, ids)] = ids
         future.release()
         bar.update(len(ids))
+    return saved
 
 
 def _loader(config: Config, files: dict[Path, np.ndarray]):
