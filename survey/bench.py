@@ -287,8 +287,9 @@ def survey_memory(sizes=(10_000, 100_000), folder="results/bench", out=print):
         code = f"from survey.bench import _memory_run; print(*_memory_run({n}, {folder!r}))"
         res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                              check=True)
-        peak, seconds = map(float, res.stdout.split()[-2:])
-        out(f"{n:>8d} cells: peak RSS {peak / 1024:7.1f} MiB, {seconds:6.1f} s")
+        peak, seconds, archive = map(float, res.stdout.split()[-3:])
+        out(f"{n:>8d} cells: peak RSS {peak / 1024:7.1f} MiB, {seconds:6.1f} s, of which "
+            f"writing the archive {archive:5.1f} s")
 
 
 def _memory_run(n, folder):
@@ -301,9 +302,10 @@ def _memory_run(n, folder):
            "indicators": {"perturbations": 0, "history_points": 2,
                           "renorm_interval": 0.005},
            "dask": {"chunk_size": 500}}
-    t = time.perf_counter()
-    run_survey(cfg, progress=False)
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, time.perf_counter() - t
+    t, timings = time.perf_counter(), {}
+    run_survey(cfg, progress=False, timings=timings)
+    return (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, time.perf_counter() - t,
+            timings["archive"])
 
 
 def _heyoka(system, y0, w0, t_final, E0, dE_survey, tols, repeats):
