@@ -373,8 +373,8 @@ GROUP_BYTES = 256 * 2 ** 20
 
 def write(config, load: Callable[[list[str]], dict], command: str) -> Path:
     """Write the archive atomically: to a temporary file beside the output, in groups of
-    variables of at most GROUP_BYTES (the peak memory beyond one variable), then renamed
-    into place. `load(names)` returns those variables over all cells in flat C order, each
+    variables of at most GROUP_BYTES together (peak memory: a group, or one variable if
+    larger), then renamed into place. `load(names)` returns those variables over all cells in flat C order, each
     of shape (n_cells, ...)."""
     import xarray as xr
     out = config.output

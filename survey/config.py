@@ -531,16 +531,19 @@ def check_address(address: str):
 
 def memory_needed(n_cells, n, deviations, crossings, store_state, history, chunk,
                   workers, samples=0) -> int:
-    """Bytes a survey holds at its peak: the driver keeps every cell's start and one archive
-    variable over all cells; each worker a chunk of result rows and one integration's
-    buffers (stages, crossing states, history samples of the orbit and its tangents, the
-    orbit samples of the torus analysis)."""
+    """Bytes a survey holds at its peak: the driver keeps every cell's start and, writing
+    the archive, a group of variables over all cells (GROUP_BYTES, or one variable if
+    larger); each worker a chunk of result rows and one integration's buffers (stages,
+    crossing states, history samples of the orbit and its tangents, the orbit samples of
+    the torus analysis)."""
+    from .archive import GROUP_BYTES
     full = n * (1 + deviations) + 2
     row = n + 40 + 4 * history + crossings * (7 + (n if store_state else 0))
     integration = 27 * full + crossings * (n + 2) + history * (full + deviations) + \
         samples * (n + 8)
-    driver = n_cells * (n + max(n, history, crossings * (n if store_state else 1)) + 1)
-    return 8 * (driver + workers * (chunk * row + integration))
+    starts = n_cells * (n + 1)
+    variable = n_cells * max(n, history, crossings * (n if store_state else 1))
+    return 8 * (starts + workers * (chunk * row + integration)) + max(GROUP_BYTES, 8 * variable)
 
 
 def check_memory(tables: dict, n_cells: int):
