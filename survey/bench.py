@@ -1,5 +1,9 @@
-"""`python -m survey bench`: survey's DOP853 against scipy's DOP853 (NumPy right-hand side)
-and heyoka's Taylor integrator, all measured in the same run on the paper's two orbits.
+"""`python -m survey bench`: survey against its baselines, measured in the same run -- a
+101-orbit grid end to end against heyoka's SIMD batch ensemble (`scan_vs_heyoka`), a
+default cell against its bare orbit (`default_cell`), what a survey costs beside its cells
+(`fixed_costs`), survey's DOP853 against scipy's DOP853 (NumPy right-hand side) and heyoka's
+Taylor integrator on the paper's two orbits (`run`), the cost of indicators, sections and
+the torus analysis, the scaling on 1 vs 2 workers and the driver's memory.
 
 Speed claims are ratios against baselines timed here, never absolute numbers: machines
 differ, ratios on one machine in one run do not. Compilation (numba's cached load, heyoka's
