@@ -13,6 +13,7 @@ archive is written only when every cell is present. One survey at a time writes 
 """
 from __future__ import annotations
 
+import atexit
 import contextlib
 import errno
 import fcntl
@@ -315,8 +316,11 @@ def _client(config: Config, workers, address):
 def dask_setup(worker):
     """Preload of our local workers. A terminal's Ctrl-C reaches every process of its group;
     the driver stops the cluster and says how to resume, so the workers ignore it rather
-    than each print a traceback."""
+    than each print a traceback. A worker process leaves without the interpreter's teardown
+    of numba and LLVM (registered first, this runs after every other exit handler): the
+    cluster's shutdown waits for it."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    atexit.register(os._exit, 0)
 
 
 def _reach(address: str, timeout: float):
