@@ -11,23 +11,19 @@ BENCH_PARTS = ["scan", "cell", "fixed", "integrator", "indicators", "tori", "sur
 
 def _bench(args):
     from . import bench
-    parts = set(args.only or BENCH_PARTS)
-    if "scan" in parts:
-        bench.scan_vs_heyoka(t_final=args.t_final)
-    if "cell" in parts:
-        bench.default_cell(t_final=args.t_final)
-    if "fixed" in parts:
-        bench.fixed_costs()
-    if "integrator" in parts:
-        bench.run(t_final=args.t_final, t_scipy=args.t_scipy, repeats=args.repeats)
-    if "indicators" in parts:
-        bench.indicator_overhead(t_final=args.t_final)
-    if "tori" in parts:
-        bench.torus_overhead(t_final=args.t_final)
-    if "survey" in parts:
-        bench.survey_scaling()
-    if "memory" in parts:
-        bench.survey_memory()
+    t = args.t_final
+    parts = {"scan": lambda: bench.scan_vs_heyoka(t_final=t),
+             "cell": lambda: bench.default_cell(t_final=t),
+             "fixed": bench.fixed_costs,
+             "integrator": lambda: bench.run(t_final=t, t_scipy=args.t_scipy,
+                                             repeats=args.repeats),
+             "indicators": lambda: bench.indicator_overhead(t_final=t),
+             "tori": lambda: bench.torus_overhead(t_final=t),
+             "survey": bench.survey_scaling,
+             "memory": bench.survey_memory}
+    for name in BENCH_PARTS:
+        if name in (args.only or BENCH_PARTS):
+            parts[name]()
     return 0
 
 
