@@ -316,9 +316,12 @@ def coordinates(config) -> dict:
     """Coordinate variables (numeric, monotone: CF section 1.3) and the string labels of the
     component and spatial dimensions as auxiliary coordinates (CF section 6.1)."""
     from .indicators import history_times
-    coords = {a.name: (a.name, a.values, {"long_name": f"initial-condition parameter "
-                                                     f"{a.name}", "units": "1"})
-              for a in config.axes}
+    from .config import system_terms
+    terms = system_terms(config.tables["system"])
+    coords = {a.name: (a.name, a.values, {
+        "long_name": f"parameter {a.param} of the {terms[a.term][0]} term {terms[a.term][1]}"
+        if a.term >= 0 else f"initial-condition parameter {a.name}", "units": "1"})
+        for a in config.axes}
     coords["history_time"] = ("history_time", history_times(
         config.tables["integration"]["t_final"], config.tables["indicators"]["history_points"]),
         {"long_name": "time of the convergence history points", "units": "1"})
@@ -343,13 +346,14 @@ def coordinates(config) -> dict:
 
 
 def attributes(config, command: str) -> dict:
+    from .config import system_terms
     ver = versions()
     now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
     init = config.tables["initial"]
     return {
         "Conventions": "CF-1.10",
         "title": f"survey '{config.name}': chaos indicators of the {init['family']} family "
-                 f"under {config.tables['system']['potential']}",
+                 f"under {' + '.join(name for _, name, _ in system_terms(config.tables['system']))}",
         "history": f"{now}: {command} (survey {ver['survey']})",
         "source": f"survey {ver['survey']}: numba DOP853 (rtol "
                   f"{config.tables['integration']['rtol']:g}) with variational equations",

@@ -11,6 +11,7 @@ import hashlib
 import json
 import math
 import os
+import re
 import tomllib
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -23,7 +24,7 @@ from .families import FAMILIES, family_parameters
 from .dynamics import System
 from .indicators import INDICATORS, IndicatorOptions
 from .integrator import RTOL_MIN
-from .potentials import POTENTIAL_NAMES, PROFILES, make_potential
+from .potentials import KINDS, PAIR_NAMES, TRIPLET_NAMES, make_potential, parameter_defaults
 from .tori import OBSERVABLES, Thresholds
 
 INT64_MAX = 2 ** 63 - 1
@@ -63,9 +64,15 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "bodies": Key("int", 3, "number of bodies N", low=3),
         "dim": Key("int", 2, "dimension of space", choices=(2, 3)),
         "masses": Key("floats", None, "masses, one per body (default all 1)", "mass", above=0),
-        "potential": Key("str", "perimetric_power", "triplet potential <measure>_<profile>",
-                         choices=POTENTIAL_NAMES),
-        "params": Key("table", {}, "potential parameters, e.g. {coupling = 1, exponent = 2}"),
+        "potential": Key("str", "perimetric_power", "triplet potential <measure>_<profile> "
+                                                    "or axilrod_teller"),
+        "params": Key("table", {}, "potential parameters, e.g. {coupling = 1, exponent = 2}; "
+                                   "any may be a grid axis named <potential>_<parameter>"),
+        "interactions": Key("terms", None, "the potential as a sum of terms, instead of "
+                                           "potential/params: [{kind = \"pair\" or "
+                                           "\"triplet\", potential = NAME, params = {...}}, "
+                                           "...]; every parameter is given, any may be a grid "
+                                           "axis named <potential>_<parameter>"),
     },
     "initial": {
         "family": Key("str", None, "initial-condition family", choices=tuple(FAMILIES)),
@@ -162,8 +169,13 @@ def markdown_tables() -> str:
 
 @dataclass(frozen=True)
 class Axis:
+    """A grid axis: an [initial] parameter, or (term >= 0) parameter `param` of term
+    number `term` of the system."""
+
     name: str
     values: np.ndarray
+    term: int = -1
+    param: str = ""
 
 
 @dataclass(frozen=True, eq=False)
@@ -199,15 +211,19 @@ class Config:
     def sha256(self) -> str:
         return hashlib.sha256(self.text.encode()).hexdigest()
 
-    def system(self) -> System:
-        return build_system(self.tables["system"])
+    def system(self, index: int = 0) -> System:
+        """The System of flat cell `index` (the same for every cell unless a parameter of
+        an interaction term is a grid axis)."""
+        return build_system(self.tables["system"], self.axis_values(index, terms=True))
 
     def cell_parameters(self, index: int) -> dict:
         """Family parameters (and target energy) of flat cell `index` (C order)."""
-        params = dict(self.fixed)
-        for axis, i in zip(self.axes, np.unravel_index(index, self.shape) if self.axes else ()):
-            params[axis.name] = float(axis.values[i])
-        return params
+        return {**self.fixed, **self.axis_values(index, terms=False)}
+
+    def axis_values(self, index: int, terms: bool) -> dict:
+        at = np.unravel_index(index, self.shape) if self.axes else ()
+        return {a.name: float(a.values[i]) for a, i in zip(self.axes, at)
+                if (a.term >= 0) == terms}
 
     def result_key(self) -> str:
         """Hash of everything that determines the cells' results -- the result tables, the
@@ -229,11 +245,36 @@ class Config:
         return h.hexdigest()[:20]
 
 
-def build_system(s: dict) -> System:
-    """The System of a validated [system] table."""
+def system_terms(s: dict) -> list[tuple[str, str, dict]]:
+    """(kind, potential, params as written) of each term of a [system] table."""
+    if s["interactions"] is None:
+        return [("triplet", s["potential"], s["params"])]
+    return [(t["kind"], t["potential"], t.get("params", {})) for t in s["interactions"]]
+
+
+def term_axis_names(s: dict) -> list[dict]:
+    """Per term, the grid-axis name of each of its parameters: <potential>_<parameter>,
+    or <potential>_<k>_<parameter> (k = 1, 2, ...) when the potential occurs twice."""
+    terms = system_terms(s)
+    names = [name for _, name, _ in terms]
+    seen: dict[str, int] = {}
+    out = []
+    for kind, name, params in terms:
+        seen[name] = seen.get(name, 0) + 1
+        label = name if names.count(name) == 1 else f"{name}_{seen[name]}"
+        out.append({key: f"{label}_{key}" for key in parameter_defaults(name, kind)})
+    return out
+
+
+def build_system(s: dict, at: dict | None = None) -> System:
+    """The System of a validated [system] table; `at` gives the values of parameters that
+    are grid axes (by axis name)."""
     masses = s["masses"] if s["masses"] is not None else [1.0] * s["bodies"]
-    return System(np.array(masses, dtype=float), s["dim"],
-                  make_potential(s["potential"], s["params"]))
+    terms = []
+    for (kind, name, params), axis_names in zip(system_terms(s), term_axis_names(s)):
+        values = {k: (at or {}).get(axis_names[k], v) for k, v in params.items()}
+        terms.append(make_potential(name, values, kind))
+    return System(np.array(masses, dtype=float), s["dim"], tuple(terms))
 
 
 def indicator_options(i: dict) -> IndicatorOptions:
@@ -491,8 +532,14 @@ def validate(raw: dict, text: str, where: str = "<config>", check_output: bool =
     _validate_names(tables)
     check_memory(tables, math.prod(_axis_size(v) for v in initial_raw.values()))
 
-    system = _validate_system(tables["system"])
+    term_axes = _validate_terms(tables["system"], raw.get("system", {}))
+    system = _validate_system(tables["system"], term_axes)
     axes, fixed = _validate_initial(dict(initial_raw), tables["initial"], system)
+    clash = {a.name for a in axes} & {a.name for a in term_axes}
+    if clash:
+        raise ConfigError(f"[initial].{sorted(clash)[0]}", "has the name of a grid axis of "
+                                                          "an interaction term")
+    axes = term_axes + axes
     _validate_cross(tables, system)
     config = Config(tables=tables, axes=tuple(axes), fixed=fixed, text=text, source=where)
     if check_output:
@@ -581,20 +628,91 @@ def _bytes(x: float) -> str:
         x /= 1024
 
 
-def _validate_system(s: dict) -> System:
+def _validate_terms(s: dict, given: dict) -> list[Axis]:
+    """Check the interaction terms (the potential/params shorthand, or interactions) and
+    return the grid axes among their parameters."""
+    if s["interactions"] is not None:
+        both = sorted({"potential", "params"} & set(given))
+        if both:
+            raise ConfigError(f"[system].{both[0]}", "give either potential/params (one "
+                                                    "triplet term) or interactions, not both")
+        if not isinstance(s["interactions"], list) or not s["interactions"]:
+            raise ConfigError("[system].interactions", "expected a list of tables like "
+                              "{kind = \"pair\", potential = \"lennard_jones\", params = "
+                              "{epsilon = 1.0, sigma = 1.0}}")
+    axes = []
+    names = None
+    for i, entry in enumerate(s["interactions"] or [None]):
+        if entry is None:
+            where, kind, name, params = "[system.params]", "triplet", s["potential"], s["params"]
+        else:
+            where = f"[system].interactions[{i}]"
+            if not isinstance(entry, dict):
+                raise ConfigError(where, f"expected a table {{kind, potential, params}}, got "
+                                         f"{entry!r}")
+            extra = sorted(set(entry) - {"kind", "potential", "params"})
+            if extra:
+                raise ConfigError(f"{where}.{extra[0]}", "unknown key" + _suggest(
+                    extra[0], ["kind", "potential", "params"]) + "; a term has kind, "
+                    "potential and params")
+            for key in ("kind", "potential"):
+                if not isinstance(entry.get(key), str):
+                    raise ConfigError(f"{where}.{key}", "is required (a string): "
+                                      + ("\"pair\" or \"triplet\"" if key == "kind"
+                                         else "the potential's name"))
+            kind, name, params = entry["kind"], entry["potential"], entry.get("params", {})
+            if kind not in KINDS:
+                raise ConfigError(f"{where}.kind", f"{kind!r} is not one of "
+                                  f"{', '.join(map(repr, KINDS))}" + _suggest(kind, KINDS))
+            if not isinstance(params, dict):
+                raise ConfigError(f"{where}.params", f"expected a table, got {params!r}")
+            where += ".params"
+        label = "[system].potential" if entry is None else f"[system].interactions[{i}].potential"
+        if entry is None and name in PAIR_NAMES:
+            raise ConfigError(label, f"{name!r} is a pair potential; potential takes one "
+                                     f"triplet term. Write interactions = [{{kind = \"pair\", "
+                                     f"potential = \"{name}\", params = {{...}}}}]")
+        try:
+            allowed = parameter_defaults(name, kind)
+        except ValueError as exc:
+            same_kind = PAIR_NAMES if kind == "pair" else TRIPLET_NAMES
+            raise ConfigError(label, str(exc) + _suggest(name, same_kind)) from None
+        for key in params:
+            if key not in allowed:
+                raise ConfigError(f"{where}.{key}", f"not a parameter of {name}"
+                                  + _suggest(key, allowed) + f"; it takes {', '.join(allowed)}")
+        if entry is not None:
+            missing = [k for k in allowed if k not in params]
+            if missing:
+                raise ConfigError(f"{where}.{missing[0]}", f"is missing: a term in "
+                                  f"interactions gives every parameter of {name} "
+                                  f"({', '.join(allowed)})")
+        names = names or term_axis_names(s)
+        values = {}
+        for key, value in params.items():
+            grid = _axis(f"{where}.{key}", value)
+            values[key] = [float(value)] if grid is None else grid.tolist()
+            if grid is not None:
+                axes.append(Axis(names[i][key], grid, term=i, param=key))
+        # every value of every axis must make a valid term (the checks are per parameter)
+        first = {k: v[0] for k, v in values.items()}
+        for key, options in [(None, [None])] + list(values.items()):
+            for v in options:
+                try:
+                    make_potential(name, {**first, key: v} if key else first, kind)
+                except ValueError as exc:
+                    bad = re.search(r"parameter '(\w+)'", str(exc))
+                    at = f" (at the grid value {v:g})" if key and len(options) > 1 else ""
+                    raise ConfigError(f"{where}.{bad.group(1)}" if bad else where,
+                                      str(exc) + at) from None
+    return axes
+
+
+def _validate_system(s: dict, term_axes: list[Axis]) -> System:
     if s["masses"] is not None and len(s["masses"]) != s["bodies"]:
         raise ConfigError("[system].masses", f"needs {s['bodies']} values (one per body), "
                                             f"got {len(s['masses'])}")
-    measure, _, profile = s["potential"].partition("_")
-    allowed = PROFILES[profile][2]
-    for key, value in s["params"].items():
-        if key not in allowed:
-            raise ConfigError(f"[system.params].{key}", f"not a parameter of {s['potential']}"
-                              + _suggest(key, allowed) + f"; it takes {', '.join(allowed)}")
-    try:
-        return build_system(s)
-    except ValueError as exc:
-        raise ConfigError("[system.params]", str(exc)) from None
+    return build_system(s, {a.name: float(a.values[0]) for a in term_axes})
 
 
 def _validate_initial(given: dict, body: dict, system: System):
@@ -608,9 +726,10 @@ def _validate_initial(given: dict, body: dict, system: System):
         raise ConfigError(f"[initial].{extra[0]}", f"not a parameter of family {family!r}"
                           + _suggest(extra[0], list(defaults) + list(own))
                           + f"; it takes {', '.join(defaults)}")
-    if system.n_bodies != 3:
+    if system.n_bodies != 3 and not FAMILIES[family].any_n:
         raise ConfigError("[initial].family", f"{family!r} starts three bodies; [system].bodies "
-                                              f"is {system.n_bodies}")
+                                              f"is {system.n_bodies} (explicit, equilibrium "
+                                              "and microcanonical start any number)")
     axes, fixed = [], {}
     for key, value in given.items():
         if key == "family":
@@ -619,11 +738,14 @@ def _validate_initial(given: dict, body: dict, system: System):
         default = defaults.get(key)
         if key != "energy" and not isinstance(default, (int, float)):
             # vector parameters: a list of numbers of the default's shape, never an axis
+            shape = np.asarray(default).tolist()
+            if default is None:      # positions, velocities: one row per body
+                default = np.zeros((system.n_bodies, system.dim))
+                shape = f"{system.n_bodies} rows (one per body) of {system.dim} numbers"
             arr = np.asarray(value, dtype=object)
             if np.shape(arr) != np.shape(default) or not all(
                     isinstance(v, (int, float)) and not isinstance(v, bool)
                     and math.isfinite(v) for v in np.ravel(arr)):
-                shape = np.asarray(default).tolist()
                 raise ConfigError(where, f"expected finite numbers shaped like {shape}, got "
                                          f"{value!r}")
             fixed[key] = np.asarray(value, dtype=float)

@@ -105,7 +105,18 @@ def reduced_sides(system: System, sigma, eta, phi):
 
 
 def reduced_potential(system: System, sigma, eta, phi):
-    """U(sigma, eta, phi): P = a + b + c, or |A| = sigma eta |sin phi| / 2."""
+    """U(sigma, eta, phi): for the paper's systems through P = a + b + c or
+    |A| = sigma eta |sin phi| / 2; for any other sum of terms (all are invariant under
+    rotations and translations) the potential of the triangle of that shape."""
+    if not system.is_paper_kind:
+        m = JacobiMasses.of(system)
+        sigma, eta, phi = np.broadcast_arrays(*(np.asarray(v, dtype=float)
+                                                for v in (sigma, eta, phi)))
+        s = np.stack([sigma, np.zeros_like(sigma)], axis=-1)
+        h = np.stack([eta * np.cos(phi), eta * np.sin(phi)], axis=-1)
+        q = np.concatenate([-m.m2 / m.m12 * s - m.m3 / m.mT * h,
+                            m.m1 / m.m12 * s - m.m3 / m.mT * h, m.m12 / m.mT * h], axis=-1)
+        return system.potential_energy(np.concatenate([q, np.zeros_like(q)], axis=-1))
     pot = system.potential
     if pot.measure == PERIMETER:
         x = sum(reduced_sides(system, sigma, eta, phi))

@@ -10,19 +10,23 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba.extending import overload
 
-from .potentials import (PERIMETER, Potential, areal_forces, kernel, make_potential,
-                         perimetric_forces, profile, triplet_measure)
+from .potentials import (AREA, DISTANCE, NONE, PERIMETER, TRIANGLE, Potential, areal_forces,
+                         atm_energy, atm_forces, kernel, make_potential, norm, pair_forces,
+                         perimetric_forces, profile, sub, triplet_measure, vec)
 
 
 @dataclass(frozen=True, eq=False)
 class System:
-    """N >= 3 bodies of positive masses in d = 2 or 3 dimensions, interacting through a
-    triplet potential summed over all triangles i < j < k."""
+    """N >= 3 bodies of positive masses in d = 2 or 3 dimensions, whose potential is a sum
+    of terms (`Potential`s, or one of them): triplet potentials summed over all triangles
+    i < j < k, pair potentials over all pairs i < j."""
 
     masses: np.ndarray
     dim: int = 2
-    potential: Potential = field(default_factory=lambda: make_potential("perimetric_power"))
+    terms: tuple[Potential, ...] = field(
+        default_factory=lambda: (make_potential("perimetric_power"),))
 
     def __post_init__(self):
         m = np.ascontiguousarray(self.masses, dtype=np.float64)
@@ -32,12 +36,34 @@ class System:
             raise ValueError("masses must be finite and > 0")
         if self.dim not in (2, 3):
             raise ValueError(f"dim must be 2 or 3, got {self.dim!r}")
+        terms = (self.terms,) if isinstance(self.terms, Potential) else tuple(self.terms)
+        if not terms or not all(isinstance(t, Potential) for t in terms):
+            raise ValueError("a system's terms are one or more Potentials (make_potential)")
         m.setflags(write=False)
         object.__setattr__(self, "masses", m)
+        object.__setattr__(self, "terms", terms)
+        object.__setattr__(self, "_par", _encode(terms))
 
     @classmethod
     def create(cls, masses=(1.0, 1.0, 1.0), dim=2, potential="perimetric_power", **params):
         return cls(np.asarray(masses, dtype=np.float64), dim, make_potential(potential, params))
+
+    @property
+    def is_paper_kind(self) -> bool:
+        """One perimetric or areal triplet term, as in the paper: its closed forms apply."""
+        return len(self.terms) == 1 and self.terms[0].measure in (PERIMETER, AREA)
+
+    @property
+    def potential(self) -> Potential:
+        """The system's one perimetric or areal triplet term, for the features that are
+        built on the paper's closed forms (e.g. U'(P) of a rotating solution)."""
+        if not self.is_paper_kind:
+            raise ValueError("this needs a system of one perimetric or areal triplet "
+                             "potential; the system is " + self.describe())
+        return self.terms[0]
+
+    def describe(self) -> str:
+        return " + ".join(t.describe() for t in self.terms)
 
     @property
     def n_bodies(self) -> int:
@@ -50,9 +76,13 @@ class System:
 
     @property
     def kernel_args(self):
-        """The arguments every compiled kernel takes to describe the system."""
-        pot = self.potential
-        return self.masses, self.dim, pot.measure, pot.profile, pot.par
+        """The arguments every compiled kernel takes to describe the system: masses, d, the
+        measure and profile codes of the leading perimetric or areal term (NONE if there is
+        none) and `par` (see _encode). Fresh writable arrays: a read-only array is another
+        numba type, which would compile every kernel a second time."""
+        lead = self.terms[0]
+        codes = (lead.measure, lead.profile) if lead.measure in (PERIMETER, AREA) else (NONE, 0)
+        return self.masses.copy(), self.dim, *codes, self._par.copy()
 
     def state(self, positions, momenta) -> np.ndarray:
         """Flat state from positions and momenta of shape (N, d)."""
@@ -76,8 +106,8 @@ class System:
         """Sum over triplets of U, for states (..., n)."""
         q, _ = self.split(y)
         flat = np.ascontiguousarray(q.reshape(-1, self.n // 2))
-        pot = self.potential
-        u = _potential_energies(flat, self.n_bodies, self.dim, pot.measure, pot.profile, pot.par)
+        _, d, measure, prof, par = self.kernel_args
+        u = _potential_energies(flat, self.n_bodies, d, measure, prof, par)
         return u.reshape(q.shape[:-2])
 
     def kinetic_energy(self, y):
@@ -109,6 +139,55 @@ class System:
         return tuple(q[..., b, :] for b in triplet)
 
 
+def _encode(terms) -> np.ndarray:
+    """The kernels' `par`. A single perimetric or areal term (the paper's systems): its two
+    parameters, a 1-D array. Otherwise a 2-D array: row 0 the two parameters of the leading
+    perimetric or areal term (zeros if there is none), then one row (measure, profile, p0,
+    p1) per further term. The kernels are compiled separately for the two array types, so
+    the paper's systems run code in which the further terms do not exist."""
+    lead = terms[0] if terms[0].measure in (PERIMETER, AREA) else None
+    if lead is not None and len(terms) == 1:
+        return lead.par
+    rows = [list(lead.par) + [0.0, 0.0] if lead is not None else [0.0] * 4]
+    for term in terms[1:] if lead is not None else terms:
+        p = term.par
+        rows.append([term.measure, term.profile, p[0], p[1] if p.size > 1 else 0.0])
+    return np.array(rows, dtype=np.float64)
+
+
+def lead_params(par):
+    """Parameters of the leading perimetric or areal term (see _encode)."""
+
+
+def further_forces(y, dy, N, d, n, n_tan, par):
+    """Forces of the terms after the leading one (see _encode)."""
+
+
+def further_energy(q, N, d, par):
+    """Energy of the terms after the leading one (see _encode)."""
+
+
+# typed at compile time on par's dimension: for a 1-D par the further terms compile to
+# nothing (a call to a kernel that is never taken still cost the paper's systems 8%)
+@overload(lead_params, jit_options=dict(error_model="numpy"))
+def _lead_params(par):
+    return (lambda par: par) if par.ndim == 1 else (lambda par: par[0, :2])
+
+
+@overload(further_forces, jit_options=dict(error_model="numpy"))
+def _further_forces(y, dy, N, d, n, n_tan, par):
+    if par.ndim == 1:
+        return lambda y, dy, N, d, n, n_tan, par: None
+    return _rows_forces
+
+
+@overload(further_energy, jit_options=dict(error_model="numpy"))
+def _further_energy(q, N, d, par):
+    if par.ndim == 1:
+        return lambda q, N, d, par: 0.0
+    return _rows_energy
+
+
 @kernel
 def _potential_energies(qs, N, d, measure, prof, par):
     out = np.empty(qs.shape[0])
@@ -119,7 +198,34 @@ def _potential_energies(qs, N, d, measure, prof, par):
 
 @kernel
 def potential_energy(q, N, d, measure, prof, par):
-    """Sum over triplets i < j < k of U(P or |A|)."""
+    """Sum over the terms of U summed over triplets i < j < k or pairs i < j."""
+    total = further_energy(q, N, d, par)
+    if measure != NONE:
+        total += _triplet_energy(q, N, d, measure, prof, lead_params(par))
+    return total
+
+
+def _rows_energy(q, N, d, par):
+    total = 0.0
+    for row in range(1, par.shape[0]):
+        kind, code, p = int(par[row, 0]), int(par[row, 1]), par[row, 2:]
+        if kind == DISTANCE:
+            for i in range(N - 1):
+                for j in range(i + 1, N):
+                    total += profile(code, p, norm(sub(vec(q, j * d, d), vec(q, i * d, d))))[0]
+        elif kind == TRIANGLE:
+            for i in range(N - 2):
+                for j in range(i + 1, N - 1):
+                    for k in range(j + 1, N):
+                        total += atm_energy(vec(q, i * d, d), vec(q, j * d, d),
+                                            vec(q, k * d, d), p[0])
+        else:
+            total += _triplet_energy(q, N, d, kind, code, p)
+    return total
+
+
+@kernel
+def _triplet_energy(q, N, d, measure, prof, par):
     total = 0.0
     for i in range(N - 2):
         for j in range(i + 1, N - 1):
@@ -146,16 +252,42 @@ def rhs(t, y, dy, masses, d, measure, prof, par, n_tan):
                 dy[base + nq + c] = 0.0
     # the measure is chosen outside the triplet loop: one branch per call, not per triplet,
     # keeps the loop body small enough for the compiler (2.6x faster)
+    lead = lead_params(par)
     if measure == PERIMETER:
         for i in range(N - 2):
             for j in range(i + 1, N - 1):
                 for k in range(j + 1, N):
-                    perimetric_forces(y, dy, i, j, k, d, n, n_tan, prof, par)
-    else:
+                    perimetric_forces(y, dy, i, j, k, d, n, n_tan, prof, lead)
+    elif measure == AREA:
         for i in range(N - 2):
             for j in range(i + 1, N - 1):
                 for k in range(j + 1, N):
-                    areal_forces(y, dy, i, j, k, d, n, n_tan, prof, par)
+                    areal_forces(y, dy, i, j, k, d, n, n_tan, prof, lead)
+    further_forces(y, dy, N, d, n, n_tan, par)
+
+
+def _rows_forces(y, dy, N, d, n, n_tan, par):
+    for row in range(1, par.shape[0]):
+        kind, code, p = int(par[row, 0]), int(par[row, 1]), par[row, 2:]
+        if kind == DISTANCE:
+            for i in range(N - 1):
+                for j in range(i + 1, N):
+                    pair_forces(y, dy, i, j, d, n, n_tan, code, p)
+        elif kind == TRIANGLE:
+            for i in range(N - 2):
+                for j in range(i + 1, N - 1):
+                    for k in range(j + 1, N):
+                        atm_forces(y, dy, i, j, k, d, n, n_tan, p)
+        elif kind == PERIMETER:
+            for i in range(N - 2):
+                for j in range(i + 1, N - 1):
+                    for k in range(j + 1, N):
+                        perimetric_forces(y, dy, i, j, k, d, n, n_tan, code, p)
+        else:
+            for i in range(N - 2):
+                for j in range(i + 1, N - 1):
+                    for k in range(j + 1, N):
+                        areal_forces(y, dy, i, j, k, d, n, n_tan, code, p)
 
 
 # ---------------------------------------------------------------- triangle geometry

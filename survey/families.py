@@ -1,8 +1,10 @@
-"""Initial-condition families of the paper (three bodies in the plane), each a function of
-named parameters that a survey may turn into grid axes.
+"""Initial-condition families, each a function of named parameters that a survey may turn
+into grid axes: the paper's (three bodies in the plane) and three for any N and d
+(`explicit`, `equilibrium`, `microcanonical`).
 
-A family builds positions and velocities of shape (3, 2); `initial_state` turns them into
-the flat state of a `System` (momenta p = m v; in 3-D the plane z = 0). The paper's printed
+A three-body family builds positions and velocities of shape (3, 2) (in 3-D the plane
+z = 0), an N-body family of shape (N, d); `initial_state` turns them into the flat state of
+a `System` (momenta p = m v). The paper's printed
 numbers decide where its text has typos: in the equilateral example the printed
 dv/dt(0) = V_rot/2 (-sqrt3, 1) does not give E = 84.45577, J = 24.40192; (-sqrt3, -1) does,
 and it is the uniformly rotating velocity.
@@ -44,6 +46,17 @@ def triangle_from_sides(a: float, b: float, c: float, masses=(1.0, 1.0, 1.0)) ->
     return q - (m @ q) / m.sum()
 
 
+def _central_pull(system: System, q: np.ndarray) -> float:
+    """Magnitude of the force on body 0 towards the centre of mass (the origin) at
+    positions q (3, 2): the centripetal force of a uniformly rotating special solution,
+    for any sum of terms."""
+    from .dynamics import rhs
+    y = system.state(np.pad(q, ((0, 0), (0, system.dim - 2))), np.zeros((3, system.dim)))
+    dy = np.zeros_like(y)
+    rhs(0.0, y, dy, *system.kernel_args, 0)
+    return -float(np.dot(dy[y.size // 2:y.size // 2 + 2], q[0])) / float(np.linalg.norm(q[0]))
+
+
 def _dU(system: System, q: np.ndarray) -> float:
     """U'(x) of the (single) triplet at positions q (3, 2)."""
     u, v, w = q
@@ -79,18 +92,20 @@ def _sides(system, a, b, c, velocities, delta, delta_direction):
 def _equilateral(system, side, v_rot, delta, delta_direction):
     """Paper Fig. 5: equilateral triangle u = (side/sqrt3, 0) rotated by 2pi/3, velocities
     du/dt = V_rot (0, 1) + delta dir, dv/dt = V_rot/2 (-sqrt3, -1), dw/dt = -du/dt - dv/dt.
-    v_rot = 0 (the default) means the uniformly rotating value sqrt(side U'/m) for this
-    potential (= 6 for U = P^2/2, side 2 sqrt3): delta = 0 is the rotating equilateral
-    solution, delta = 3 the paper's regular orbit (E = 84.45577, J = 24.40192)."""
+    v_rot = 0 (the default) means the uniformly rotating value sqrt(r F/m) for this
+    potential (F the pull towards the centre, r = side/sqrt3; = 6 for U = P^2/2, side
+    2 sqrt3): delta = 0 is the rotating equilateral solution, delta = 3 the paper's regular
+    orbit (E = 84.45577, J = 24.40192)."""
     _equal_masses(system, "equilateral")
     r = side / SQ3
     q = np.array([[r, 0.0], rotation(2 * math.pi / 3) @ [r, 0.0], rotation(4 * math.pi / 3) @ [r, 0.0]])
     if v_rot == 0:
-        dU = _dU(system, q)
-        if system.potential.measure == AREA:   # |grad_u |A|| = side/2 on the altitude
-            speed2 = r * dU * side / (2.0 * system.masses[0])
-        else:                                  # |grad_u P| = sqrt3 towards the centre
-            speed2 = r * dU * SQ3 / system.masses[0]
+        if not system.is_paper_kind:
+            speed2 = r * _central_pull(system, q) / system.masses[0]
+        elif system.potential.measure == AREA:   # |grad_u |A|| = side/2 on the altitude
+            speed2 = r * _dU(system, q) * side / (2.0 * system.masses[0])
+        else:                                    # |grad_u P| = sqrt3 towards the centre
+            speed2 = r * _dU(system, q) * SQ3 / system.masses[0]
         if speed2 <= 0:
             raise ValueError("v_rot = 0 asks for the rotating speed, but this potential "
                              "does not pull the equilateral triangle inwards")
@@ -112,14 +127,18 @@ def _linear(system, half_length, velocity_u, delta, delta_direction):
 
 def _rotating_line(system, radius, angle):
     """Collinear special solution: v = 0 at the centre, u = -w at distance r, rotating
-    uniformly at omega = sqrt(2 U'(4r) / (m r)) (perimetric potentials; paper Sec. 3.3)."""
+    uniformly at omega = sqrt(F / (m r)), F the pull on u towards the centre
+    (= sqrt(2 U'(4r) / (m r)) for perimetric potentials, paper Sec. 3.3; an areal potential
+    exerts no force on a line)."""
     _equal_masses(system, "rotating_line")
-    if system.potential.measure != PERIMETER:
-        raise ValueError("family 'rotating_line' needs a perimetric potential")
+    if system.is_paper_kind and system.potential.measure != PERIMETER:
+        raise ValueError("family 'rotating_line' needs a perimetric potential (or pair "
+                         "terms): an areal potential does not act on a line")
     q = np.array([[radius, 0.0], [0.0, 0.0], [-radius, 0.0]]) @ rotation(angle).T
-    omega2 = 2.0 * _dU(system, q) / (system.masses[0] * radius)
+    omega2 = (2.0 * _dU(system, q) if system.is_paper_kind
+              else _central_pull(system, q)) / (system.masses[0] * radius)
     if omega2 <= 0:
-        raise ValueError("the rotating line needs U'(P) > 0")
+        raise ValueError("the rotating line needs a pull towards the centre (U'(P) > 0)")
     vel = math.sqrt(omega2) * np.array([[-q[0, 1], q[0, 0]], [0.0, 0.0], [q[0, 1], -q[0, 0]]])
     return q, vel
 
@@ -171,11 +190,174 @@ def _section(system, energy, angular_momentum, sigma, p_sigma, eta, p_eta, phi, 
     return q, p / system.masses[:, None]
 
 
+# ---------------------------------------------------------------- N bodies, any d
+
+def _positions(system: System, value, key: str) -> np.ndarray:
+    if value is None:
+        raise ValueError(f"{key} is required: {system.n_bodies} rows of {system.dim} numbers")
+    q = np.asarray(value, dtype=float)
+    if q.shape != (system.n_bodies, system.dim) or not np.all(np.isfinite(q)):
+        raise ValueError(f"{key} must be {system.n_bodies} rows (one per body) of "
+                         f"{system.dim} finite numbers, got shape {q.shape}")
+    dist = np.linalg.norm(q[:, None] - q[None], axis=-1)[np.triu_indices(len(q), 1)]
+    if dist.min() <= 1e-12 * max(dist.max(), 1e-300):
+        raise ValueError(f"{key}: two bodies start at the same place")
+    return q
+
+
+def _explicit(system, positions, velocities):
+    """Positions and velocities given as arrays of N rows of d numbers (any N, d)."""
+    q = _positions(system, positions, "positions")
+    v = np.zeros_like(q) if velocities is None else np.asarray(velocities, dtype=float)
+    if v.shape != q.shape or not np.all(np.isfinite(v)):
+        raise ValueError(f"velocities must be {system.n_bodies} rows of {system.dim} finite "
+                         f"numbers, got shape {v.shape}")
+    return q, v
+
+
+def forces_and_hessian(system: System, q: np.ndarray):
+    """Forces -dU/dq (N d) and the Hessian of U (N d, N d) at positions q, from the
+    right-hand side's exact tangent forces."""
+    from .dynamics import rhs
+    nq = q.size
+    y = np.concatenate([q.ravel(), np.zeros(nq)])
+    tangents = np.concatenate([np.eye(nq), np.zeros((nq, nq))], axis=1)
+    state = np.concatenate([y, tangents.ravel()])
+    out = np.zeros_like(state)
+    rhs(0.0, state, out, *system.kernel_args, nq)
+    blocks = out[2 * nq:].reshape(nq, 2 * nq)
+    return out[nq:2 * nq], -0.5 * (blocks[:, nq:] + blocks[:, nq:].T)
+
+
+def _rigid_motions(q: np.ndarray) -> np.ndarray:
+    """Orthonormal rows spanning the translations and rotations of positions q (N, d)."""
+    N, d = q.shape
+    r = np.pad(q - q.mean(axis=0), ((0, 0), (0, 3 - d)))
+    rows = [np.tile(np.eye(d)[k], N) for k in range(d)]
+    for axis in ([2] if d == 2 else [0, 1, 2]):
+        rows.append(np.cross(np.eye(3)[axis], r)[:, :d].ravel())
+    u, sv, _ = np.linalg.svd(np.array(rows).T, full_matrices=False)
+    return u[:, sv > 1e-10 * sv.max()].T
+
+
+def equilibrium_positions(system: System, start, max_iter: int = 100) -> np.ndarray:
+    """The equilibrium reached from `start` (N, d) by descending the potential: Newton
+    steps on |Hessian| (a descent direction even at saddles) in the space orthogonal to
+    translations and rotations, backtracking while U rises above its rounding level, until
+    the steps are at rounding level. A start with a symmetry keeps it (the linear trimer
+    stays linear). Centre of mass at the origin."""
+    q = np.array(start, dtype=float)
+    state = lambda x: np.concatenate([x.ravel(), np.zeros(x.size)])
+    energy = lambda x: float(system.potential_energy(state(x)))
+    u = energy(q)
+    for _ in range(max_iter):
+        if not np.isfinite(u):
+            raise ValueError("the potential is not finite along the descent from positions")
+        force, hess = forces_and_hessian(system, q)
+        R = _rigid_motions(q)
+        P = np.eye(q.size) - R.T @ R
+        w, V = np.linalg.eigh(P @ hess @ P)
+        keep = np.abs(w) > 1e-10 * np.abs(w).max()
+        step = (V[:, keep] @ ((V[:, keep].T @ (P @ force)) / np.abs(w[keep]))).reshape(q.shape)
+        extent = np.abs(q - q.mean(axis=0)).max()
+        if np.abs(step).max() <= 1e-13 * extent:
+            break
+        slack = 1e-13 * (abs(u) + 1.0)     # energies closer than this are equal
+        for _ in range(60):
+            trial = q + step
+            ut = energy(trial)
+            if ut <= u + slack:
+                break
+            step = 0.5 * step
+        else:
+            break
+        q, u = trial, ut
+    else:
+        raise ValueError(f"no equilibrium within {max_iter} Newton steps from positions")
+    return q - (system.masses @ q) / system.masses.sum()
+
+
+def _random_motion(system: System, q: np.ndarray, rng, angular_momentum: float):
+    """Seeded Gaussian velocities with zero total momentum and zero angular momentum about
+    the centre of mass, and the rigid rotation that carries `angular_momentum` (about z):
+    (internal, rotation) velocities."""
+    m = system.masses[:, None]
+    r = q - (system.masses @ q) / system.masses.sum()
+    v = rng.normal(size=q.shape)
+    v -= (system.masses @ v) / system.masses.sum()
+    # remove the rigid rotations: L = I omega, with the inertia tensor of the body
+    r3 = np.pad(r, ((0, 0), (0, 3 - system.dim)))
+    v3 = np.pad(v, ((0, 0), (0, 3 - system.dim)))
+    inertia = np.einsum("i,ij,ik->jk", system.masses, r3, r3)
+    inertia = np.trace(inertia) * np.eye(3) - inertia
+    L = np.sum(m * np.cross(r3, v3), axis=0)
+    axes = [2] if system.dim == 2 else [0, 1, 2]
+    omega = np.zeros(3)
+    omega[axes] = np.linalg.lstsq(inertia[np.ix_(axes, axes)], L[axes], rcond=1e-12)[0]
+    v = v - np.cross(omega, r3)[:, :system.dim]
+    spin = np.zeros(3)
+    if angular_momentum:     # the rigid rotation omega with I omega = (0, 0, J)
+        sub = inertia[np.ix_(axes, axes)]
+        if not np.linalg.matrix_rank(sub) == len(axes):
+            raise ValueError("a collinear configuration cannot carry this angular momentum")
+        spin[axes] = np.linalg.solve(sub, np.array([0.0, 0.0, angular_momentum])[axes])
+    return v, np.cross(spin, r3)[:, :system.dim]
+
+
+def _shell(system, q, internal, rotation, energy):
+    """Velocities rotation + s internal with K + U = energy (s >= 0), or Inaccessible."""
+    m = system.masses[:, None]
+    u = float(system.potential_energy(np.concatenate([q.ravel(), np.zeros(q.size)])))
+    k_rot = 0.5 * np.sum(m * rotation ** 2)
+    k_int = 0.5 * np.sum(m * internal ** 2)
+    room = energy - u - k_rot
+    if not room >= 0:
+        raise Inaccessible(f"U(q0) + J^2/2I = {u + k_rot:.6g} exceeds the target energy "
+                           f"{energy:.6g}")
+    return rotation + math.sqrt(room / k_int) * internal
+
+
+def _equilibrium(system, positions, displacement, speed, seed):
+    """The equilibrium reached from `positions` (N rows of d numbers) by minimising the
+    potential (e.g. the equilateral or linear trimer, the LJ7 pentagonal bipyramid), each
+    body then moved by `displacement` times a seeded Gaussian, with seeded random velocities
+    of rms `speed` at zero momentum and angular momentum. With a target energy the velocities
+    are rescaled to it (any speed > 0 then does). displacement = speed = 0 is the
+    equilibrium at rest."""
+    q = equilibrium_positions(system, _positions(system, positions, "positions"))
+    rng = np.random.default_rng(int(seed))
+    q = q + displacement * rng.normal(size=q.shape)
+    v, _ = _random_motion(system, q, rng, 0.0)
+    rms = math.sqrt(np.mean(np.sum(v * v, axis=1)))
+    return q, v * (speed / rms if rms > 0 else 0.0)
+
+
+def _microcanonical(system, positions, displacement, angular_momentum, seed, energy):
+    """A seeded random start on the energy shell H = energy at zero total momentum and
+    angular momentum J (about z): the bodies at `positions` each moved by `displacement`
+    times a Gaussian (redrawn, up to 100 times, until U + J^2/2I < energy), Gaussian
+    velocities with no momentum or rigid rotation, scaled to the kinetic energy left over
+    after the rotation that carries J."""
+    q0 = _positions(system, positions, "positions")
+    rng = np.random.default_rng(int(seed))
+    for _ in range(100):
+        q = q0 + displacement * rng.normal(size=q0.shape)
+        internal, rotation = _random_motion(system, q, rng, angular_momentum)
+        try:
+            return q, _shell(system, q, internal, rotation, energy)
+        except Inaccessible as exc:
+            last = exc
+        if displacement == 0:
+            break
+    raise last
+
+
 @dataclass(frozen=True)
 class Family:
     name: str
     build: Callable
     defaults: dict
+    any_n: bool = False     # builds (N, d) arrays for any system, not three bodies in a plane
 
     @property
     def doc(self) -> str:
@@ -196,6 +378,12 @@ FAMILIES = {f.name: f for f in [
     Family("section", _section, dict(energy=84.45577136594005, angular_momentum=24.401923788646684,
                                      sigma=2 * SQ3, p_sigma=0.0, eta=3.0, p_eta=0.0,
                                      phi=math.pi / 2, theta=0.0, direction=1)),
+    Family("explicit", _explicit, dict(positions=None, velocities=None), any_n=True),
+    Family("equilibrium", _equilibrium, dict(positions=None, displacement=0.0, speed=1.0,
+                                             seed=0), any_n=True),
+    Family("microcanonical", _microcanonical, dict(positions=None, displacement=0.05,
+                                                   angular_momentum=0.0, seed=0,
+                                                   energy=None), any_n=True),
 ]}
 
 
@@ -217,14 +405,17 @@ def initial_state(system: System, family: str, energy=None, **params) -> np.ndar
     if unknown:
         raise ValueError(f"family {family!r} has no parameter {unknown[0]!r}; "
                          f"its parameters are {', '.join(defaults)}")
-    if system.n_bodies != 3:
+    spec = FAMILIES[family]
+    if system.n_bodies != 3 and not spec.any_n:
         raise ValueError(f"family {family!r} is a three-body family; the system has "
                          f"{system.n_bodies} bodies")
     own_energy = "energy" in defaults
     if energy is not None and own_energy:
         params["energy"] = energy
-    q, vel = FAMILIES[family].build(system, **{**defaults, **params})
-    if system.dim == 3:
+    if own_energy and {**defaults, **params}["energy"] is None:
+        raise ValueError(f"family {family!r} needs a target energy")
+    q, vel = spec.build(system, **{**defaults, **params})
+    if system.dim == 3 and not spec.any_n:
         q, vel = (np.pad(x, ((0, 0), (0, 1))) for x in (q, vel))
     y = system.state(q, vel * system.masses[:, None])
     if energy is not None and not own_energy:

@@ -95,8 +95,7 @@ def _constraints(system: System, y0, project_flow: bool) -> np.ndarray:
         rows += [shift.ravel(), boost.ravel()]
     if project_flow:
         f = np.zeros(n)
-        m, dd, meas, prof, par = system.kernel_args
-        rhs(0.0, np.ascontiguousarray(y0, dtype=float), f, m.copy(), dd, meas, prof, par, 0)
+        rhs(0.0, np.ascontiguousarray(y0, dtype=float), f, *system.kernel_args, 0)
         rows += [f, np.concatenate([-f[n // 2:], f[:n // 2]])]
     q, r = np.linalg.qr(np.array(rows).T)
     return q[:, np.abs(np.diag(r)) > 1e-12 * np.abs(r).max()].T

@@ -1008,9 +1008,7 @@ def integrate(system: System, y0, t_span, *, tangents=None, megno=False, rtol=1e
                              "integration")
     n_eval = state.size if sample_tangents else n
     n_err = n * (1 + n_tan) if control_tangents else n
-    m, d = system.masses.copy(), system.dim
-    pot = system.potential
-    res = dop853(state, t0, t1, m, d, pot.measure, pot.profile, pot.par, n_tan, megno,
+    res = dop853(state, t0, t1, *system.kernel_args, n_tan, megno,
                  float(rtol), float(atol), n_err, int(max_steps), float(first_step),
                  float(max_step), float(min_step), encode_events(events, system),
                  int(max_events), int(event_substeps), t_eval, n_eval, float(renorm_interval),

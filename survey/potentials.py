@@ -1,14 +1,17 @@
-"""Triangle potentials: energy, forces and tangent (Hessian-vector) forces of one triplet.
+"""Interaction terms: energy, forces and tangent (Hessian-vector) forces of one triplet or
+one pair.
 
-A triplet potential is U(x) of one shape measure x of the triangle: its perimeter P
-("perimetric") or the magnitude of its area |A| ("areal"). A *profile* gives U, U' and U''
-as functions of x. The kernels take integer codes and a parameter array, so one compiled
-(and cached) kernel serves every choice made at run time: numba cannot cache kernels that
-take other jitted functions as arguments.
+A perimetric or areal triplet potential is U(x) of one shape measure x of the triangle: its
+perimeter P ("perimetric") or the magnitude of its area |A| ("areal"). The Axilrod-Teller-
+Muto triple dipole depends on the whole triangle. A pair potential is U(r) of a pair's
+distance. A *profile* gives U, U' and U'' as functions of x or r. The kernels take integer
+codes and a parameter array, so one compiled (and cached) kernel serves every choice made at
+run time: numba cannot cache kernels that take other jitted functions as arguments.
 
-Forces use the paper's vector forms (bisector forces for P, altitude forces for |A|, with
-the area vector in 3-D), not chain rules through side lengths, which are ill-conditioned
-near collinear triangles. 2-D vectors are handled as 3-vectors with z = 0.
+Forces use vector forms (bisector forces for P, altitude forces for |A|, with the area
+vector in 3-D; ATM through the side vectors' dot products), not chain rules through side
+lengths or angles, which are ill-conditioned near collinear triangles. 2-D vectors are
+handled as 3-vectors with z = 0.
 """
 from __future__ import annotations
 
@@ -26,8 +29,10 @@ kernel = njit(cache=True, error_model="numpy")
 # otherwise cost more than the arithmetic (3x on the right-hand side).
 helper = njit(cache=True, error_model="numpy", inline="always")
 
-PERIMETER, AREA = 0, 1
-POWER, YUKAWA, BARRIER = 0, 1, 2
+# what a term depends on: a triangle's perimeter or area, the whole triangle (ATM), or a
+# pair's distance; NONE marks "no perimetric or areal term" in the kernels' arguments
+NONE, PERIMETER, AREA, TRIANGLE, DISTANCE = -1, 0, 1, 2, 3
+POWER, YUKAWA, BARRIER, LENNARD_JONES = 0, 1, 2, 3
 
 MEASURES = {"perimetric": PERIMETER, "areal": AREA}
 
@@ -38,14 +43,31 @@ PROFILES = {
     "yukawa": (YUKAWA, "-coupling * exp(-gamma * {x}) / {x}", {"coupling": 1.0, "gamma": 1.0}),
     "barrier": (BARRIER, "alpha / {x} + beta * {x}**2", {"alpha": 2.0, "beta": 1.0}),
 }
+ATM = "axilrod_teller"
+ATM_FORMULA = "strength * (1 + 3 cos t_i cos t_j cos t_k) / (r_ij r_jk r_ki)**3"
+TRIPLET_NAMES = tuple(f"{m}_{p}" for m in MEASURES for p in PROFILES) + (ATM,)
+POTENTIAL_NAMES = TRIPLET_NAMES      # the [system].potential shorthand: one triplet term
 
-POTENTIAL_NAMES = tuple(f"{m}_{p}" for m in MEASURES for p in PROFILES)
+# pair potential name -> (profile code, formula, ordered parameters with defaults); the
+# repulsive pair Yukawa is the YUKAWA profile with its coupling negated
+PAIR_PROFILES = {
+    "lennard_jones": (LENNARD_JONES, "4 epsilon ((sigma / r)**12 - (sigma / r)**6)",
+                      {"epsilon": 1.0, "sigma": 1.0}),
+    "yukawa": (YUKAWA, "coupling * exp(-gamma * r) / r  (repulsive for coupling > 0)",
+               {"coupling": 1.0, "gamma": 1.0}),
+    "power": (POWER, "coupling * r**exponent / exponent  (coupling * log(r) if exponent == 0)",
+              {"coupling": 1.0, "exponent": -1.0}),
+}
+PAIR_NAMES = tuple(PAIR_PROFILES)
+KINDS = ("pair", "triplet")
 
 
 @dataclass(frozen=True)
 class Potential:
-    """A triplet potential chosen by name, e.g. ``perimetric_power`` (the paper's P**2/2
-    with the defaults) or ``areal_barrier`` (the paper's 2/|A| + |A|**2)."""
+    """One term of a system's potential, chosen by kind and name: a triplet potential summed
+    over all triangles, e.g. ``perimetric_power`` (the paper's P**2/2 with the defaults),
+    ``areal_barrier`` (the paper's 2/|A| + |A|**2) or ``axilrod_teller``, or a pair
+    potential summed over all pairs, e.g. ``lennard_jones``."""
 
     name: str
     measure: int
@@ -54,38 +76,79 @@ class Potential:
     param_names: tuple[str, ...]
 
     @property
+    def kind(self) -> str:
+        return "pair" if self.measure == DISTANCE else "triplet"
+
+    @property
     def par(self) -> np.ndarray:
-        return np.array(self.params, dtype=np.float64)
+        """The parameters as the kernels read them (a pair Yukawa's coupling negated)."""
+        p = np.array(self.params, dtype=np.float64)
+        if self.kind == "pair" and self.profile == YUKAWA:
+            p[0] = -p[0]
+        return p
 
     def describe(self) -> str:
-        x = "P" if self.measure == PERIMETER else "|A|"
-        formula = PROFILES[self.name.split("_", 1)[1]][1].format(x=x)
+        if self.kind == "pair":
+            formula = PAIR_PROFILES[self.name][1]
+        elif self.measure == TRIANGLE:
+            formula = ATM_FORMULA
+        else:
+            x = "P" if self.measure == PERIMETER else "|A|"
+            formula = PROFILES[self.name.split("_", 1)[1]][1].format(x=x)
         values = ", ".join(f"{k}={v:g}" for k, v in zip(self.param_names, self.params))
-        return f"{self.name}: U = {formula} with {values}"
+        return f"{self.name} ({self.kind}): U = {formula} with {values}"
 
 
-def make_potential(name: str, params: dict | None = None) -> Potential:
-    """Resolve a potential name and its parameters; unknown names or keys raise ValueError."""
+def parameter_defaults(name: str, kind: str = "triplet") -> dict:
+    """The parameters of a potential with their defaults; unknown names raise ValueError,
+    with a hint when the name is a potential of the other kind."""
+    if kind not in KINDS:
+        raise ValueError(f"unknown interaction kind {kind!r}; choose one of {', '.join(KINDS)}")
+    names, other, other_kind = ((PAIR_NAMES, TRIPLET_NAMES, "triplet") if kind == "pair"
+                                else (TRIPLET_NAMES, PAIR_NAMES, "pair"))
+    if name not in names:
+        hint = (f" ({name!r} is a {other_kind} potential: give it kind = \"{other_kind}\")"
+                if name in other else "")
+        raise ValueError(f"unknown {kind} potential {name!r}; choose one of "
+                         f"{', '.join(names)}{hint}")
+    if kind == "pair":
+        return dict(PAIR_PROFILES[name][2])
+    if name == ATM:
+        return {"strength": 1.0}
+    return dict(PROFILES[name.split("_", 1)[1]][2])
+
+
+def make_potential(name: str, params: dict | None = None, kind: str = "triplet") -> Potential:
+    """Resolve a potential of a kind ("triplet" or "pair"), its name and its parameters;
+    anything unknown, missing or out of range raises ValueError naming it."""
     params = dict(params or {})
-    if name not in POTENTIAL_NAMES:
-        raise ValueError(f"unknown potential {name!r}; choose one of {', '.join(POTENTIAL_NAMES)}")
-    measure, profile = name.split("_", 1)
-    code, _, defaults = PROFILES[profile]
+    defaults = parameter_defaults(name, kind)
     unknown = sorted(set(params) - set(defaults))
     if unknown:
         raise ValueError(f"potential {name!r} has no parameter {unknown[0]!r}; "
                          f"its parameters are {', '.join(defaults)}")
-    values = []
+    values = {}
     for key, default in defaults.items():
         value = params.get(key, default)
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
             raise ValueError(f"potential parameter {key!r} must be a finite number, got {value!r}")
-        values.append(float(value))
-    if profile == "yukawa" and values[1] < 0:
+        values[key] = float(value)
+    if values.get("gamma", 0.0) < 0:
         raise ValueError("potential parameter 'gamma' must be >= 0 (a screening rate)")
-    if profile in ("power", "yukawa") and values[0] == 0:
+    if values.get("coupling") == 0:      # divides by it, and means "no term"
         raise ValueError("potential parameter 'coupling' must be nonzero")
-    return Potential(name, MEASURES[measure], code, tuple(values), tuple(defaults))
+    for key, what in (("epsilon", "a well depth"), ("sigma", "a length")):
+        if key in values and not values[key] > 0:
+            raise ValueError(f"potential parameter {key!r} must be > 0 ({what}), "
+                             f"got {values[key]:g}")
+    if kind == "pair":
+        measure, code = DISTANCE, PAIR_PROFILES[name][0]
+    elif name == ATM:
+        measure, code = TRIANGLE, 0
+    else:
+        measure, profile_name = name.split("_", 1)
+        measure, code = MEASURES[measure], PROFILES[profile_name][0]
+    return Potential(name, measure, code, tuple(values.values()), tuple(defaults))
 
 
 # ---------------------------------------------------------------- 3-vector helpers
@@ -151,8 +214,12 @@ def profile(code, par, x):
         e = math.exp(-g * x)
         return (-c * e / x, c * e * (g * x + 1.0) / (x * x),
                 -c * e * (g * g * x * x + 2.0 * g * x + 2.0) / (x * x * x))
-    a, b = par[0], par[1]
-    return a / x + b * x * x, -a / (x * x) + 2.0 * b * x, 2.0 * a / (x * x * x) + 2.0 * b
+    if code == BARRIER:
+        a, b = par[0], par[1]
+        return a / x + b * x * x, -a / (x * x) + 2.0 * b * x, 2.0 * a / (x * x * x) + 2.0 * b
+    eps, r6 = par[0], (par[1] / x) ** 6     # LENNARD_JONES
+    return (4.0 * eps * (r6 * r6 - r6), 24.0 * eps * (r6 - 2.0 * r6 * r6) / x,
+            24.0 * eps * (26.0 * r6 * r6 - 7.0 * r6) / (x * x))
 
 
 # ---------------------------------------------------------------- one triplet
@@ -245,3 +312,101 @@ def areal_forces(y, dy, i, j, k, d, n, n_tan, prof, par):
         add_to(dy, off + j * d, d, b, axpy(1.0, cross(sub(dw, du), Ah), cross(swu, dAh)))
         add_to(dy, off + k * d, d, a, Gw)
         add_to(dy, off + k * d, d, b, axpy(1.0, cross(sub(du, dv), Ah), cross(suv, dAh)))
+
+
+# ---------------------------------------------------------------- the triple dipole
+
+@helper
+def _atm_h(c, s, A, B, sb, C, sc):
+    """Q^(5/2)/Z times dU/ds for one side s of the ATM triangle (see atm_forces)."""
+    return axpy(c, s, axpy(-3.0 * A * B, sb, (-3.0 * A * C * sc[0], -3.0 * A * C * sc[1],
+                                               -3.0 * A * C * sc[2])))
+
+
+@helper
+def _atm_dh(c, dc, s, r, A, dA, B, dB, sb, rb, C, dC, sc, rc):
+    """Variation of _atm_h along side variations r, rb, rc."""
+    out = axpy(dc, s, (c * r[0], c * r[1], c * r[2]))
+    out = axpy(-3.0 * (dA * B + A * dB), sb, out)
+    out = axpy(-3.0 * (dA * C + A * dC), sc, out)
+    out = axpy(-3.0 * A * B, rb, out)
+    return axpy(-3.0 * A * C, rc, out)
+
+
+@helper
+def atm_energy(u, v, w, Z):
+    """Axilrod-Teller-Muto energy of one triangle. With side vectors s1 = v - u,
+    s2 = w - v, s3 = u - w, Q = |s1|^2 |s2|^2 |s3|^2 and D = (s1.s2)(s2.s3)(s3.s1), the
+    cosines' product is -D/Q and U = Z (Q - 3 D) / Q^(5/2): polynomials in the sides, with
+    no angle or side length to lose accuracy near collinear triangles."""
+    s1, s2, s3 = sub(v, u), sub(w, v), sub(u, w)
+    Q = dot(s1, s1) * dot(s2, s2) * dot(s3, s3)
+    D = dot(s1, s2) * dot(s2, s3) * dot(s3, s1)
+    return Z * (Q - 3.0 * D) / (Q * Q * math.sqrt(Q))
+
+
+@helper
+def atm_forces(y, dy, i, j, k, d, n, n_tan, par):
+    """As perimetric_forces, for the Axilrod-Teller-Muto potential of strength par[0].
+    dU/ds1 = Z Q^(-5/2) ((15 D - 3 Q) s1 / |s1|^2 - 3 (s2.s3) ((s3.s1) s2 + (s1.s2) s3))
+    (cyclic), and the force on u is dU/ds1 - dU/ds3 (s1 = v - u, s3 = u - w)."""
+    nq = n // 2
+    Z = par[0]
+    u, v, w = vec(y, i * d, d), vec(y, j * d, d), vec(y, k * d, d)
+    s1, s2, s3 = sub(v, u), sub(w, v), sub(u, w)
+    l1, l2, l3 = dot(s1, s1), dot(s2, s2), dot(s3, s3)
+    a12, a23, a31 = dot(s1, s2), dot(s2, s3), dot(s3, s1)
+    Q = l1 * l2 * l3
+    D = a12 * a23 * a31
+    W = Z / (Q * Q * math.sqrt(Q))
+    c1, c2, c3 = (15.0 * D - 3.0 * Q) / l1, (15.0 * D - 3.0 * Q) / l2, (15.0 * D - 3.0 * Q) / l3
+    H1 = _atm_h(c1, s1, a23, a31, s2, a12, s3)
+    H2 = _atm_h(c2, s2, a31, a12, s3, a23, s1)
+    H3 = _atm_h(c3, s3, a12, a23, s1, a31, s2)
+    add_to(dy, nq + i * d, d, W, sub(H1, H3))
+    add_to(dy, nq + j * d, d, W, sub(H2, H1))
+    add_to(dy, nq + k * d, d, W, sub(H3, H2))
+    for t in range(n_tan):
+        base = n * (1 + t)
+        du, dv, dw = vec(y, base + i * d, d), vec(y, base + j * d, d), vec(y, base + k * d, d)
+        r1, r2, r3 = sub(dv, du), sub(dw, dv), sub(du, dw)
+        dl1, dl2, dl3 = 2.0 * dot(s1, r1), 2.0 * dot(s2, r2), 2.0 * dot(s3, r3)
+        da12 = dot(s1, r2) + dot(r1, s2)
+        da23 = dot(s2, r3) + dot(r2, s3)
+        da31 = dot(s3, r1) + dot(r3, s1)
+        dQ = dl1 * l2 * l3 + l1 * dl2 * l3 + l1 * l2 * dl3
+        dD = da12 * a23 * a31 + a12 * da23 * a31 + a12 * a23 * da31
+        dW = -2.5 * W * dQ / Q
+        dcc = 15.0 * dD - 3.0 * dQ
+        dH1 = _atm_dh(c1, (dcc - c1 * dl1) / l1, s1, r1, a23, da23, a31, da31, s2, r2,
+                      a12, da12, s3, r3)
+        dH2 = _atm_dh(c2, (dcc - c2 * dl2) / l2, s2, r2, a31, da31, a12, da12, s3, r3,
+                      a23, da23, s1, r1)
+        dH3 = _atm_dh(c3, (dcc - c3 * dl3) / l3, s3, r3, a12, da12, a23, da23, s1, r1,
+                      a31, da31, s2, r2)
+        off = base + nq
+        add_to(dy, off + i * d, d, dW, sub(H1, H3))
+        add_to(dy, off + i * d, d, W, sub(dH1, dH3))
+        add_to(dy, off + j * d, d, dW, sub(H2, H1))
+        add_to(dy, off + j * d, d, W, sub(dH2, dH1))
+        add_to(dy, off + k * d, d, dW, sub(H3, H2))
+        add_to(dy, off + k * d, d, W, sub(dH3, dH2))
+
+
+# ---------------------------------------------------------------- one pair
+
+@helper
+def pair_forces(y, dy, i, j, d, n, n_tan, prof, par):
+    """As perimetric_forces, for a pair potential U(r) of bodies i and j: the force on i is
+    U'(r) along the unit vector towards j, its tangent force the variation of that."""
+    nq = n // 2
+    e, L = _unit(sub(vec(y, j * d, d), vec(y, i * d, d)))
+    _, U1, U2 = profile(prof, par, L)
+    add_to(dy, nq + i * d, d, U1, e)
+    add_to(dy, nq + j * d, d, -U1, e)
+    for t in range(n_tan):
+        base = n * (1 + t)
+        r = sub(vec(y, base + j * d, d), vec(y, base + i * d, d))
+        g = _pair_tangent(e, L, r, dot(e, r), U1, U2)
+        add_to(dy, base + nq + i * d, d, 1.0, g)
+        add_to(dy, base + nq + j * d, d, -1.0, g)

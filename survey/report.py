@@ -87,10 +87,17 @@ def markdown(ds, figure_names=()) -> str:
     initial = config.get("initial", {})
     grid = ", ".join(f"{a} from {float(ds[a].min()):g} to {float(ds[a].max()):g} "
                      f"({ds.sizes[a]} values)" for a in axes) or "a single cell"
+    if "interactions" in system:
+        potential = "the sum of " + " + ".join(
+            f"{t.get('kind')} `{t.get('potential')}` "
+            + str({k: "(grid axis)" if isinstance(v, (dict, list)) else v
+                   for k, v in t.get("params", {}).items()})
+            for t in system["interactions"])
+    else:
+        potential = (f"potential `{system.get('potential', 'perimetric_power')}` "
+                     f"{system.get('params', {}) or '(defaults: U = P^2/2 for perimetric_power)'}")
     out += [f"- System: {system.get('bodies', 3)} bodies in {system.get('dim', 2)}-D, "
-            f"masses {system.get('masses', 'all 1')}, potential "
-            f"`{system.get('potential', 'perimetric_power')}` "
-            f"{system.get('params', {}) or '(defaults: U = P^2/2 for perimetric_power)'}.",
+            f"masses {system.get('masses', 'all 1')}, {potential}.",
             f"- Initial conditions: family `{initial.get('family')}`"
             + "".join(f", {k} = {v}" for k, v in initial.items() if k != "family"
                       and k not in axes) + f"; grid: {grid}; {n} cells.",

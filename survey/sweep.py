@@ -48,16 +48,20 @@ def build_starts(config: Config) -> np.ndarray:
     """Initial states of every cell (n_cells, n), NaN rows where inaccessible. A value that
     makes no start at all (a degenerate triangle) is a ConfigError naming the cell."""
     system = config.system()
+    varies = any(a.term >= 0 for a in config.axes)
     family = config.tables["initial"]["family"]
     starts = np.full((config.n_cells, system.n), np.nan)
     for index in range(config.n_cells):
         params = config.cell_parameters(index)
+        if varies:
+            system = config.system(index)
         try:
             starts[index] = initial_state(system, family, **params)
         except Inaccessible:
             continue
         except ValueError as exc:
-            at = ", ".join(f"{a.name} = {params[a.name]:g}" for a in config.axes)
+            values = {**params, **config.axis_values(index, terms=True)}
+            at = ", ".join(f"{a.name} = {values[a.name]:g}" for a in config.axes)
             raise ConfigError("[initial]" + (f" at {at}" if at else ""), str(exc)) from None
     return starts
 
@@ -75,13 +79,23 @@ class CellTask:
     section: dict | None
     tori: dict
     slots: tuple
+    term_axes: tuple = ()   # (name, values, stride in flat cell index) of the terms' axes
 
     @classmethod
     def of(cls, config: Config) -> "CellTask":
         t = config.tables
+        strides = np.cumprod((config.shape + (1,))[:0:-1])[::-1]
+        terms = tuple((a.name, tuple(a.values.tolist()), int(stride))
+                      for a, stride in zip(config.axes, strides) if a.term >= 0)
         return cls(t["system"], t["integration"], t["indicators"],
                    t["section"] if t["section_enabled"] else None, t["tori"],
-                   archive.layout(config))
+                   archive.layout(config), terms)
+
+    def term_values(self, cell: int) -> tuple:
+        """(axis name, value) of the interaction-term axes at a cell: what its System
+        depends on beyond the [system] table."""
+        return tuple((name, values[(cell // stride) % len(values)])
+                     for name, values, stride in self.term_axes)
 
     def short(self) -> "CellTask":
         """The same task with a tiny t_final: compiles (or loads) every kernel a cell uses."""
@@ -94,11 +108,15 @@ class CellTask:
 def run_cells(task: CellTask, cell_ids, starts) -> dict[str, np.ndarray]:
     """Integrate a chunk of cells (the unit of work a dask task does): one result row per
     cell in every array of the task's layout."""
-    system = build_system(task.system)
-    events = [section_event_for({"section": task.section}, system)] if task.section else []
     res = archive.empty_results(task.slots, len(cell_ids))
+    systems = {}
     for k, (cell, y0) in enumerate(zip(cell_ids, starts)):
-        archive.fill_row(res, k, compute_cell(task, system, events, int(cell), y0))
+        at = task.term_values(int(cell))
+        if at not in systems:
+            system = build_system(task.system, dict(at))
+            systems[at] = system, ([section_event_for({"section": task.section}, system)]
+                                   if task.section else [])
+        archive.fill_row(res, k, compute_cell(task, *systems[at], int(cell), y0))
     return res
 
 

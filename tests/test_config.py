@@ -34,9 +34,21 @@ BAD = [
     ("[system]\nbodies = 2", "[system].bodies: must be >= 3"),
     ("[system]\nbodies = true", "[system].bodies: expected an integer"),
     ("[system]\ndim = 4", "[system].dim: 4 is not one of 2, 3"),
-    ("[system]\npotential = 'perimetric_cubic'", "[system].potential: 'perimetric_cubic' is not one"),
+    ("[system]\npotential = 'perimetric_cubic'", "[system].potential: unknown triplet potential 'perimetric_cubic'"),
     ("[system]\nparams = {k = 2}", "[system.params].k: not a parameter of perimetric_power"),
-    ("[system]\npotential = 'perimetric_yukawa'\nparams = {gamma = -1.0}", "[system.params]: potential parameter 'gamma' must be >= 0"),
+    ("[system]\npotential = 'perimetric_yukawa'\nparams = {gamma = -1.0}", "[system.params].gamma: potential parameter 'gamma' must be >= 0"),
+    ("[system]\npotential = 'lennard_jones'", "[system].potential: 'lennard_jones' is a pair potential; potential takes one triplet term"),
+    ("[system]\npotential = 'areal_power'\ninteractions = [{kind = 'pair', potential = 'power', params = {coupling = 1.0, exponent = -1.0}}]", "[system].potential: give either potential/params (one triplet term) or interactions"),
+    ("[system]\ninteractions = [{kind = 'pairs', potential = 'lennard_jones', params = {epsilon = 1.0, sigma = 1.0}}]", "[system].interactions[0].kind: 'pairs' is not one of 'pair', 'triplet' (did you mean 'pair'?)"),
+    ("[system]\ninteractions = [{potential = 'lennard_jones', params = {epsilon = 1.0, sigma = 1.0}}]", "[system].interactions[0].kind: is required"),
+    ("[system]\ninteractions = [{kind = 'pair', potential = 'axilrod_teller', params = {strength = 1.0}}]", "[system].interactions[0].potential: unknown pair potential 'axilrod_teller'; choose one of lennard_jones, yukawa, power ('axilrod_teller' is a triplet potential: give it kind = \"triplet\")"),
+    ("[system]\ninteractions = [{kind = 'triplet', potential = 'lennard_jones', params = {epsilon = 1.0, sigma = 1.0}}]", "[system].interactions[0].potential: unknown triplet potential 'lennard_jones'"),
+    ("[system]\ninteractions = [{kind = 'pair', potential = 'lenard_jones', params = {epsilon = 1.0, sigma = 1.0}}]", "(did you mean 'lennard_jones'?)"),
+    ("[system]\ninteractions = [{kind = 'pair', potential = 'lennard_jones', params = {epsilon = 1.0}}]", "[system].interactions[0].params.sigma: is missing"),
+    ("[system]\ninteractions = [{kind = 'pair', potential = 'lennard_jones', params = {epsilon = 1.0, sigma = -2.0}}]", "[system].interactions[0].params.sigma: potential parameter 'sigma' must be > 0"),
+    ("[system]\ninteractions = [{kind = 'pair', potential = 'lennard_jones', params = {epsilon = [1.0, 0.0], sigma = 1.0}}]", "[system].interactions[0].params.epsilon: potential parameter 'epsilon' must be > 0 (a well depth), got 0 (at the grid value 0)"),
+    ("[system]\ninteractions = [{kind = 'pair', potential = 'yukawa', params = {coupling = 1.0, gama = 1.0}}]", "[system].interactions[0].params.gama: not a parameter of yukawa (did you mean 'gamma'?)"),
+    ("[system]\ninteractions = []", "[system].interactions: expected a list of tables"),
     ("[integration]\nrtol = 0.0", "[integration].rtol: must be >= 2.22e-15"),
     ("[integration]\nrtol = -1e-9", "[integration].rtol: must be >= 2.22e-15"),
     ("[integration]\nrtol = 1e-16", "double precision cannot honour"),
@@ -98,6 +110,8 @@ def merged(change: str, out: str) -> str:
         if table == "initial":
             base[table] = body
         elif isinstance(body, dict) and isinstance(base.get(table), dict):
+            if "interactions" in body and "potential" not in body:   # the one or the other
+                base[table].pop("potential", None)
             base[table].update(body)
         else:
             base[table] = body

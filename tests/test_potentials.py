@@ -5,7 +5,7 @@ import pytest
 
 import reference
 from survey.dynamics import System, perimeter, rhs
-from survey.potentials import POTENTIAL_NAMES, make_potential
+from survey.potentials import ATM, POTENTIAL_NAMES, make_potential
 
 PARAMS = {  # non-default parameters, so that no special case (k = 2) hides a bug
     "perimetric_power": dict(coupling=0.7, exponent=3.0),
@@ -15,7 +15,8 @@ PARAMS = {  # non-default parameters, so that no special case (k = 2) hides a bu
     "areal_yukawa": dict(coupling=1.0, gamma=0.5),
     "areal_barrier": dict(alpha=2.0, beta=1.0),
 }
-CASES = [(name, N, d) for name in POTENTIAL_NAMES for N in (3, 4) for d in (2, 3)]
+# the perimetric and areal families; axilrod_teller and the pair terms: test_interactions.py
+CASES = [(name, N, d) for name in PARAMS for N in (3, 4) for d in (2, 3)]
 
 
 def make_case(name, N, d, seed=0):
@@ -34,7 +35,7 @@ def full_rhs(system, y, n_tan=0):
 
 
 def test_all_named_potentials_are_tested():
-    assert set(PARAMS) == set(POTENTIAL_NAMES)
+    assert set(PARAMS) | {ATM} == set(POTENTIAL_NAMES)
 
 
 @pytest.mark.parametrize("name,N,d", CASES)
@@ -109,7 +110,7 @@ def test_areal_forces_are_parallel_to_altitudes():
 
 
 @pytest.mark.parametrize("bad,match", [
-    (("perimetric_cubic", {}), "unknown potential"),
+    (("perimetric_cubic", {}), "unknown triplet potential"),
     (("perimetric_power", {"k": 2}), "no parameter 'k'"),
     (("perimetric_yukawa", {"gamma": -1.0}), "gamma"),
     (("areal_power", {"coupling": "x"}), "finite number"),
