@@ -30,6 +30,8 @@ SYMBOLS = {
     "eta": r"$\eta$", "p_eta": r"$p_\eta$", "phi": r"$\phi$", "p_phi": r"$p_\phi$",
     "theta": r"$\theta$", "side": "side", "angular_momentum": "$J$",
     "regime": "regime", "history_time": "t",
+    "axilrod_teller_strength": r"triple-dipole strength $Z$",
+    "lennard_jones_epsilon": r"$\epsilon$", "lennard_jones_sigma": r"$\sigma_{LJ}$",
 }
 # indicator maps: (variable, colour map, clipping range or None, log scale)
 MAPS = [("megno", "viridis", (0.0, 8.0), False), ("ftle", "magma", None, True),

@@ -142,11 +142,16 @@ def miniature(path: Path, tmp: Path) -> dict:
     """A workflow's config with a tiny grid and a short run."""
     raw = tomllib.loads(path.read_text())
     raw["survey"]["output"] = str(tmp / f"{path.stem}.nc")
-    for key, value in raw["initial"].items():
-        if isinstance(value, dict):
-            value["num"] = min(value["num"], 3)
-        elif isinstance(value, list):
-            raw["initial"][key] = value[:3]
+    def shrink(table):     # grid axes: {start, stop, num} or lists of numbers
+        for key, value in table.items():
+            if isinstance(value, dict):
+                value["num"] = min(value["num"], 3)
+            elif isinstance(value, list) and all(isinstance(v, (int, float)) for v in value):
+                table[key] = value[:3]
+    shrink(raw["initial"])
+    system = raw.get("system", {})
+    for params in [system.get("params", {})] + [t["params"] for t in system.get("interactions", [])]:
+        shrink(params)
     raw.setdefault("integration", {})["t_final"] = 20.0
     raw.setdefault("dask", {})["workers"] = 1
     return raw
