@@ -313,17 +313,23 @@ def cell_labels(ds) -> list[str]:
     """'delta=4.2, energy=90' for every cell, in flat C order."""
     axes = grid_axes(ds)
     mesh = np.meshgrid(*[ds[a].values for a in axes], indexing="ij")
-    return [", ".join(f"{a}={m.ravel()[i]:.4g}" for a, m in zip(axes, mesh))
+    return [", ".join(f"{a}={m.ravel()[i]:.6g}" for a, m in zip(axes, mesh))
             for i in range(ds["status"].size)]
 
 
 def frequency_map(ds, order: int = 5) -> Figure:
     """The frequency map of the regular cells: two shape frequencies divided by a third
-    (for three bodies in the plane, the rotation frequency), with the resonance lines
+    (for three bodies in the plane, the rotation frequency, unless the orbits do not
+    rotate (J = 0): then the third shape frequency), with the resonance lines
     m1 x + m2 y + m3 = 0 of order |m| <= `order` -- the Arnold web."""
     names = [str(n) for n in ds["fundamental_name"].values]
     f = np.abs(ds["frequency"].values.reshape(-1, len(names)))
     ref = names.index("rotation") if "rotation" in names else 2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        spin = np.nanmedian(f[:, ref] / f[:, 0]) if np.isfinite(f[:, ref] / f[:, 0]).any() \
+            else 1.0
+    if ref != 2 and len(names) > 3 and spin < 1e-3:   # J = 0: no rotation to divide by
+        ref = 2
     x, y = f[:, 0] / f[:, ref], f[:, 1] / f[:, ref]
     regime = ds["regime"].values.ravel() if "regime" in ds else np.zeros(x.size, int)
     fig = Figure(figsize=(6.4, 5.6), layout="constrained")
