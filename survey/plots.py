@@ -324,14 +324,13 @@ def frequency_map(ds, order: int = 5) -> Figure:
     m1 x + m2 y + m3 = 0 of order |m| <= `order` -- the Arnold web."""
     names = [str(n) for n in ds["fundamental_name"].values]
     f = np.abs(ds["frequency"].values.reshape(-1, len(names)))
+    regime = ds["regime"].values.ravel() if "regime" in ds else np.zeros(len(f), int)
     ref = names.index("rotation") if "rotation" in names else 2
     with np.errstate(invalid="ignore", divide="ignore"):
-        spin = np.nanmedian(f[:, ref] / f[:, 0]) if np.isfinite(f[:, ref] / f[:, 0]).any() \
-            else 1.0
-    if ref != 2 and len(names) > 3 and spin < 1e-3:   # J = 0: no rotation to divide by
-        ref = 2
+        spin = (f[:, ref] / f[:, 0])[np.isin(regime, [Regime.TORUS, Regime.RESONANT])]
+    if ref != 2 and np.isfinite(spin).any() and np.nanmedian(spin) < 1e-3:
+        ref = 2                      # the tori do not rotate (J = 0): nothing to divide by
     x, y = f[:, 0] / f[:, ref], f[:, 1] / f[:, ref]
-    regime = ds["regime"].values.ravel() if "regime" in ds else np.zeros(x.size, int)
     fig = Figure(figsize=(6.4, 5.6), layout="constrained")
     ax = fig.add_subplot()
     keep = np.isfinite(x) & np.isfinite(y)
