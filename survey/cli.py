@@ -6,7 +6,8 @@ import os
 import sys
 
 
-BENCH_PARTS = ["scan", "cell", "fixed", "integrator", "indicators", "tori", "survey", "memory"]
+BENCH_PARTS = ["scan", "cell", "fixed", "integrator", "indicators", "tori", "terms", "survey",
+               "memory"]
 
 
 def _bench(args):
@@ -19,6 +20,7 @@ def _bench(args):
                                              repeats=args.repeats),
              "indicators": lambda: bench.indicator_overhead(t_final=t),
              "tori": lambda: bench.torus_overhead(t_final=t),
+             "terms": lambda: bench.interaction_terms(t_final=t),
              "survey": bench.survey_scaling,
              "memory": bench.survey_memory}
     for name in BENCH_PARTS:

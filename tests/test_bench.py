@@ -9,8 +9,10 @@ def test_bench_parts_run_and_print_their_ratios(tmp_path):
                          out=lines.append)
     bench.default_cell(t_final=2.0, repeats=1, folder=str(tmp_path), out=lines.append)
     bench.fixed_costs(folder=str(tmp_path), repeats=1, out=lines.append)
+    rows = bench.interaction_terms(t_final=2.0, repeats=1, out=lines.append)
+    assert all(r["same"] for r in rows)     # the two paths give the same orbit, bit for bit
     text = "\n".join(lines)
     assert "survey end to end" in text and "cluster" in text and "archive" in text
     assert "heyoka is not installed" in text or "survey / heyoka =" in text
     assert text.count("x\n") >= 1 and "Default survey cell" in text
-    assert "Fixed costs" in text and "shutdown" in text and "python -m survey run" in text
+    assert "general/own" in text and "Fixed costs" in text and "shutdown" in text and "python -m survey run" in text
