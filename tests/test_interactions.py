@@ -362,3 +362,18 @@ def test_a_survey_over_the_atm_strength_and_energy(tmp_path):
             assert abs(ljat(2.5 if Z < 1 else 0.5, (1.0, 1.0, 1.0)).energy(y0) - E) > 1e-3
     ok, lines = verify(tmp_path / "ljat.nc", cells=4)
     assert ok, lines
+
+
+def test_section_start_of_a_mixture_lies_on_its_energy_shell():
+    """The `section` family solves the reduced Hamiltonian; for a sum of terms its potential
+    is that of the triangle of the given shape (all terms are invariant under rotations),
+    so the start lands on the target shell with the target angular momentum."""
+    from survey.coordinates import reduced
+    from survey.families import initial_state
+    s = ljat(Z=0.5, masses=(1.0, 1.3, 0.8))
+    y = initial_state(s, "section", energy=-1.5, angular_momentum=0.2, sigma=1.2, eta=1.0,
+                      p_sigma=0.1, p_eta=0.0)
+    assert s.energy(y) == pytest.approx(-1.5, abs=1e-13)
+    assert s.angular_momentum(y) == pytest.approx(0.2, abs=1e-14)
+    r = reduced(s, y)
+    assert r.sigma == pytest.approx(1.2) and r.phi == pytest.approx(math.pi / 2)
