@@ -640,8 +640,7 @@ def _validate_terms(s: dict, given: dict) -> list[Axis]:
             raise ConfigError("[system].interactions", "expected a list of tables like "
                               "{kind = \"pair\", potential = \"lennard_jones\", params = "
                               "{epsilon = 1.0, sigma = 1.0}}")
-    axes = []
-    names = None
+    grids = []         # (term, parameter, values); named once every term is known good
     for i, entry in enumerate(s["interactions"] or [None]):
         if entry is None:
             where, kind, name, params = "[system.params]", "triplet", s["potential"], s["params"]
@@ -687,13 +686,12 @@ def _validate_terms(s: dict, given: dict) -> list[Axis]:
                 raise ConfigError(f"{where}.{missing[0]}", f"is missing: a term in "
                                   f"interactions gives every parameter of {name} "
                                   f"({', '.join(allowed)})")
-        names = names or term_axis_names(s)
         values = {}
         for key, value in params.items():
             grid = _axis(f"{where}.{key}", value)
             values[key] = [float(value)] if grid is None else grid.tolist()
             if grid is not None:
-                axes.append(Axis(names[i][key], grid, term=i, param=key))
+                grids.append((i, key, grid))
         # every value of every axis must make a valid term (the checks are per parameter)
         first = {k: v[0] for k, v in values.items()}
         for key, options in [(None, [None])] + list(values.items()):
@@ -705,7 +703,8 @@ def _validate_terms(s: dict, given: dict) -> list[Axis]:
                     at = f" (at the grid value {v:g})" if key and len(options) > 1 else ""
                     raise ConfigError(f"{where}.{bad.group(1)}" if bad else where,
                                       str(exc) + at) from None
-    return axes
+    names = term_axis_names(s)
+    return [Axis(names[i][key], grid, term=i, param=key) for i, key, grid in grids]
 
 
 def _validate_system(s: dict, term_axes: list[Axis]) -> System:

@@ -17,7 +17,7 @@ from typing import Callable
 
 import numpy as np
 
-from .dynamics import System
+from .dynamics import System, rhs
 from .potentials import AREA, PERIMETER, profile
 
 SQ3 = math.sqrt(3.0)
@@ -50,11 +50,8 @@ def _central_pull(system: System, q: np.ndarray) -> float:
     """Magnitude of the force on body 0 towards the centre of mass (the origin) at
     positions q (3, 2): the centripetal force of a uniformly rotating special solution,
     for any sum of terms."""
-    from .dynamics import rhs
-    y = system.state(np.pad(q, ((0, 0), (0, system.dim - 2))), np.zeros((3, system.dim)))
-    dy = np.zeros_like(y)
-    rhs(0.0, y, dy, *system.kernel_args, 0)
-    return -float(np.dot(dy[y.size // 2:y.size // 2 + 2], q[0])) / float(np.linalg.norm(q[0]))
+    force = forces(system, np.pad(q, ((0, 0), (0, system.dim - 2))))
+    return -float(np.dot(force[:2], q[0])) / float(np.linalg.norm(q[0]))
 
 
 def _dU(system: System, q: np.ndarray) -> float:
@@ -215,16 +212,17 @@ def _explicit(system, positions, velocities):
     return q, v
 
 
-def forces_and_hessian(system: System, q: np.ndarray):
-    """Forces -dU/dq (N d) and the Hessian of U (N d, N d) at positions q, from the
-    right-hand side's exact tangent forces."""
-    from .dynamics import rhs
+def forces(system: System, q: np.ndarray, hessian: bool = False):
+    """Forces -dU/dq (N d) at positions q (N, d), and with `hessian` the Hessian of U
+    (N d, N d) from the right-hand side's exact tangent forces."""
     nq = q.size
-    y = np.concatenate([q.ravel(), np.zeros(nq)])
-    tangents = np.concatenate([np.eye(nq), np.zeros((nq, nq))], axis=1)
-    state = np.concatenate([y, tangents.ravel()])
+    n_tan = nq if hessian else 0
+    tangents = np.concatenate([np.eye(n_tan, nq), np.zeros((n_tan, nq))], axis=1)
+    state = np.concatenate([np.ravel(q), np.zeros(nq), tangents.ravel()])
     out = np.zeros_like(state)
-    rhs(0.0, state, out, *system.kernel_args, nq)
+    rhs(0.0, state, out, *system.kernel_args, n_tan)
+    if not hessian:
+        return out[nq:2 * nq]
     blocks = out[2 * nq:].reshape(nq, 2 * nq)
     return out[nq:2 * nq], -0.5 * (blocks[:, nq:] + blocks[:, nq:].T)
 
@@ -253,7 +251,7 @@ def equilibrium_positions(system: System, start, max_iter: int = 100) -> np.ndar
     for _ in range(max_iter):
         if not np.isfinite(u):
             raise ValueError("the potential is not finite along the descent from positions")
-        force, hess = forces_and_hessian(system, q)
+        force, hess = forces(system, q, hessian=True)
         R = _rigid_motions(q)
         P = np.eye(q.size) - R.T @ R
         w, V = np.linalg.eigh(P @ hess @ P)

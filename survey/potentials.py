@@ -248,6 +248,15 @@ def _pair_tangent(e, L, dr, dP, U1, U2):
 
 
 @helper
+def _add_cyclic(dy, off, i, j, k, d, s, g1, g2, g3):
+    """Add s times the derivatives along the sides i->j, j->k, k->i (g1, g2, g3) to bodies
+    i, j, k: -dU/dq_i = g1 - g3, and cyclic."""
+    add_to(dy, off + i * d, d, s, sub(g1, g3))
+    add_to(dy, off + j * d, d, s, sub(g2, g1))
+    add_to(dy, off + k * d, d, s, sub(g3, g2))
+
+
+@helper
 def perimetric_forces(y, dy, i, j, k, d, n, n_tan, prof, par):
     """Add the forces of triplet (i, j, k) under U(P) to dy's momentum rates, and for each
     tangent vector t (stored at y[n*(1+t):]) its tangent force -Hess U . dq to dy at the
@@ -260,9 +269,7 @@ def perimetric_forces(y, dy, i, j, k, d, n, n_tan, prof, par):
     e2, L2 = _unit(sub(w, v))
     e3, L3 = _unit(sub(u, w))
     _, U1, U2 = profile(prof, par, L1 + L2 + L3)
-    add_to(dy, nq + i * d, d, U1, sub(e1, e3))
-    add_to(dy, nq + j * d, d, U1, sub(e2, e1))
-    add_to(dy, nq + k * d, d, U1, sub(e3, e2))
+    _add_cyclic(dy, nq, i, j, k, d, U1, e1, e2, e3)
     for t in range(n_tan):
         base = n * (1 + t)
         du, dv, dw = vec(y, base + i * d, d), vec(y, base + j * d, d), vec(y, base + k * d, d)
@@ -271,10 +278,7 @@ def perimetric_forces(y, dy, i, j, k, d, n, n_tan, prof, par):
         g1 = _pair_tangent(e1, L1, r1, dP, U1, U2)
         g2 = _pair_tangent(e2, L2, r2, dP, U1, U2)
         g3 = _pair_tangent(e3, L3, r3, dP, U1, U2)
-        off = base + nq
-        add_to(dy, off + i * d, d, 1.0, sub(g1, g3))
-        add_to(dy, off + j * d, d, 1.0, sub(g2, g1))
-        add_to(dy, off + k * d, d, 1.0, sub(g3, g2))
+        _add_cyclic(dy, base + nq, i, j, k, d, 1.0, g1, g2, g3)
 
 
 @helper
@@ -359,13 +363,12 @@ def atm_forces(y, dy, i, j, k, d, n, n_tan, par):
     Q = l1 * l2 * l3
     D = a12 * a23 * a31
     W = Z / (Q * Q * math.sqrt(Q))
-    c1, c2, c3 = (15.0 * D - 3.0 * Q) / l1, (15.0 * D - 3.0 * Q) / l2, (15.0 * D - 3.0 * Q) / l3
+    num = 15.0 * D - 3.0 * Q
+    c1, c2, c3 = num / l1, num / l2, num / l3
     H1 = _atm_h(c1, s1, a23, a31, s2, a12, s3)
     H2 = _atm_h(c2, s2, a31, a12, s3, a23, s1)
     H3 = _atm_h(c3, s3, a12, a23, s1, a31, s2)
-    add_to(dy, nq + i * d, d, W, sub(H1, H3))
-    add_to(dy, nq + j * d, d, W, sub(H2, H1))
-    add_to(dy, nq + k * d, d, W, sub(H3, H2))
+    _add_cyclic(dy, nq, i, j, k, d, W, H1, H2, H3)
     for t in range(n_tan):
         base = n * (1 + t)
         du, dv, dw = vec(y, base + i * d, d), vec(y, base + j * d, d), vec(y, base + k * d, d)
@@ -384,13 +387,8 @@ def atm_forces(y, dy, i, j, k, d, n, n_tan, par):
                       a23, da23, s1, r1)
         dH3 = _atm_dh(c3, (dcc - c3 * dl3) / l3, s3, r3, a12, da12, a23, da23, s1, r1,
                       a31, da31, s2, r2)
-        off = base + nq
-        add_to(dy, off + i * d, d, dW, sub(H1, H3))
-        add_to(dy, off + i * d, d, W, sub(dH1, dH3))
-        add_to(dy, off + j * d, d, dW, sub(H2, H1))
-        add_to(dy, off + j * d, d, W, sub(dH2, dH1))
-        add_to(dy, off + k * d, d, dW, sub(H3, H2))
-        add_to(dy, off + k * d, d, W, sub(dH3, dH2))
+        _add_cyclic(dy, base + nq, i, j, k, d, dW, H1, H2, H3)
+        _add_cyclic(dy, base + nq, i, j, k, d, W, dH1, dH2, dH3)
 
 
 # ---------------------------------------------------------------- one pair

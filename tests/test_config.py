@@ -49,6 +49,7 @@ BAD = [
     ("[system]\ninteractions = [{kind = 'pair', potential = 'lennard_jones', params = {epsilon = [1.0, 0.0], sigma = 1.0}}]", "[system].interactions[0].params.epsilon: potential parameter 'epsilon' must be > 0 (a well depth), got 0 (at the grid value 0)"),
     ("[system]\ninteractions = [{kind = 'pair', potential = 'yukawa', params = {coupling = 1.0, gama = 1.0}}]", "[system].interactions[0].params.gama: not a parameter of yukawa (did you mean 'gamma'?)"),
     ("[system]\ninteractions = []", "[system].interactions: expected a list of tables"),
+    ("[system]\ninteractions = [{kind = 'triplet', potential = 'axilrod_teller', params = {strength = [0.1, 0.2]}}, {kind = 'pair', potential = 'lenard_jones', params = {epsilon = 1.0, sigma = 1.0}}]", "[system].interactions[1].potential: unknown pair potential 'lenard_jones'"),
     ("[integration]\nrtol = 0.0", "[integration].rtol: must be >= 2.22e-15"),
     ("[integration]\nrtol = -1e-9", "[integration].rtol: must be >= 2.22e-15"),
     ("[integration]\nrtol = 1e-16", "double precision cannot honour"),

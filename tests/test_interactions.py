@@ -6,7 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from survey.dynamics import System, rhs
+from conftest import derivative, energy_gradient, full_rhs
+from survey.dynamics import System
 from survey.integrator import integrate
 from survey.potentials import make_potential as term
 from survey.status import Status
@@ -23,12 +24,6 @@ MIXES = {
                 term("perimetric_yukawa", dict(gamma=0.2))],
 }
 CASES = [(name, N, d) for name in MIXES for N in (3, 4, 7) for d in (2, 3)]
-
-
-def full_rhs(system, y, n_tan=0):
-    dy = np.zeros_like(y)
-    rhs(0.0, y, dy, *system.kernel_args, n_tan)
-    return dy
 
 
 def make_case(name, N, d, seed):
@@ -48,13 +43,7 @@ def test_forces_are_minus_gradient_of_energy(name, N, d):
     system, y = make_case(name, N, d, seed=0)
     nq = system.n // 2
     force = full_rhs(system, y)[nq:]
-    grad = np.zeros(nq)
-    h = 1e-5
-    for a in range(nq):
-        e = np.zeros(system.n)
-        e[a] = h
-        grad[a] = (-system.energy(y + 2 * e) + 8 * system.energy(y + e)
-                   - 8 * system.energy(y - e) + system.energy(y - 2 * e)) / (12 * h)
+    grad = energy_gradient(system, y)
     np.testing.assert_allclose(force, -grad, rtol=1e-6, atol=1e-8 * np.abs(grad).max())
     np.testing.assert_allclose(force.reshape(N, d).sum(axis=0), 0.0,
                                atol=1e-13 * np.abs(force).max())
@@ -68,9 +57,7 @@ def test_tangent_forces_are_derivative_of_forces(name, N, d):
     out = full_rhs(system, np.concatenate([y, tangents.ravel()]), n_tan=2)
     for t in range(2):
         dq = np.concatenate([tangents[t, :nq], np.zeros(nq)])
-        h = 1e-5
-        f = lambda s: full_rhs(system, y + s * dq)[nq:]
-        fd = (-f(2 * h) + 8 * f(h) - 8 * f(-h) + f(-2 * h)) / (12 * h)
+        fd = derivative(lambda s: full_rhs(system, y + s * dq)[nq:])
         block = out[n * (1 + t):n * (2 + t)]
         np.testing.assert_allclose(block[nq:], fd, rtol=1e-6, atol=1e-8 * np.abs(fd).max())
         np.testing.assert_allclose(block[:nq], tangents[t, nq:] / np.repeat(system.masses, d),
@@ -240,12 +227,12 @@ BIPYRAMID = np.array([[1.1 * math.cos(2 * math.pi * k / 5), 1.1 * math.sin(2 * m
 def test_equilibrium_finds_the_lj7_pentagonal_bipyramid():
     """From a rough, perturbed bipyramid the descent reaches the LJ7 global minimum,
     U = -16.505384 eps (Wales & Doye 1997), where every force vanishes."""
-    from survey.families import forces_and_hessian, initial_state
+    from survey.families import forces, initial_state
     s = System(np.ones(7), 3, (LJ,))
     start = BIPYRAMID + np.random.default_rng(1).normal(scale=0.05, size=(7, 3))
     y = initial_state(s, "equilibrium", positions=start, speed=0.0)
     assert s.potential_energy(y) == pytest.approx(-16.505384, abs=5e-7)
-    force, hess = forces_and_hessian(s, s.split(y)[0])
+    force, hess = forces(s, s.split(y)[0], hessian=True)
     assert np.abs(force).max() < 1e-12
     w = np.linalg.eigvalsh(hess)
     assert np.all(w[6:] > 1.0) and np.all(np.abs(w[:6]) < 1e-8)   # a minimum; 6 zero modes

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 import reference
-from survey.dynamics import System, perimeter, rhs
+from conftest import derivative, energy_gradient, full_rhs
+from survey.dynamics import System, perimeter
 from survey.potentials import ATM, POTENTIAL_NAMES, make_potential
 
 PARAMS = {  # non-default parameters, so that no special case (k = 2) hides a bug
@@ -27,13 +28,6 @@ def make_case(name, N, d, seed=0):
     return system, y
 
 
-def full_rhs(system, y, n_tan=0):
-    dy = np.zeros_like(y)
-    m, d, meas, prof, par = system.kernel_args
-    rhs(0.0, y, dy, m.copy(), d, meas, prof, par, n_tan)
-    return dy
-
-
 def test_all_named_potentials_are_tested():
     assert set(PARAMS) | {ATM} == set(POTENTIAL_NAMES)
 
@@ -43,14 +37,7 @@ def test_forces_are_minus_gradient_of_energy(name, N, d):
     system, y = make_case(name, N, d)
     nq = system.n // 2
     force = full_rhs(system, y)[nq:]
-    grad = np.zeros(nq)
-    h = 1e-5
-    for a in range(nq):
-        e = np.zeros(system.n)
-        e[a] = h
-        # 4th-order central difference of the total energy in q_a
-        grad[a] = (-system.energy(y + 2 * e) + 8 * system.energy(y + e)
-                   - 8 * system.energy(y - e) + system.energy(y - 2 * e)) / (12 * h)
+    grad = energy_gradient(system, y)
     np.testing.assert_allclose(force, -grad, rtol=1e-7, atol=1e-8 * np.abs(grad).max())
 
 
@@ -63,9 +50,8 @@ def test_tangent_forces_are_derivative_of_forces(name, N, d):
     out = full_rhs(system, np.concatenate([y, tangents.ravel()]), n_tan=2)
     for t in range(2):
         dq, dp = tangents[t, :nq], tangents[t, nq:]
-        h = 1e-5
-        f = lambda s: full_rhs(system, y + s * np.concatenate([dq, np.zeros(nq)]))[nq:]
-        fd = (-f(2 * h) + 8 * f(h) - 8 * f(-h) + f(-2 * h)) / (12 * h)
+        step = np.concatenate([dq, np.zeros(nq)])
+        fd = derivative(lambda s: full_rhs(system, y + s * step)[nq:])
         block = out[n * (1 + t):n * (2 + t)]
         np.testing.assert_allclose(block[nq:], fd, rtol=1e-6, atol=1e-8 * np.abs(fd).max())
         # d(dq)/dt = M^-1 dp
