@@ -13,7 +13,7 @@ import numpy as np
 from numba.extending import overload
 
 from .potentials import (AREA, DISTANCE, NONE, PERIMETER, TRIANGLE, Potential, areal_forces,
-                         atm_energy, atm_forces, kernel, make_potential, norm, pair_forces,
+                         atm_energy, atm_forces, helper, kernel, make_potential, norm, pair_forces,
                          perimetric_forces, profile, sub, triplet_measure, vec)
 
 
@@ -239,20 +239,32 @@ def rhs(t, y, dy, masses, d, measure, prof, par, n_tan):
     """Hamilton's equations and the variational equations of n_tan tangent vectors
     (d dq/dt = M^-1 dp, d dp/dt = -Hess U dq)."""
     N = masses.size
+    lead = lead_params(par)
+    # three bodies in the plane (every workflow, most of the paper) get N and d as
+    # constants, so the inlined helpers' loops unroll: 1.15x faster orbits, 1.4x with a
+    # tangent vector. Each such copy costs ~12 s of first compilation: 3-D stays general.
+    if N == 3 and d == 2:
+        _leading_forces(y, dy, masses, 3, 2, measure, prof, lead, n_tan)
+    else:
+        _leading_forces(y, dy, masses, N, d, measure, prof, lead, n_tan)
+    further_forces(y, dy, N, d, 2 * N * d, n_tan, par)
+
+
+@helper
+def _leading_forces(y, dy, masses, N, d, measure, prof, lead, n_tan):
+    """Velocities, and the forces of the leading perimetric or areal term. The measure is
+    chosen outside the triplet loop: one branch per call, not per triplet, keeps the loop
+    body small enough for the compiler (2.6x faster)."""
     nq = N * d
     n = 2 * nq
-    for b in range(N):
-        inv = 1.0 / masses[b]
-        for c in range(b * d, b * d + d):
-            dy[c] = y[nq + c] * inv
-            dy[nq + c] = 0.0
-            for t_ in range(n_tan):
-                base = n * (1 + t_)
-                dy[base + c] = y[base + nq + c] * inv
-                dy[base + nq + c] = 0.0
-    # the measure is chosen outside the triplet loop: one branch per call, not per triplet,
-    # keeps the loop body small enough for the compiler (2.6x faster)
-    lead = lead_params(par)
+    for t_ in range(1 + n_tan):
+        base = n * t_
+        for b in range(N):
+            inv = 1.0 / masses[b]
+            for c in range(base + b * d, base + b * d + d):
+                dy[c] = y[nq + c] * inv
+        for c in range(base + nq, base + n):
+            dy[c] = 0.0
     if measure == PERIMETER:
         for i in range(N - 2):
             for j in range(i + 1, N - 1):
@@ -263,7 +275,6 @@ def rhs(t, y, dy, masses, d, measure, prof, par, n_tan):
             for j in range(i + 1, N - 1):
                 for k in range(j + 1, N):
                     areal_forces(y, dy, i, j, k, d, n, n_tan, prof, lead)
-    further_forces(y, dy, N, d, n, n_tan, par)
 
 
 def _rows_forces(y, dy, N, d, n, n_tan, par):
