@@ -553,6 +553,66 @@ def default_cell(t_final=2000.0, repeats=5, folder="results/bench", out=print):
     return rows
 
 
+def step_costs(t_final=2000.0, repeats=7, out=print):
+    """Where a DOP853 step's time goes, on the paper's two orbits: the 12 right-hand-side
+    evaluations of an accepted step, the stage combinations with the error norm (the same
+    11 evaluations subtracted), and the rest of `integrate`'s loop (step control, finiteness
+    checks, tangent renormalisation, MEGNO), as shares of `integrate`'s time per attempted
+    step; compiled loops over survey's own kernels at the orbit's start, best of `repeats`."""
+    import numba
+    from .dynamics import rhs
+    from .integrator import _error_norm, _stages
+
+    @numba.njit
+    def rhs_loop(y, reps, masses, d, measure, prof, par, n_tan):
+        K = np.zeros((16, y.size))
+        for _ in range(reps):
+            for s in range(12):
+                rhs(0.0, y, K[s], masses, d, measure, prof, par, n_tan)
+        return K[11, 0]
+
+    @numba.njit
+    def stage_loop(y, reps, h, masses, d, measure, prof, par, n_tan):
+        nf = y.size
+        K, yt, ynew = np.zeros((16, nf)), np.zeros(nf), np.zeros(nf)
+        rhs(0.0, y, K[0], masses, d, measure, prof, par, n_tan)
+        acc = 0.0
+        for _ in range(reps):
+            _stages(masses, d, measure, prof, par, n_tan, nf, 0.0, y, h, K, yt, ynew)
+            acc += _error_norm(y, ynew, K, h, 2 * masses.size * d, 1e-12, 1e-12)
+        return acc
+
+    system = System.create()
+    rows = []
+    for label, family, params in CASES:
+        y0 = initial_state(system, family, **params)
+        for n_tan in (0, 1):
+            w = deviation_vectors(system, y0, n_tan, seed=0) if n_tan else None
+            y = np.concatenate([y0, *w]) if n_tan else y0.copy()
+            res = integrate(system, y0, t_final, tangents=w, megno=n_tan > 0)
+            steps = res.n_steps + res.n_rejected
+            h = t_final / res.n_steps
+            args = system.kernel_args
+            rhs_loop(y, 1, *args, n_tan)
+            stage_loop(y, 1, h, *args, n_tan)
+            t_rhs = _best_time(lambda: rhs_loop(y, steps, *args, n_tan), repeats)[0]
+            t_stage = _best_time(lambda: stage_loop(y, steps, h, *args, n_tan), repeats)[0]
+            t_all = _best_time(lambda: integrate(system, y0, t_final, tangents=w,
+                                                 megno=n_tan > 0), repeats)[0]
+            rows.append((label, n_tan, steps, t_all, t_rhs, t_stage - t_rhs * 11 / 12))
+    out("")
+    out(f"Where a step goes (t = {t_final:g}, tol 1e-12; per attempted step, ns; shares of "
+        f"integrate's time)")
+    out(f"{'case':26s} {'tangents':>8s} {'steps':>7s} {'step ns':>8s} {'12 rhs':>7s} "
+        f"{'stages+norm':>12s} {'rest':>6s}")
+    for label, n_tan, steps, t_all, t_rhs, t_comb in rows:
+        ns = 1e9 / steps
+        rest = t_all - t_rhs - t_comb
+        out(f"{label:26s} {n_tan:8d} {steps:7d} {t_all * ns:8.0f} {t_rhs / t_all:7.0%} "
+            f"{t_comb / t_all:12.0%} {rest / t_all:6.0%}")
+    return rows
+
+
 def fixed_costs(folder="results/bench", repeats=3, out=print):
     """What a survey costs beside its cells: a 1-cell survey ('sides', default settings
     otherwise, t = 10) end to end with numba's disk cache warm, by phase, best of

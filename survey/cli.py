@@ -6,8 +6,8 @@ import os
 import sys
 
 
-BENCH_PARTS = ["scan", "cell", "fixed", "integrator", "indicators", "tori", "terms", "survey",
-               "memory"]
+BENCH_PARTS = ["scan", "cell", "fixed", "integrator", "step", "indicators", "tori", "terms",
+               "survey", "memory"]
 
 
 def _bench(args):
@@ -18,6 +18,7 @@ def _bench(args):
              "fixed": bench.fixed_costs,
              "integrator": lambda: bench.run(t_final=t, t_scipy=args.t_scipy,
                                              repeats=args.repeats),
+             "step": lambda: bench.step_costs(t_final=t),
              "indicators": lambda: bench.indicator_overhead(t_final=t),
              "tori": lambda: bench.torus_overhead(t_final=t),
              "terms": lambda: bench.interaction_terms(t_final=t),
