@@ -17,11 +17,12 @@ import time
 
 import numpy as np
 
-from .dynamics import System, rhs
-from .families import initial_state
-from .indicators import deviation_vectors
-from .integrator import _error_norm, _stages, integrate
-from .potentials import kernel
+from .numerics.dop853 import error_norm, stages
+from .numerics.indicators import deviation_vectors
+from .numerics.integrate import integrate
+from .physics.families import initial_state
+from .physics.jit import kernel
+from .physics.system import System, rhs
 
 CASES = [("chaotic 'sides'", "sides", {}),
          ("regular equilateral d=3", "equilateral", {"delta": 3.0})]
@@ -152,7 +153,7 @@ def indicator_overhead(t_final=2000.0, repeats=7, deviations=2, out=print):
     orbit + tangent-vector integration (same vectors, same steps), per paper orbit. The
     variants are timed interleaved and each keeps its best time, which cancels most of the
     machine's drift."""
-    from .coordinates import section_event
+    from .numerics.sections import section_event
     system = System.create()
     history = np.linspace(t_final / 64, t_final, 64)
     rows = []
@@ -237,9 +238,9 @@ def torus_overhead(t_final=2000.0, repeats=6, out=print):
     `repeats` interleaved runs; and the classification of a 10^4-cell grid (target: the
     analysis adds < 15% per cell)."""
     import xarray as xr
-    from .config import load_config
-    from .sweep import CellTask, build_starts, run_cells
-    from .tori import classify
+    from .analysis.classify import classify
+    from .pipeline.cells import CellTask, build_starts, run_cells
+    from .pipeline.config import load_config
     rows = []
     for label, fam, params in CASES:
         best = {}
@@ -286,7 +287,7 @@ def survey_scaling(cells=200, t_final=2000.0, repeats=2, folder="results/bench",
     and the per-task overhead: the share of the workers' compute phase not spent inside
     cells (targets: speed-up >= 1.85, overhead < 5%)."""
     import xarray as xr
-    from .sweep import run_survey
+    from .pipeline.sweep import run_survey
     rows = {}
     for _ in range(repeats):
         for workers in (1, 2):
@@ -340,7 +341,7 @@ def survey_memory(sizes=(10_000, 100_000), folder="results/bench", out=print):
 
 def _memory_run(n, folder):
     import resource
-    from .sweep import run_survey
+    from .pipeline.sweep import run_survey
     cfg = {"survey": {"name": f"mem-{n}", "output": f"{folder}/mem-{n}.nc"},
            "initial": {"family": "equilateral",
                        "delta": {"start": 0.0, "stop": 10.0, "num": n}},
@@ -417,7 +418,7 @@ def scan_vs_heyoka(cells=101, t_final=2000.0, tol=1e-12, repeats=2, folder="resu
     SIMD batch integrator over the same starts and deviation vectors in
     `ensemble_propagate_until_batch` on 2 threads (its JIT compilation timed apart).
     Interleaved `repeats` times, best of each (target: survey <= 0.7x heyoka)."""
-    from .sweep import run_survey
+    from .pipeline.sweep import run_survey
     cfg = {"survey": {"name": "bench-scan", "output": f"{folder}/bench-scan.nc"},
            "initial": {"family": "equilateral",
                        "delta": {"start": 0.0, "stop": 10.0, "num": cells}},
@@ -478,7 +479,7 @@ def _heyoka_scan(cells, t_final, tol, segment=10.0):
         import heyoka as hy
     except ImportError:
         return {}
-    from .indicators import IndicatorOptions
+    from .catalog.indicators import IndicatorOptions
     system = System.create()
     n = system.n
     seed = IndicatorOptions().seed
@@ -524,8 +525,8 @@ def default_cell(t_final=2000.0, repeats=5, folder="results/bench", out=print):
     orbits, the phi section, histories, the torus analysis) through the worker's code path,
     against the same orbit with one tangent vector alone (`integrate`), best of `repeats`
     interleaved runs (target: at most 1.5x)."""
-    from .config import load_config
-    from .sweep import CellTask, build_starts, run_cells
+    from .pipeline.cells import CellTask, build_starts, run_cells
+    from .pipeline.config import load_config
     system = System.create()
     rows = []
     for label, fam, params in CASES:
@@ -572,8 +573,8 @@ def _stage_loop(y, reps, h, masses, d, measure, prof, par, n_tan):
     rhs(0.0, y, K[0], masses, d, measure, prof, par, n_tan)
     acc = 0.0
     for _ in range(reps):
-        _stages(masses, d, measure, prof, par, n_tan, nf, 0.0, y, h, K, yt, ynew)
-        acc += _error_norm(y, ynew, K, h, 2 * masses.size * d, 1e-12, 1e-12)
+        stages(masses, d, measure, prof, par, n_tan, nf, 0.0, y, h, K, yt, ynew)
+        acc += error_norm(y, ynew, K, h, 2 * masses.size * d, 1e-12, 1e-12)
     return acc
 
 
@@ -624,7 +625,7 @@ def fixed_costs(folder="results/bench", repeats=3, out=print):
     """What a survey costs beside its cells: a 1-cell survey ('sides', default settings
     otherwise, t = 10) end to end with numba's disk cache warm, by phase, best of
     `repeats`."""
-    from .sweep import run_survey
+    from .pipeline.sweep import run_survey
     cfg = {"survey": {"name": "bench-1cell", "output": f"{folder}/bench-1cell.nc"},
            "initial": {"family": "sides"}, "integration": {"t_final": 10.0}}
     best = None

@@ -35,12 +35,12 @@ def _orbit(args):
     its Lyapunov exponent, and with --plot the paper's single-orbit figures."""
     import numpy as np
 
-    from . import orbits
-    from .config import ConfigError
+    from .catalog.errors import ConfigError
+    from .pipeline import orbits
     if args.workflow:
         if not args.plot:
             raise ConfigError("--plot", "an orbit workflow draws figures: give --plot DIR")
-        for path in orbits.run_workflow(args.workflow, args.plot):
+        for path in orbit_workflow(args.workflow, args.plot):
             print(f"wrote {path}")
         return 0
     params = {}
@@ -55,21 +55,34 @@ def _orbit(args):
     spec = orbits.check(orbits.OrbitSpec(name=args.family, family=args.family, params=params,
                                          potential=args.potential, t_final=args.t_final,
                                          tol=args.tol), "orbit", cli=True)
+    runs = orbits.run_orbits(spec)
+    print("\n".join(line for run in runs for line in orbits.describe(spec, run)))
     if args.plot:
-        from . import plots
-        figs, text = orbits.figures(spec)
-        print("\n".join(text))
+        from .presentation import orbit_plots, plots
+        figs = orbit_plots.spec_figures(spec.name, spec.zoom_until, runs)
         for path in plots.save(figs, args.plot, spec.name):
             print(f"wrote {path}")
-    else:
-        print("\n".join(orbits.describe(spec, *orbits.integrate_orbit(spec))))
     return 0
 
 
+def orbit_workflow(path, folder) -> list:
+    """Draw every figure of an orbit workflow into `folder`; returns the files."""
+    from .pipeline import orbits
+    from .presentation import orbit_plots, plots
+    written = []
+    for spec in orbits.load_workflow(path):
+        runs = orbits.run_orbits(spec)
+        written += plots.save(orbit_plots.spec_figures(spec.name, spec.zoom_until, runs),
+                              folder, spec.name)
+        print("\n".join(line for run in runs for line in orbits.describe(spec, run)))
+    return written
+
+
 def _plot(args):
-    from . import plots
-    from .archive import open_archive
     from pathlib import Path
+
+    from .pipeline.archive import open_archive
+    from .presentation import plots
     with open_archive(args.archive) as ds:
         figs = plots.figures(ds, args.var or None)
         out = Path(args.out or Path(args.archive).parent)
@@ -79,9 +92,10 @@ def _plot(args):
 
 
 def _report(args):
-    from . import report
-    from .archive import open_archive
     from pathlib import Path
+
+    from .pipeline.archive import open_archive
+    from .presentation import report
     with open_archive(args.archive) as ds:
         path = report.write(ds, args.out or Path(args.archive).parent, Path(args.archive).stem)
     print(f"wrote {path} and its figures")
@@ -93,10 +107,12 @@ def _reproduce(args):
     workflows to their figures -- all of results/."""
     from pathlib import Path
 
-    from . import orbits, report
-    from .config import load_config
-    from .sweep import run_survey
     import xarray as xr
+
+    from .pipeline import orbits
+    from .pipeline.config import load_config
+    from .pipeline.sweep import run_survey
+    from .presentation import report
     paths = sorted(Path(args.workflows).glob("*.toml")) + [Path(__file__).parent /
                                                              "default.toml"]
     if args.only:
@@ -104,7 +120,7 @@ def _reproduce(args):
     for path in paths:
         print(f"== {path}")
         if orbits.is_orbit_workflow(path):
-            for out in orbits.run_workflow(path, args.results):
+            for out in orbit_workflow(path, args.results):
                 print(f"wrote {out}")
             continue
         config = load_config(path)
@@ -119,8 +135,9 @@ def _reproduce(args):
 def _run(args):
     from pathlib import Path
 
-    from .config import ensure_writable, load_config, parse_config
-    from .sweep import run_survey
+    from .pipeline.config import load_config, parse_config
+    from .pipeline.resources import ensure_writable
+    from .pipeline.sweep import run_survey
     if args.config is None:
         text = (Path(__file__).parent / "default.toml").read_text()
         config = parse_config(text, "embedded default (survey/default.toml)")
@@ -135,20 +152,20 @@ def _run(args):
     print(f"wrote {path} ({config.n_cells} cells)")
     import xarray as xr
 
-    from .tori import summary
+    from .analysis.classify import summary
     with xr.open_dataset(path) as ds:
         print("\n".join(summary(ds)))
         if not args.no_report:
-            from . import report
+            from .presentation import report
             written = report.write(ds, path.parent, path.stem)
             print(f"report and figures: {written} (and {path.stem}_*.png beside it)")
     return 0
 
 
 def _verify(args):
-    from .sweep import verify
+    from .catalog.errors import ConfigError
+    from .pipeline.sweep import verify
     if args.cells < 1:
-        from .config import ConfigError
         raise ConfigError("--cells", f"must be >= 1, got {args.cells}")
     ok, lines = verify(args.archive, cells=args.cells)
     print("\n".join(lines))
@@ -224,9 +241,7 @@ def main(argv=None):
     """Run a command; every failure is one line on stderr: exit 2 for bad input (a config,
     an argument, a file that is not an archive), 1 for a survey that could not finish (a
     full disk, a busy output), 130 when interrupted."""
-    from .archive import ArchiveError
-    from .config import ConfigError
-    from .sweep import SurveyError
+    from .catalog.errors import ArchiveError, ConfigError, SurveyError
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0].endswith(".toml"):
         argv.insert(0, "run")

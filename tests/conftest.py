@@ -6,7 +6,7 @@ import pytest
 
 sys.path.insert(0, os.path.dirname(__file__))  # tests/reference.py
 
-from survey.dynamics import System, rhs  # noqa: E402
+from survey.physics.system import System, rhs  # noqa: E402
 
 
 @pytest.fixture(scope="session")

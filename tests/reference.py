@@ -10,7 +10,7 @@ import itertools
 
 import numpy as np
 
-from survey.potentials import AREA, POWER, YUKAWA
+from survey.physics.terms import AREA, POWER, YUKAWA
 
 
 def profile_U(code, par, x):

@@ -3,13 +3,16 @@ import math
 
 import numpy as np
 import pytest
+from conftest import area_rate_form
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
-from conftest import area_rate_form
-from survey.dynamics import System, area, perimeter, sides
-from survey.families import initial_state
-from survey.integrator import Event, Quadratic, SidesRate, Status, integrate
+from survey.catalog.status import Status
+from survey.numerics.events import Event, Quadratic, SidesRate
+from survey.numerics.integrate import integrate
+from survey.physics.families import initial_state
+from survey.physics.geometry import area, perimeter, sides
+from survey.physics.system import System
 
 
 def extrema(system, y0, t_final, **kw):

@@ -5,8 +5,8 @@ from pathlib import Path
 import pytest
 import xarray as xr
 
-from survey import orbits
-from survey.sweep import verify
+from survey.pipeline import orbits
+from survey.pipeline.sweep import verify
 
 ROOT = Path(__file__).parents[1]
 RESULTS = ROOT / "results"

@@ -1,0 +1,235 @@
+"""The archive's variables, each declared once: name, units, long name, fill, which cells
+carry it, how a cell's result fills it, whether it is reproducible. Everything else follows
+from VARIABLES: the arrays a task returns, how a cell fills them, the archive's variables and
+attributes, the schema `verify` expects and the README's variable table.
+
+Dimensions: the grid axes (in the order the config writes them), then a variable's own:
+`crossing` (section points, NaN-padded, with n_crossings), `history_time` (convergence
+histories), `component` (phase-space state), `spatial` (3-D vectors), `observable` and
+`fundamental` (torus analysis).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable, NamedTuple
+
+import numpy as np
+
+from .regimes import Regime
+from .status import Status
+
+
+# which cells a variable has values for; elsewhere it holds its fill value
+ALL, STARTED, FINISHED = "all cells", "cells with a start", "cells with status ok or event"
+
+
+class CellResult(NamedTuple):
+    """What one cell computed: the source every archive variable is filled from."""
+
+    status: Status
+    wall_time: float
+    n_steps: int = 0
+    n_rhs: int = 0
+    start: np.ndarray | None = None        # None where no start exists (inaccessible)
+    t_end: float = np.nan
+    energy: Any = np.nan
+    angular_momentum: Any = np.nan
+    energy_error: float = np.nan
+    angular_momentum_error: float = np.nan
+    indicators: Any = None                 # indicators.ChaosIndicators
+    tori: Any = None                       # tori.TorusEvidence
+    n_crossings: int = 0
+    crossing_time: np.ndarray | None = None    # kept crossings
+    crossing_state: np.ndarray | None = None
+    reduced: Any = None                    # coordinates.Reduced of the kept crossings
+
+
+@dataclass(frozen=True)
+class Var:
+    name: str
+    long_name: str
+    value: Callable[[CellResult], Any]     # how a cell's result fills it
+    cells: str = STARTED                   # ALL, STARTED or FINISHED
+    dtype: str = "f8"
+    extra: tuple[str, ...] = ()            # own dimensions after the grid's
+    units: str = "1"
+    reproducible: bool = True              # part of the bit-for-bit contract
+    when: Callable = lambda config: True   # whether a config's archive holds it
+    flags: Any = None                      # an IntEnum: a CF flag variable
+    derived: bool = False                  # computed from the other variables (tori.classify)
+
+    @property
+    def fill(self):
+        return np.nan if self.dtype.startswith("f") else -1
+
+    def attrs(self) -> dict:
+        attrs = {"long_name": self.long_name}
+        if self.flags is not None:
+            attrs["flag_values"] = np.array([s.value for s in self.flags], dtype=np.int8)
+            attrs["flag_meanings"] = " ".join(s.name.lower() for s in self.flags)
+        else:
+            attrs["units"] = self.units
+        if self.derived:
+            attrs["comment"] = "derived by survey.tori.classify from the other variables"
+        elif self.cells != ALL:
+            attrs["comment"] = f"{'NaN' if self.dtype.startswith('f') else '-1'} except in " \
+                               f"{self.cells}"
+        if not self.reproducible:
+            attrs["reproducible"] = "no: differs between runs"
+        return attrs
+
+
+def _which(*names):
+    return lambda c: bool(set(names) & set(c.tables["indicators"]["which"]))
+
+
+def _section(c):
+    return c.tables["section_enabled"]
+
+
+def _planar3(c):
+    s = c.tables["system"]
+    return s["bodies"] == 3 and s["dim"] == 2
+
+
+def _tori(c):
+    return c.tables["tori"]["analyse"]
+
+
+def _torus(name, long_name, value, dtype="f8", extra=(), when=_tori):
+    return Var(name, long_name, value, FINISHED, dtype, extra, when=when)
+
+
+def _indicator(name, long_name, when):
+    return Var(name, long_name, lambda r: getattr(r.indicators, name), FINISHED, when=when)
+
+
+def _history(name, of, when):
+    return Var(f"{name}_history", f"{of} convergence history",
+               lambda r: getattr(r.indicators, f"{name}_history"), FINISHED,
+               extra=("history_time",), when=when)
+
+
+def _reduced_crossing(q):
+    return Var(f"crossing_{q}", f"reduced coordinate {q} at each kept section crossing",
+               lambda r: getattr(r.reduced, q), extra=("crossing",),
+               when=lambda c: _section(c) and _planar3(c))
+
+
+VARIABLES = [
+    Var("status", "integration outcome of the cell", lambda r: r.status, ALL, "i1",
+        flags=Status),
+    Var("regime", "regular or chaotic: the verdict of all the evidence", None, ALL, "i1",
+        flags=Regime, derived=True),
+    Var("regime_confidence", "share of the lines of evidence present that support the "
+                             "regime", None, ALL, derived=True),
+    Var("t_end", "time reached by the integration", lambda r: r.t_end),
+    Var("energy", "energy H at t = 0", lambda r: r.energy),
+    Var("angular_momentum", "total angular momentum at t = 0 (z component in 2-D)",
+        lambda r: r.angular_momentum),
+    Var("energy_error", "max |E(t)/E(0) - 1| over the history times and the end",
+        lambda r: r.energy_error),
+    Var("angular_momentum_error", "max |J(t) - J(0)| / max(|J(0)|, 1) over the same times",
+        lambda r: r.angular_momentum_error),
+    _indicator("ftle", "finite-time maximal Lyapunov exponent at t_end, ensemble mean",
+               _which("ftle")),
+    _indicator("ftle_spread", "standard deviation of the FTLE over deviation vectors and "
+                              "perturbed starts", _which("ftle")),
+    _indicator("megno", "mean exponential growth factor of nearby orbits <Y> at t_end, "
+                        "ensemble mean", _which("megno")),
+    _indicator("megno_spread", "standard deviation of <Y> over the perturbed starts",
+               _which("megno")),
+    _indicator("megno_slope", "least-squares slope d<Y>/dt over the second half of the run "
+                              "(about ftle/2 in chaos)", _which("megno")),
+    _indicator("fli", "fast Lyapunov indicator: max ln(|w|/|w0|) of the first deviation "
+                      "vector", _which("fli")),
+    _indicator("sali", "smaller alignment index of two deviation vectors at t_end",
+               _which("sali")),
+    _indicator("gali2", "generalized alignment index |w1^ ^ w2^| at t_end", _which("gali2")),
+    _indicator("ftle_wba", "weighted Birkhoff average of the growth rate d ln|w|/dt of the "
+                           "first deviation vector (Sander & Meiss 2025)", _which("ftle")),
+    _torus("birkhoff_digits", "weighted Birkhoff digits of convergence at t_end, mean over "
+                              "the observables", lambda r: r.tori.digits),
+    _torus("birkhoff_digits_half", "weighted Birkhoff digits of convergence at t_end / 2, "
+                                   "mean over the observables", lambda r: r.tori.digits_half),
+    _torus("birkhoff_digits_observable", "weighted Birkhoff digits of convergence at t_end "
+                                         "of each observable", lambda r: r.tori.digits_each,
+           extra=("observable",)),
+    _torus("birkhoff_digits_observable_half", "weighted Birkhoff digits of convergence at "
+                                              "t_end / 2 of each observable",
+           lambda r: r.tori.digits_each_half, extra=("observable",)),
+    _torus("frequency", "fundamental frequency in cycles per unit time (mean of the two "
+                        "halves of the orbit)", lambda r: r.tori.frequencies.frequency,
+           extra=("fundamental",)),
+    _torus("frequency_change", "change of each fundamental frequency from the first half "
+                               "of the orbit to the second", lambda r: r.tori.frequencies.change,
+           extra=("fundamental",)),
+    _torus("frequency_diffusion", "log10 max |nu(second half) - nu(first half)| / max |nu|",
+           lambda r: r.tori.frequencies.diffusion),
+    _torus("resonance", "integer vector m of the nearest resonance m . nu = 0",
+           lambda r: r.tori.frequencies.resonance, "i8", ("fundamental",)),
+    _torus("resonance_order", "order |m|_1 of the nearest resonance (-1: none searched)",
+           lambda r: r.tori.frequencies.resonance_order, "i8"),
+    _torus("resonance_distance", "|m . nu| / (|m| max |nu|) of the nearest resonance",
+           lambda r: r.tori.frequencies.resonance_distance),
+    Var("n_steps", "accepted integration steps of the nominal orbit", lambda r: r.n_steps,
+        ALL, "i8"),
+    Var("n_rhs", "right-hand-side evaluations of the nominal orbit", lambda r: r.n_rhs,
+        ALL, "i8"),
+    Var("wall_time", "wall-clock time spent on the cell", lambda r: r.wall_time, ALL,
+        units="s", reproducible=False),
+    Var("initial_state", "phase-space state at t = 0", lambda r: r.start,
+        extra=("component",)),
+    Var("n_crossings", "crossings of the surface of section (all, also those not kept)",
+        lambda r: r.n_crossings, dtype="i8", when=_section),
+    Var("crossing_time", "time of each kept section crossing", lambda r: r.crossing_time,
+        extra=("crossing",), when=_section),
+    *[_reduced_crossing(q) for q in ("sigma", "p_sigma", "eta", "p_eta", "phi", "p_phi")],
+    Var("crossing_state", "phase-space state at each kept section crossing",
+        lambda r: r.crossing_state, extra=("crossing", "component"),
+        when=lambda c: _section(c) and c.tables["section"]["store_state"]),
+    _history("ftle", "FTLE", _which("ftle")),
+    _history("megno", "<Y>", _which("megno")),
+    _history("fli", "FLI", _which("fli")),
+    _history("sali", "SALI", _which("sali")),
+]
+
+
+BY_NAME = {v.name: v for v in VARIABLES}
+
+
+def markdown_table() -> str:
+    """The README's table of archive variables."""
+    lines = ["| variable | meaning | units | dimensions beyond the grid | cells |",
+             "| --- | --- | --- | --- | --- |"]
+    for v in VARIABLES:
+        units = "flags" if v.name == "status" else v.units
+        extra = "spatial (3-D)" if v.name == "angular_momentum" else ", ".join(v.extra)
+        note = "" if v.reproducible else " (not reproducible)"
+        text = (v.long_name + note).replace("|", "\\|").replace("<", "&lt;").replace(">", "&gt;")
+        lines.append(f"| `{v.name}` | {text} | {units} | {extra} | {v.cells} |")
+    return "\n".join(lines)
+
+
+def history_times(t_final: float, points: int) -> np.ndarray:
+    """The time grid of the convergence histories: `points` evenly spaced up to t_final."""
+    return np.linspace(t_final / points, t_final, points)
+
+
+OBSERVABLES = {
+    "perimeter": "sum of all pair distances (the perimeter for three bodies)",
+    "inertia": "moment of inertia about the centre of mass",
+}
+
+
+def shape_dof(n_bodies: int, dim: int) -> int:
+    """Degrees of freedom of the shape: N d minus translations and rotations (3 for three
+    bodies in the plane or in space)."""
+    return n_bodies * dim - dim - dim * (dim - 1) // 2
+
+
+def fundamental_names(n_bodies: int, dim: int) -> list[str]:
+    """The frequencies stored per cell: a basis of shape frequencies, and for three bodies
+    in the plane the rotation frequency of theta."""
+    return [f"shape_{k + 1}" for k in range(shape_dof(n_bodies, dim))] + \
+        (["rotation"] if (n_bodies, dim) == (3, 2) else [])

@@ -1,0 +1,190 @@
+"""Chaos indicators of one orbit, from one integration of the orbit with its tangent vectors.
+
+- FTLE: ln(|w(t)|/|w(0)|)/t with periodic renormalisation and accumulated logs (Benettin
+  et al. 1980), for each of several seeded deviation vectors.
+- MEGNO: Y(t) = (2/t) int_0^t s (w'.w)/|w|^2 ds and <Y>(t) = (1/t) int_0^t Y ds (Cincotta &
+  Simo 2000), accumulated by the driver from L = ln|w| at step ends, integrated by parts (no
+  extra ODE components): <Y> -> 2 on tori, -> 0 at isochronous stable periodic orbits,
+  ~ lambda t / 2 in chaos.
+- FLI: max_{s <= t} ln(|w(s)|/|w(0)|) (Froeschle, Lega & Gonczi 1997).
+- SALI = min(|w1^ + w2^|, |w1^ - w2^|) and GALI_2 = |w1^ ^ w2^| of two deviation vectors
+  (Skokos 2001; Skokos, Bountis & Antonopoulos 2007): -> 0 exponentially in chaos, stay
+  finite on tori.
+
+Single runs of chaotic orbits are not reproducible digit for digit, so each indicator comes
+with a spread over an ensemble: the deviation vectors of the orbit, and optionally orbits
+started a tiny distance away.
+"""
+from __future__ import annotations
+
+import time
+from typing import NamedTuple, Sequence
+
+import numpy as np
+
+from ..catalog.indicators import IndicatorOptions
+from ..catalog.status import Status
+from ..catalog.variables import history_times
+from ..physics.system import System, rhs
+from .events import Crossings, Event
+from .integrate import Outcome, integrate
+
+
+class ChaosIndicators(NamedTuple):
+    status: Status
+    t: float
+    ftle: float            # mean over the ensemble of ln(|w(t)|/|w0|)/t
+    ftle_spread: float     # standard deviation over the ensemble (0 for one member)
+    megno: float           # <Y>(t), mean over the nominal and perturbed orbits
+    megno_spread: float    # 0 without perturbed orbits
+    megno_slope: float     # least-squares d<Y>/dt over the history's second half (~lambda/2)
+    fli: float             # first deviation vector
+    sali: float            # nan with one deviation vector
+    gali2: float
+    history_time: np.ndarray
+    ftle_history: np.ndarray     # ensemble mean of the nominal orbit's vectors
+    megno_history: np.ndarray
+    fli_history: np.ndarray
+    sali_history: np.ndarray
+    ftle_wba: float        # weighted Birkhoff average of the growth rate, first vector
+    energy_error: float    # max |E/E0 - 1| over the history times and the end
+    angular_momentum_error: float   # max |J - J0| / max(|J0|, 1)
+    n_steps: int
+    n_rhs: int
+    crossings: Crossings
+    n_crossings: int
+    outcome: Outcome
+
+
+def _constraints(system: System, y0, project_flow: bool) -> np.ndarray:
+    """Orthonormal rows spanning what a deviation vector must not contain: centre-of-mass
+    shifts (sum m_i dq_i) and boosts (sum dp_i), and optionally the flow f(y0) and grad H."""
+    N, d, n = system.n_bodies, system.dim, system.n
+    rows = []
+    for c in range(d):
+        shift = np.zeros((2, N, d))
+        shift[0, :, c] = system.masses
+        boost = np.zeros((2, N, d))
+        boost[1, :, c] = 1.0
+        rows += [shift.ravel(), boost.ravel()]
+    if project_flow:
+        f = np.zeros(n)
+        rhs(0.0, np.ascontiguousarray(y0, dtype=float), f, *system.kernel_args, 0)
+        rows += [f, np.concatenate([-f[n // 2:], f[:n // 2]])]
+    q, r = np.linalg.qr(np.array(rows).T)
+    return q[:, np.abs(np.diag(r)) > 1e-12 * np.abs(r).max()].T
+
+
+def deviation_vectors(system: System, y0, count: int, seed: int, cell: int = 0,
+                      project_flow: bool = False, stream: int = 0) -> np.ndarray:
+    """`count` unit deviation vectors (count, n), random from (seed, cell, stream) alone --
+    the same whatever the chunking of a survey -- with zero total position and momentum
+    deviation (such a vector never grows and reports every orbit regular)."""
+    rng = np.random.default_rng([seed, cell, stream])
+    w = rng.normal(size=(count, system.n))
+    C = _constraints(system, y0, project_flow)
+    w -= (w @ C.T) @ C
+    return w / np.linalg.norm(w, axis=1, keepdims=True)
+
+
+def _sali(w1, w2):
+    """SALI and GALI_2 of two deviation vectors. For unit a, b: |a + b|^2 |a - b|^2 =
+    4 (1 - (a.b)^2), so GALI_2 = |a ^ b| = |a + b| |a - b| / 2 -- from the components,
+    without the cancellation of sqrt(1 - c^2) that stops GALI_2 near 1e-8."""
+    a = w1 / np.linalg.norm(w1, axis=-1, keepdims=True)
+    b = w2 / np.linalg.norm(w2, axis=-1, keepdims=True)
+    plus, minus = np.linalg.norm(a + b, axis=-1), np.linalg.norm(a - b, axis=-1)
+    return np.minimum(plus, minus), 0.5 * plus * minus
+
+
+def _ls_slope(t, v):
+    ok = np.isfinite(v)
+    t, v = t[ok], v[ok]
+    if t.size < 2:
+        return np.nan
+    t0 = t - t.mean()
+    return float(np.dot(t0, v - v.mean()) / np.dot(t0, t0))
+
+
+def conservation_errors(system: System, y0, states):
+    """max |E/E0 - 1| and max |J - J0| / max(|J0|, 1) over states (k, n)."""
+    E0, J0 = system.energy(y0), system.angular_momentum(y0)
+    dJ = np.reshape(system.angular_momentum(states) - J0, (len(states), -1))
+    return (float(np.max(np.abs(system.energy(states) / E0 - 1))),
+            float(np.max(np.linalg.norm(dJ, axis=1)) / max(np.linalg.norm(J0), 1.0)))
+
+
+def chaos_indicators(system: System, y0, t_final: float, options=IndicatorOptions(), *,
+                     cell: int = 0, events: Sequence[Event] = (), rtol=1e-12, atol=1e-12,
+                     max_steps=10_000_000, max_events=100_000, time_limit=0.0,
+                     control_tangents=False, t_fine=None) -> ChaosIndicators:
+    """Integrate y0 to t_final with `options.deviations` tangent vectors and their MEGNO
+    accumulators (plus `options.perturbations` nearby orbits) and return the indicators,
+    their ensemble spread and convergence histories, and any section crossings.
+    time_limit (wall-clock seconds, 0 for none) is the budget of all these integrations
+    together; when it runs out the status is TIME_LIMIT. t_fine: times at which the nominal
+    orbit is sampled for the torus analysis (Outcome.fine)."""
+    o = options
+    y0 = np.asarray(y0, dtype=float)
+    n = system.n
+    history = history_times(t_final, o.history_points)
+    deadline = time.perf_counter() + time_limit if time_limit > 0 else None
+
+    def left():    # the kernel's time_limit for the next integration: 0 means none
+        return 0.0 if deadline is None else deadline - time.perf_counter()
+
+    run = dict(rtol=rtol, atol=atol, max_steps=max_steps, renorm_interval=o.renorm_interval,
+               control_tangents=control_tangents)
+    kw = dict(megno=True, t_eval=history, sample_tangents=True, **run)
+    w0 = deviation_vectors(system, y0, o.deviations, o.seed, cell, o.project_flow)
+    out = integrate(system, y0, t_final, tangents=w0, events=events, max_events=max_events,
+                    time_limit=left(), t_fine=t_fine, **kw)
+    status = out.status
+    k = o.deviations
+    reached = ~np.isnan(history) & (history <= out.t)
+    th = np.where(reached, history, np.nan)
+    tang = out.samples[:, n:n * (1 + k)].reshape(-1, k, n)
+    z = out.sample_megno
+    ftle_h = out.sample_log_growth / th[:, None]
+    megno_h = z[:, 1] / th
+
+    ftles = list(out.log_growth / out.t) if out.t > 0 else [np.nan] * k
+    megnos = [out.megno_sums[1] / out.t if out.t > 0 else np.nan]
+    for j in range(o.perturbations if status.finished else 0):
+        if deadline is not None and left() <= 0:
+            status = Status.TIME_LIMIT
+            break
+        xi = deviation_vectors(system, y0, 1, o.seed, cell, stream=1 + j)[0]
+        yp = y0 + o.perturbation_size * np.linalg.norm(y0) * xi
+        wp = deviation_vectors(system, yp, 1, o.seed, cell, o.project_flow, stream=1 + j)
+        res = integrate(system, yp, t_final, tangents=wp, megno=True, time_limit=left(), **run)
+        if res.status == Status.TIME_LIMIT:
+            status = Status.TIME_LIMIT
+            break
+        if res.ok and res.t > 0:
+            ftles.append(res.log_growth[0] / res.t)
+            megnos.append(res.megno_sums[1] / res.t)
+    spread = lambda v: float(np.std(v, ddof=1)) if len(v) > 1 else 0.0
+
+    if k >= 2:
+        sali_h, _ = _sali(tang[:, 0], tang[:, 1])
+        sali, gali2 = _sali(out.tangents[0], out.tangents[1])
+    else:
+        sali_h = np.full(history.size, np.nan)
+        sali = gali2 = np.nan
+    fli_h = np.fmax.accumulate(np.where(reached, out.sample_log_growth[:, 0], -np.inf))
+    fli_h[~reached] = np.nan
+
+    dE, dJ = conservation_errors(system, y0, np.concatenate([out.samples[reached, :n], [out.y]]))
+    half = history >= 0.5 * t_final
+    return ChaosIndicators(
+        status=status, t=out.t,
+        ftle=float(np.mean(ftles)), ftle_spread=spread(ftles),
+        megno=float(np.mean(megnos)), megno_spread=spread(megnos),
+        megno_slope=_ls_slope(th[half], megno_h[half]),
+        fli=float(out.fli[0]), sali=float(sali), gali2=float(gali2), ftle_wba=out.ftle_wba,
+        history_time=history, ftle_history=ftle_h.mean(axis=1),
+        megno_history=megno_h, fli_history=fli_h, sali_history=sali_h,
+        energy_error=dE, angular_momentum_error=dJ,
+        n_steps=out.n_steps, n_rhs=out.n_rhs, crossings=out.crossings,
+        n_crossings=out.n_crossings, outcome=out)

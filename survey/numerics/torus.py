@@ -1,0 +1,265 @@
+"""Is an orbit on a KAM torus? Two lines of evidence computed from the orbit sampled at a
+fixed interval (the `fine` output of the integrator), in the worker beside the variational
+indicators:
+
+- Weighted Birkhoff averages (Das, Saiki, Sander & Yorke, Nonlinearity 30 (2017); Sander &
+  Meiss, Physica D 411 (2020); Duignan & Meiss, Physica D 449 (2023) for flows). With the
+  weight g(s) = exp(-1/(s(1-s))) the average of a smooth observable converges faster than
+  any power of T on a quasi-periodic orbit and like T^-1/2 on a chaotic one. The digits
+  dig = -log10 |WB(h; first half) - WB(h; second half)| / rms(h) are computed for each
+  observable at T and at T/2 (a torus gains digits with time, chaos does not), capped at
+  the precision the integration itself reached (its relative energy error). Observables are
+  symmetric in the bodies: the sum of pair distances (the perimeter for three bodies) and
+  the moment of inertia. Individual side lengths converge slowly even on tori (the shape
+  drifts slowly among permutations), and the kinetic energy's average is pinned by the
+  virial theorem on every bounded orbit: neither separates anything.
+- Frequency analysis (Laskar, Physica D 67 (1993) 257) with NAFF: the leading
+  lines of complex shape signals (three bodies in the plane: sigma + i c p_sigma, eta + i c
+  p_eta, phi + i c p_phi; otherwise the perimeter and the moment of inertia) on each half
+  of the orbit, a basis of fundamental shape frequencies built from them (a line that is a
+  low-order integer combination of the basis so far adds nothing), the rotation frequency
+  of theta, the diffusion log10 |nu(2) - nu(1)| / |nu|, and the nearest resonance
+  m . nu = 0.
+
+`survey.analysis.classify` then decides each cell's regime from all the evidence an archive
+stores.
+"""
+from __future__ import annotations
+
+import itertools
+import math
+from functools import lru_cache
+from typing import NamedTuple
+
+import numpy as np
+
+from ..catalog.variables import OBSERVABLES, fundamental_names, shape_dof
+from ..physics.jacobi import reduced
+
+
+def birkhoff_average(h: np.ndarray) -> np.ndarray:
+    """Weighted Birkhoff average along the last axis of samples taken at equal intervals,
+    midpoint rule with g(s) = exp(-1/(s(1-s))) (its integral is then spectrally accurate)."""
+    n = h.shape[-1]
+    s = (np.arange(n) + 0.5) / n
+    g = np.exp(-1.0 / (s * (1.0 - s)))
+    return h @ (g / g.sum())
+
+
+def birkhoff_digits(h: np.ndarray, cap: float) -> float:
+    """-log10 of the relative difference between the weighted averages over the two halves
+    of h, at most `cap` (an exact match, or one below the integration's precision)."""
+    half = h.size // 2
+    if half < 8:
+        return np.nan
+    scale = math.sqrt(float(np.mean(h * h)))
+    diff = abs(birkhoff_average(h[:half]) - birkhoff_average(h[half:2 * half]))
+    if scale == 0 or diff == 0:
+        return cap
+    return min(-math.log10(diff / scale), cap)
+
+
+def observable(name: str, system, states: np.ndarray) -> np.ndarray:
+    q, _ = system.split(states)
+    if name == "perimeter":
+        N = system.n_bodies
+        i, j = np.triu_indices(N, 1)
+        return np.linalg.norm(q[..., i, :] - q[..., j, :], axis=-1).sum(axis=-1)
+    if name == "inertia":
+        return system.moment_of_inertia(states)
+    raise ValueError(f"unknown observable {name!r}; choose from {', '.join(OBSERVABLES)}")
+
+
+def _rms(x):
+    return float(np.sqrt(np.mean(x * x)))
+
+
+def _centred(x, p):
+    """x - <x> + i c p with c making the phase portrait round (NAFF then sees one line per
+    oscillation, not a +- pair); None if x does not move (a stationary shape)."""
+    dx, dp = x - x.mean(), p - p.mean()
+    if _rms(dx) <= 1e-9 * max(_rms(x), 1e-300):
+        return None
+    return dx + 1j * (_rms(dx) / _rms(dp)) * dp if _rms(dp) > 0 else dx + 0j
+
+
+def signals(system, states: np.ndarray):
+    """Complex shape signals (those that move) and the rotation signal (or None)."""
+    if system.n_bodies == 3 and system.dim == 2:
+        r = reduced(system, states)
+        phi = np.unwrap(r.phi)
+        shape = [_centred(r.sigma, r.p_sigma), _centred(r.eta, r.p_eta),
+                 _centred(phi, r.p_phi) if np.ptp(phi) < 2 * np.pi else np.exp(1j * phi)]
+        return [z for z in shape if z is not None], np.exp(1j * r.theta)
+    shape = [_centred(observable(name, system, states), np.gradient(
+        observable(name, system, states))) for name in OBSERVABLES]
+    return [z for z in shape if z is not None], None
+
+
+def naff(z: np.ndarray, count: int):
+    """Laskar's NAFF: the `count` strongest lines of a signal z_n sampled at n = 0..N-1, as
+    frequencies in cycles per sample and complex amplitudes, strongest first. Each line is
+    the maximum of |sum_n z_n w_n exp(-2 pi i f n)| (w: Hann window squared), found from
+    the FFT peak by Newton steps on the exact derivatives, then subtracted from the signal.
+
+    Written here rather than taken from nafflib: nafflib compiles its numba kernels in every
+    process with no disk cache (about 1 s per dask worker and survey, more than the whole
+    analysis of a short survey); the tests check this one against it."""
+    z = np.array(z, dtype=complex)
+    N = z.size
+    n = np.arange(N, dtype=float)
+    w = (1.0 - np.cos(2.0 * np.pi * (n + 0.5) / N)) ** 2
+    wsum = w.sum()
+    freqs, amps = np.zeros(count), np.zeros(count, dtype=complex)
+    for line in range(count):
+        zw = z * w
+        moments = np.stack([zw, zw * n, zw * n * n])
+        k = int(np.argmax(np.abs(np.fft.fft(zw))))
+        f = k / N if k <= N // 2 else k / N - 1.0
+        for _ in range(30):
+            F, F1, F2 = moments @ _phasors(-f, N)
+            F1, F2 = -2j * np.pi * F1, -4 * np.pi ** 2 * F2
+            grad = 2.0 * (np.conj(F) * F1).real            # d|F|^2/df
+            curv = 2.0 * (abs(F1) ** 2 + (np.conj(F) * F2).real)
+            step = -grad / curv if curv < 0 else 0.25 * np.sign(grad) / N
+            step = float(np.clip(step, -0.5 / N, 0.5 / N))
+            f += step
+            if abs(step) < 1e-15:
+                break
+        e = _phasors(f, N)
+        amp = (zw @ np.conj(e)) / wsum
+        freqs[line], amps[line] = f, amp
+        z -= amp * e
+    return freqs, amps
+
+
+def _phasors(f: float, N: int) -> np.ndarray:
+    """exp(2 pi i f n), n = 0..N-1, as powers of exp(2 pi i f): a fifth of the cost of N
+    complex exponentials; the phase drifts by ~N eps, far below the window's resolution."""
+    r = np.full(N, np.exp(2j * np.pi * f))
+    r[0] = 1.0
+    return np.cumprod(r)
+
+
+def spectral_lines(z: np.ndarray, dt: float, count: int):
+    """The `count` strongest lines of z sampled every dt: frequencies in cycles per unit
+    time and amplitudes relative to the strongest."""
+    freq, amp = naff(z, count)
+    amp = np.abs(amp)
+    return freq / dt, amp / amp.max() if amp.max() > 0 else amp
+
+
+@lru_cache(maxsize=16)
+def integer_vectors(dim: int, order: int) -> np.ndarray:
+    """Integer vectors m with 1 <= |m|_1 <= order, first nonzero entry positive, by order."""
+    out = [m for m in itertools.product(range(-order, order + 1), repeat=dim)
+           if 0 < sum(map(abs, m)) <= order and next(x for x in m if x) > 0]
+    return np.array(sorted(out, key=lambda m: sum(map(abs, m))), dtype=np.int64).reshape(-1, dim)
+
+
+def frequency_basis(lines, max_dim: int, order: int, tol: float,
+                    resolution: float) -> list[float]:
+    """Greedy basis of fundamental frequencies from pooled lines (frequency, relative
+    amplitude), strongest first. A line closer than `resolution` (the Fourier resolution of
+    the samples, 1/duration) to one already taken is the same line seen in another signal;
+    a line within tol (relative) of an integer combination of order <= `order` of the basis
+    so far is a harmonic or a combination, not a new frequency."""
+    basis: list[float] = []
+    taken: list[float] = []
+    scale = max((abs(f) for f, _ in lines), default=1.0)
+    for f, a in sorted(lines, key=lambda x: -x[1]):
+        if a < 1e-6 or abs(f) < 1e-6 * scale:       # noise, or the mean of an angle's drift
+            continue
+        if any(abs(f - g) < resolution for g in taken):
+            continue
+        taken.append(f)
+        if basis:
+            combos = integer_vectors(len(basis), order) @ np.array(basis)
+            if np.min(np.abs(np.concatenate([combos, -combos]) - f)) <= tol * scale:
+                continue
+        basis.append(f)
+        if len(basis) == max_dim:
+            break
+    return basis
+
+
+class Frequencies(NamedTuple):
+    frequency: np.ndarray       # (fundamental,) cycles per unit time, NaN-padded
+    change: np.ndarray          # (fundamental,) nu(second half) - nu(first half)
+    diffusion: float            # log10 max |nu(2) - nu(1)| / max |nu|
+    resonance: np.ndarray       # (fundamental,) integer vector of the nearest resonance
+    resonance_order: int        # its |m|_1 (-1: none searched)
+    resonance_distance: float   # |m . nu| / (|m| max|nu|)
+
+
+def frequency_analysis(system, states: np.ndarray, dt: float, lines: int = 5,
+                       order: int = 6, tol: float = 1e-6) -> Frequencies:
+    """Fundamental frequencies on the two halves of an orbit sampled every dt, their
+    diffusion, and the nearest resonance of order <= `order`."""
+    names = fundamental_names(system.n_bodies, system.dim)
+    k = len(names)
+    nan = Frequencies(np.full(k, np.nan), np.full(k, np.nan), np.nan, np.zeros(k, np.int64),
+                      -1, np.nan)
+    half = states.shape[0] // 2
+    if half < 64:
+        return nan
+    pooled, rotation = [], []
+    for part in (slice(0, half), slice(half, 2 * half)):
+        shape, rot = signals(system, states[part])
+        found = []
+        for z in shape:
+            f, a = spectral_lines(z, dt, lines)
+            found += list(zip(f, a))
+        pooled.append(found)
+        rotation.append(spectral_lines(rot, dt, 1)[0][0] if rot is not None else np.nan)
+    basis = frequency_basis(pooled[0], shape_dof(system.n_bodies, system.dim), order, tol,
+                            1.0 / (half * dt))
+    second = np.array([f for f, _ in pooled[1]]) if pooled[1] else np.zeros(0)
+    nu1, nu2 = [], []
+    for b in basis:   # each frequency of the first half, matched to the second half's lines
+        nu1.append(b)
+        nu2.append(second[np.argmin(np.abs(second - b))] if second.size else np.nan)
+    if "rotation" in names:
+        nu1.append(rotation[0])
+        nu2.append(rotation[1])
+    nu1, nu2 = np.array(nu1, float), np.array(nu2, float)
+    freq, change = np.full(k, np.nan), np.full(k, np.nan)
+    n_shape = len(basis)
+    cols = list(range(n_shape)) + ([k - 1] if "rotation" in names else [])
+    freq[cols] = 0.5 * (nu1 + nu2)
+    change[cols] = nu2 - nu1
+    known = np.isfinite(freq)
+    if not known.any():
+        return nan
+    scale = np.max(np.abs(freq[known]))
+    diffusion = math.log10(max(float(np.max(np.abs(change[known]))) / scale, 1e-16))
+    m, order_found, distance = np.zeros(k, np.int64), -1, np.nan
+    if known.sum() >= 2:
+        vectors = integer_vectors(int(known.sum()), order)
+        dist = np.abs(vectors @ freq[known]) / (np.linalg.norm(vectors, axis=1) * scale)
+        best = int(np.argmin(dist))
+        m[known] = vectors[best]
+        order_found, distance = int(np.abs(vectors[best]).sum()), float(dist[best])
+    return Frequencies(freq, change, diffusion, m, order_found, distance)
+
+
+class TorusEvidence(NamedTuple):
+    digits_each: np.ndarray        # (observable,) at T
+    digits_each_half: np.ndarray   # (observable,) at T/2
+    digits: float                  # combined: mean over observables, at T
+    digits_half: float             # at T/2
+    frequencies: Frequencies
+
+
+def analyse(system, fine: np.ndarray, dt: float, energy_error: float, observables,
+            lines: int, order: int) -> TorusEvidence:
+    """The torus evidence of one orbit sampled every dt (fine: states (k, n), NaN past the
+    end reached)."""
+    done = fine[~np.isnan(fine[:, 0])]
+    cap = -math.log10(max(energy_error, 16 * np.finfo(float).eps)) \
+        if np.isfinite(energy_error) else np.nan
+    values = [observable(o, system, done) for o in observables]
+    at_t = np.array([birkhoff_digits(h, cap) for h in values])
+    at_half = np.array([birkhoff_digits(h[:h.size // 2], cap) for h in values])
+    return TorusEvidence(at_t, at_half, float(np.mean(at_t)), float(np.mean(at_half)),
+                         frequency_analysis(system, done, dt, lines, order))

@@ -1,0 +1,263 @@
+"""Energy, forces and tangent (Hessian-vector) forces of one triplet or one pair, compiled.
+
+A *profile* gives U, U' and U'' as functions of a triangle's measure x or a pair's distance
+r. Forces use vector forms (bisector forces for P, altitude forces for |A|, with the area
+vector in 3-D; ATM through the side vectors' dot products), not chain rules through side
+lengths or angles, which are ill-conditioned near collinear triangles. 2-D vectors are
+handled as 3-vectors with z = 0.
+"""
+from __future__ import annotations
+
+import math
+
+from .jit import helper, kernel
+from .terms import BARRIER, PERIMETER, POWER, YUKAWA
+
+
+@helper
+def vec(a, off, d):
+    """Components off..off+d of a flat array as a 3-tuple (z = 0 in 2-D)."""
+    if d == 3:
+        return (a[off], a[off + 1], a[off + 2])
+    return (a[off], a[off + 1], 0.0)
+
+
+@helper
+def add_to(a, off, d, s, v):
+    """a[off:off+d] += s * v."""
+    a[off] += s * v[0]
+    a[off + 1] += s * v[1]
+    if d == 3:
+        a[off + 2] += s * v[2]
+
+
+@helper
+def sub(a, b):
+    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
+
+
+@helper
+def axpy(s, a, b):
+    """s * a + b."""
+    return (s * a[0] + b[0], s * a[1] + b[1], s * a[2] + b[2])
+
+
+@helper
+def dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@helper
+def cross(a, b):
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+@helper
+def norm(a):
+    return math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+
+
+@helper
+def profile(code, par, x):
+    """U(x), U'(x), U''(x) of a profile."""
+    if code == POWER:
+        c, k = par[0], par[1]
+        if k == 2.0:
+            return 0.5 * c * x * x, c * x, c
+        if k == 0.0:
+            return c * math.log(x), c / x, -c / (x * x)
+        xk2 = x ** (k - 2.0)
+        return c * xk2 * x * x / k, c * xk2 * x, c * (k - 1.0) * xk2
+    if code == YUKAWA:
+        c, g = par[0], par[1]
+        e = math.exp(-g * x)
+        return (-c * e / x, c * e * (g * x + 1.0) / (x * x),
+                -c * e * (g * g * x * x + 2.0 * g * x + 2.0) / (x * x * x))
+    if code == BARRIER:
+        a, b = par[0], par[1]
+        return a / x + b * x * x, -a / (x * x) + 2.0 * b * x, 2.0 * a / (x * x * x) + 2.0 * b
+    eps, r6 = par[0], (par[1] / x) ** 6     # LENNARD_JONES
+    return (4.0 * eps * (r6 * r6 - r6), 24.0 * eps * (r6 - 2.0 * r6 * r6) / x,
+            24.0 * eps * (26.0 * r6 * r6 - 7.0 * r6) / (x * x))
+
+
+@kernel
+def triplet_measure(q, i, j, k, d, measure):
+    """Perimeter, or |A|, of the triangle of bodies i, j, k (positions q, flat)."""
+    u, v, w = vec(q, i * d, d), vec(q, j * d, d), vec(q, k * d, d)
+    if measure == PERIMETER:
+        return norm(sub(v, u)) + norm(sub(w, v)) + norm(sub(u, w))
+    return 0.5 * norm(cross(sub(v, u), sub(w, u)))
+
+
+@helper
+def _unit(a):
+    L = norm(a)
+    r = 1.0 / L
+    return (a[0] * r, a[1] * r, a[2] * r), L
+
+
+@helper
+def _pair_tangent(e, L, dr, dP, U1, U2):
+    """Variation of U'(P) e for one side: U'' dP e + U' (I - e e^T) dr / L."""
+    s = U1 / L
+    return axpy(U2 * dP - s * dot(e, dr), e, (s * dr[0], s * dr[1], s * dr[2]))
+
+
+@helper
+def _add_cyclic(dy, off, i, j, k, d, s, g1, g2, g3):
+    """Add s times the derivatives along the sides i->j, j->k, k->i (g1, g2, g3) to bodies
+    i, j, k: -dU/dq_i = g1 - g3, and cyclic."""
+    add_to(dy, off + i * d, d, s, sub(g1, g3))
+    add_to(dy, off + j * d, d, s, sub(g2, g1))
+    add_to(dy, off + k * d, d, s, sub(g3, g2))
+
+
+@helper
+def perimetric_forces(y, dy, i, j, k, d, n, n_tan, prof, par):
+    """Add the forces of triplet (i, j, k) under U(P) to dy's momentum rates, and for each
+    tangent vector t (stored at y[n*(1+t):]) its tangent force -Hess U . dq to dy at the
+    same offsets (the paper's one-jet, Appendix E)."""
+    nq = n // 2
+    u, v, w = vec(y, i * d, d), vec(y, j * d, d), vec(y, k * d, d)
+    # unit vectors along the sides i->j, j->k, k->i; the force on a body is U'(P) times the
+    # sum of the unit vectors towards its two neighbours: it bisects the interior angle.
+    e1, L1 = _unit(sub(v, u))
+    e2, L2 = _unit(sub(w, v))
+    e3, L3 = _unit(sub(u, w))
+    _, U1, U2 = profile(prof, par, L1 + L2 + L3)
+    _add_cyclic(dy, nq, i, j, k, d, U1, e1, e2, e3)
+    for t in range(n_tan):
+        base = n * (1 + t)
+        du, dv, dw = vec(y, base + i * d, d), vec(y, base + j * d, d), vec(y, base + k * d, d)
+        r1, r2, r3 = sub(dv, du), sub(dw, dv), sub(du, dw)
+        dP = dot(e1, r1) + dot(e2, r2) + dot(e3, r3)
+        g1 = _pair_tangent(e1, L1, r1, dP, U1, U2)
+        g2 = _pair_tangent(e2, L2, r2, dP, U1, U2)
+        g3 = _pair_tangent(e3, L3, r3, dP, U1, U2)
+        _add_cyclic(dy, base + nq, i, j, k, d, 1.0, g1, g2, g3)
+
+
+@helper
+def areal_forces(y, dy, i, j, k, d, n, n_tan, prof, par):
+    """As perimetric_forces, for U(|A|)."""
+    nq = n // 2
+    u, v, w = vec(y, i * d, d), vec(y, j * d, d), vec(y, k * d, d)
+    # grad_u |A| = (v - w) x Ahat / 2 (cyclic): the force on a body is parallel to its
+    # altitude. A collinear start (|A| = 0) gets Ahat = 0, the limit of a smooth profile.
+    A = cross(sub(v, u), sub(w, u))
+    A = (0.5 * A[0], 0.5 * A[1], 0.5 * A[2])
+    absA = norm(A)
+    inv = 1.0 / absA if absA > 0.0 else 0.0
+    Ah = (A[0] * inv, A[1] * inv, A[2] * inv)
+    _, U1, U2 = profile(prof, par, absA)
+    svw, swu, suv = sub(v, w), sub(w, u), sub(u, v)
+    Gu, Gv, Gw = cross(svw, Ah), cross(swu, Ah), cross(suv, Ah)   # each 2 grad |A|
+    add_to(dy, nq + i * d, d, -0.5 * U1, Gu)
+    add_to(dy, nq + j * d, d, -0.5 * U1, Gv)
+    add_to(dy, nq + k * d, d, -0.5 * U1, Gw)
+    for t in range(n_tan):
+        base = n * (1 + t)
+        du, dv, dw = vec(y, base + i * d, d), vec(y, base + j * d, d), vec(y, base + k * d, d)
+        c1, c2, c3 = cross(du, svw), cross(dv, swu), cross(dw, suv)
+        dA = (0.5 * (c1[0] + c2[0] + c3[0]), 0.5 * (c1[1] + c2[1] + c3[1]),
+              0.5 * (c1[2] + c2[2] + c3[2]))
+        dabs = dot(Ah, dA)
+        dAh = axpy(-dabs * inv, Ah, (dA[0] * inv, dA[1] * inv, dA[2] * inv))
+        off = base + nq
+        a = -0.5 * U2 * dabs
+        b = -0.5 * U1
+        add_to(dy, off + i * d, d, a, Gu)
+        add_to(dy, off + i * d, d, b, axpy(1.0, cross(sub(dv, dw), Ah), cross(svw, dAh)))
+        add_to(dy, off + j * d, d, a, Gv)
+        add_to(dy, off + j * d, d, b, axpy(1.0, cross(sub(dw, du), Ah), cross(swu, dAh)))
+        add_to(dy, off + k * d, d, a, Gw)
+        add_to(dy, off + k * d, d, b, axpy(1.0, cross(sub(du, dv), Ah), cross(suv, dAh)))
+
+
+@helper
+def _atm_h(c, s, A, B, sb, C, sc):
+    """Q^(5/2)/Z times dU/ds for one side s of the ATM triangle (see atm_forces)."""
+    return axpy(c, s, axpy(-3.0 * A * B, sb, (-3.0 * A * C * sc[0], -3.0 * A * C * sc[1],
+                                               -3.0 * A * C * sc[2])))
+
+
+@helper
+def _atm_dh(c, dc, s, r, A, dA, B, dB, sb, rb, C, dC, sc, rc):
+    """Variation of _atm_h along side variations r, rb, rc."""
+    out = axpy(dc, s, (c * r[0], c * r[1], c * r[2]))
+    out = axpy(-3.0 * (dA * B + A * dB), sb, out)
+    out = axpy(-3.0 * (dA * C + A * dC), sc, out)
+    out = axpy(-3.0 * A * B, rb, out)
+    return axpy(-3.0 * A * C, rc, out)
+
+
+@helper
+def atm_energy(u, v, w, Z):
+    """Axilrod-Teller-Muto energy of one triangle. With side vectors s1 = v - u,
+    s2 = w - v, s3 = u - w, Q = |s1|^2 |s2|^2 |s3|^2 and D = (s1.s2)(s2.s3)(s3.s1), the
+    cosines' product is -D/Q and U = Z (Q - 3 D) / Q^(5/2): polynomials in the sides, with
+    no angle or side length to lose accuracy near collinear triangles."""
+    s1, s2, s3 = sub(v, u), sub(w, v), sub(u, w)
+    Q = dot(s1, s1) * dot(s2, s2) * dot(s3, s3)
+    D = dot(s1, s2) * dot(s2, s3) * dot(s3, s1)
+    return Z * (Q - 3.0 * D) / (Q * Q * math.sqrt(Q))
+
+
+@helper
+def atm_forces(y, dy, i, j, k, d, n, n_tan, par):
+    """As perimetric_forces, for the Axilrod-Teller-Muto potential of strength par[0].
+    dU/ds1 = Z Q^(-5/2) ((15 D - 3 Q) s1 / |s1|^2 - 3 (s2.s3) ((s3.s1) s2 + (s1.s2) s3))
+    (cyclic), and the force on u is dU/ds1 - dU/ds3 (s1 = v - u, s3 = u - w)."""
+    nq = n // 2
+    Z = par[0]
+    u, v, w = vec(y, i * d, d), vec(y, j * d, d), vec(y, k * d, d)
+    s1, s2, s3 = sub(v, u), sub(w, v), sub(u, w)
+    l1, l2, l3 = dot(s1, s1), dot(s2, s2), dot(s3, s3)
+    a12, a23, a31 = dot(s1, s2), dot(s2, s3), dot(s3, s1)
+    Q = l1 * l2 * l3
+    D = a12 * a23 * a31
+    W = Z / (Q * Q * math.sqrt(Q))
+    num = 15.0 * D - 3.0 * Q
+    c1, c2, c3 = num / l1, num / l2, num / l3
+    H1 = _atm_h(c1, s1, a23, a31, s2, a12, s3)
+    H2 = _atm_h(c2, s2, a31, a12, s3, a23, s1)
+    H3 = _atm_h(c3, s3, a12, a23, s1, a31, s2)
+    _add_cyclic(dy, nq, i, j, k, d, W, H1, H2, H3)
+    for t in range(n_tan):
+        base = n * (1 + t)
+        du, dv, dw = vec(y, base + i * d, d), vec(y, base + j * d, d), vec(y, base + k * d, d)
+        r1, r2, r3 = sub(dv, du), sub(dw, dv), sub(du, dw)
+        dl1, dl2, dl3 = 2.0 * dot(s1, r1), 2.0 * dot(s2, r2), 2.0 * dot(s3, r3)
+        da12 = dot(s1, r2) + dot(r1, s2)
+        da23 = dot(s2, r3) + dot(r2, s3)
+        da31 = dot(s3, r1) + dot(r3, s1)
+        dQ = dl1 * l2 * l3 + l1 * dl2 * l3 + l1 * l2 * dl3
+        dD = da12 * a23 * a31 + a12 * da23 * a31 + a12 * a23 * da31
+        dW = -2.5 * W * dQ / Q
+        dcc = 15.0 * dD - 3.0 * dQ
+        dH1 = _atm_dh(c1, (dcc - c1 * dl1) / l1, s1, r1, a23, da23, a31, da31, s2, r2,
+                      a12, da12, s3, r3)
+        dH2 = _atm_dh(c2, (dcc - c2 * dl2) / l2, s2, r2, a31, da31, a12, da12, s3, r3,
+                      a23, da23, s1, r1)
+        dH3 = _atm_dh(c3, (dcc - c3 * dl3) / l3, s3, r3, a12, da12, a23, da23, s1, r1,
+                      a31, da31, s2, r2)
+        _add_cyclic(dy, base + nq, i, j, k, d, dW, H1, H2, H3)
+        _add_cyclic(dy, base + nq, i, j, k, d, W, dH1, dH2, dH3)
+
+
+@helper
+def pair_forces(y, dy, i, j, d, n, n_tan, prof, par):
+    """As perimetric_forces, for a pair potential U(r) of bodies i and j: the force on i is
+    U'(r) along the unit vector towards j, its tangent force the variation of that."""
+    nq = n // 2
+    e, L = _unit(sub(vec(y, j * d, d), vec(y, i * d, d)))
+    _, U1, U2 = profile(prof, par, L)
+    add_to(dy, nq + i * d, d, U1, e)
+    add_to(dy, nq + j * d, d, -U1, e)
+    for t in range(n_tan):
+        base = n * (1 + t)
+        r = sub(vec(y, base + j * d, d), vec(y, base + i * d, d))
+        g = _pair_tangent(e, L, r, dot(e, r), U1, U2)
+        add_to(dy, base + nq + i * d, d, 1.0, g)
+        add_to(dy, base + nq + j * d, d, -1.0, g)

@@ -1,0 +1,52 @@
+"""How survey compiles: the two numba decorators every kernel uses, and the invalidation of
+numba's disk cache when kernel sources change.
+
+numba's disk cache is keyed by each function's own source file, so a kernel that inlines
+code from another module (rhs inlines the forces of forces.py, the driver inlines rhs), or
+freezes another module's constants (the status codes), would keep stale machine code after
+that module changes. Importing this module (every compiled module does, first) clears
+survey's cached kernels whenever the kernel modules' sources have changed.
+"""
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+from numba import njit
+
+PACKAGE = Path(__file__).parents[1]
+# the modules whose source compiled code depends on, and the folders their caches live in
+SOURCES = ("catalog/status.py", "physics/*.py", "numerics/*.py", "bench.py")
+CACHES = ("__pycache__", "physics/__pycache__", "numerics/__pycache__")
+
+
+def refresh_kernel_cache(package: Path = PACKAGE):
+    """Delete the cached kernels when the hash of the kernel sources differs from the one
+    recorded beside them (then record it)."""
+    files = sorted(f for pattern in SOURCES for f in package.glob(pattern))
+    digest = hashlib.sha256(b"".join(f.read_bytes() for f in files)).hexdigest()
+    stamp = package / "__pycache__" / "kernels.sha256"
+    try:
+        if stamp.read_text() == digest:
+            return
+    except OSError:
+        pass
+    try:
+        for folder in CACHES:
+            for f in (package / folder).glob("*.nb[ic]"):
+                f.unlink(missing_ok=True)
+        stamp.parent.mkdir(exist_ok=True)
+        stamp.write_text(digest)
+    except OSError:   # a read-only install: numba then compiles in memory
+        pass
+
+
+refresh_kernel_cache()
+
+# Every compiled function: cached on disk, and IEEE arithmetic (inf/nan, never a Python
+# exception such as ZeroDivisionError from inside a kernel; the integrator turns
+# non-finite values into a status).
+kernel = njit(cache=True, error_model="numpy")
+# small helpers are inlined at numba-IR level: calls between separately compiled functions
+# otherwise cost more than the arithmetic (3x on the right-hand side).
+helper = njit(cache=True, error_model="numpy", inline="always")

@@ -1,0 +1,56 @@
+"""What a worker builds from a config's tables: a cell's System (its interaction terms, with
+the values of any term parameter that is a grid axis), its indicator options and its
+surface of section."""
+from __future__ import annotations
+
+from dataclasses import fields
+
+import numpy as np
+
+from ..catalog.indicators import IndicatorOptions
+from ..numerics.sections import section_event
+from ..physics.system import System
+from ..physics.terms import make_potential, parameter_defaults
+
+
+def system_terms(s: dict) -> list[tuple[str, str, dict]]:
+    """(kind, potential, params as written) of each term of a [system] table."""
+    if s["interactions"] is None:
+        return [("triplet", s["potential"], s["params"])]
+    return [(t["kind"], t["potential"], t.get("params", {})) for t in s["interactions"]]
+
+
+def term_axis_names(s: dict) -> list[dict]:
+    """Per term, the grid-axis name of each of its parameters: <potential>_<parameter>,
+    or <potential>_<k>_<parameter> (k = 1, 2, ...) when the potential occurs twice."""
+    terms = system_terms(s)
+    names = [name for _, name, _ in terms]
+    seen: dict[str, int] = {}
+    out = []
+    for kind, name, params in terms:
+        seen[name] = seen.get(name, 0) + 1
+        label = name if names.count(name) == 1 else f"{name}_{seen[name]}"
+        out.append({key: f"{label}_{key}" for key in parameter_defaults(name, kind)})
+    return out
+
+
+def build_system(s: dict, at: dict | None = None) -> System:
+    """The System of a validated [system] table; `at` gives the values of parameters that
+    are grid axes (by axis name)."""
+    masses = s["masses"] if s["masses"] is not None else [1.0] * s["bodies"]
+    terms = []
+    for (kind, name, params), axis_names in zip(system_terms(s), term_axis_names(s)):
+        values = {k: (at or {}).get(axis_names[k], v) for k, v in params.items()}
+        terms.append(make_potential(name, values, kind))
+    return System(np.array(masses, dtype=float), s["dim"], tuple(terms))
+
+
+def indicator_options(i: dict) -> IndicatorOptions:
+    """The IndicatorOptions of a validated [indicators] table."""
+    return IndicatorOptions(**{f.name: i[f.name] for f in fields(IndicatorOptions)})
+
+
+def section_event_for(tables: dict, system: System):
+    sec = tables["section"]
+    return section_event(system, sec["coordinate"], sec["value"], sec["direction"],
+                         tuple(sec["triplet"]), sec["coefficients"])

@@ -1,0 +1,146 @@
+"""A survey's cells: their starts, the task a worker runs on a chunk of them, and everything
+one cell computes.
+
+A cell's result depends only on the config and its own index (deviation vectors are seeded
+by (seed, cell index)), never on the chunk it travels in or the worker that runs it, so an
+archive is the same bit for bit whatever the chunk size or worker count.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..catalog.errors import ConfigError, Inaccessible
+from ..catalog.status import Status
+from ..catalog.variables import CellResult, history_times
+from ..numerics import torus
+from ..numerics.indicators import chaos_indicators, conservation_errors
+from ..numerics.integrate import integrate
+from ..physics.families import initial_state
+from ..physics.jacobi import reduced
+from . import archive
+from .build import build_system, indicator_options, section_event_for
+from .config import Config
+
+
+def build_starts(config: Config) -> np.ndarray:
+    """Initial states of every cell (n_cells, n), NaN rows where inaccessible. A value that
+    makes no start at all (a degenerate triangle) is a ConfigError naming the cell."""
+    system = config.system()
+    varies = any(a.term >= 0 for a in config.axes)
+    family = config.tables["initial"]["family"]
+    starts = np.full((config.n_cells, system.n), np.nan)
+    for index in range(config.n_cells):
+        params = config.cell_parameters(index)
+        if varies:
+            system = config.system(index)
+        try:
+            starts[index] = initial_state(system, family, **params)
+        except Inaccessible:
+            continue
+        except ValueError as exc:
+            values = {**params, **config.axis_values(index, terms=True)}
+            at = ", ".join(f"{a.name} = {values[a.name]:g}" for a in config.axes)
+            raise ConfigError("[initial]" + (f" at {at}" if at else ""), str(exc)) from None
+    return starts
+
+
+@dataclass(frozen=True)
+class CellTask:
+    """What a worker needs to integrate cells -- the result-determining tables and the
+    archive's layout -- and nothing of the grid or the config text, which can be large."""
+
+    system: dict
+    integration: dict
+    indicators: dict
+    section: dict | None
+    tori: dict
+    slots: tuple
+    term_axes: tuple = ()   # (name, values, stride in flat cell index) of the terms' axes
+
+    @classmethod
+    def of(cls, config: Config) -> "CellTask":
+        t = config.tables
+        strides = np.cumprod((config.shape + (1,))[:0:-1])[::-1]
+        terms = tuple((a.name, tuple(a.values.tolist()), int(stride))
+                      for a, stride in zip(config.axes, strides) if a.term >= 0)
+        return cls(t["system"], t["integration"], t["indicators"],
+                   t["section"] if t["section_enabled"] else None, t["tori"],
+                   archive.layout(config), terms)
+
+    def term_values(self, cell: int) -> tuple:
+        """(axis name, value) of the interaction-term axes at a cell: what its System
+        depends on beyond the [system] table."""
+        return tuple((name, values[(cell // stride) % len(values)])
+                     for name, values, stride in self.term_axes)
+
+    def short(self) -> "CellTask":
+        """The same task with a tiny t_final: compiles (or loads) every kernel a cell uses."""
+        ind = self.indicators
+        return replace(self, integration={**self.integration, "t_final": 1e-3},
+                       indicators={**ind, "renorm_interval": 1e-3,
+                                   "perturbations": min(1, ind["perturbations"])})
+
+
+def run_cells(task: CellTask, cell_ids, starts) -> dict[str, np.ndarray]:
+    """Integrate a chunk of cells (the unit of work a dask task does): one result row per
+    cell in every array of the task's layout."""
+    res = archive.empty_results(task.slots, len(cell_ids))
+    systems = {}
+    for k, (cell, y0) in enumerate(zip(cell_ids, starts)):
+        at = task.term_values(int(cell))
+        if at not in systems:
+            system = build_system(task.system, dict(at))
+            systems[at] = system, ([section_event_for({"section": task.section}, system)]
+                                   if task.section else [])
+        archive.fill_row(res, k, compute_cell(task, *systems[at], int(cell), y0))
+    return res
+
+
+def compute_cell(task: CellTask, system, events, cell: int, y0) -> CellResult:
+    """Everything one cell's variables are filled from."""
+    clock = time.perf_counter()
+    if np.isnan(y0[0]):
+        return CellResult(Status.INACCESSIBLE, time.perf_counter() - clock)
+    integ, ind, tor = task.integration, task.indicators, task.tori
+    kw = dict(rtol=integ["rtol"], atol=integ["atol"], max_steps=integ["max_steps"],
+              time_limit=integ["cell_time_limit"])
+    dt = tor["sample_interval"]
+    if tor["analyse"]:    # midpoints of equal intervals: the Birkhoff sums' quadrature
+        kw["t_fine"] = (np.arange(int(integ["t_final"] / dt)) + 0.5) * dt
+    if task.section:
+        kw["max_events"] = task.section["max_crossings"]
+    indicators = None
+    if ind["which"]:
+        indicators = chaos_indicators(system, y0, integ["t_final"], indicator_options(ind),
+                                      cell=cell, events=events,
+                                      control_tangents=integ["control_tangents"], **kw)
+        out, status = indicators.outcome, indicators.status
+        errors = indicators.energy_error, indicators.angular_momentum_error
+    else:
+        history = history_times(integ["t_final"], ind["history_points"])
+        out = integrate(system, y0, integ["t_final"], events=events, t_eval=history, **kw)
+        status = out.status
+        done = ~np.isnan(out.samples[:, 0])
+        errors = conservation_errors(system, y0, np.concatenate([out.samples[done], [out.y]]))
+    planar3 = system.n_bodies == 3 and system.dim == 2
+    evidence = None
+    if tor["analyse"] and status.finished:
+        evidence = torus.analyse(system, out.fine, dt, errors[0], tor["observables"],
+                                tor["lines"], tor["resonance_order"])
+    return CellResult(
+        status=status, wall_time=time.perf_counter() - clock, n_steps=out.n_steps,
+        n_rhs=out.n_rhs, start=y0, t_end=out.t, energy=system.energy(y0),
+        angular_momentum=system.angular_momentum(y0), energy_error=errors[0],
+        angular_momentum_error=errors[1], indicators=indicators, tori=evidence,
+        n_crossings=out.n_crossings,
+        crossing_time=out.crossings.t, crossing_state=out.crossings.y,
+        reduced=reduced(system, out.crossings.y) if planar3 else None)
+
+
+def warm_up(task: CellTask, first, starts):
+    """Load every compiled kernel a cell uses from numba's disk cache."""
+    if first.size:
+        run_cells(task.short(), first, starts)

@@ -1,0 +1,680 @@
+"""Survey configuration: TOML (data only, never evaluated) -> validated, frozen settings.
+
+Every key is declared once in SCHEMA with its type, default, unit, allowed range and meaning;
+validation happens before any work and each problem is one `ConfigError` naming the key and
+what to do. The README's configuration table is checked against SCHEMA by the tests.
+"""
+from __future__ import annotations
+
+import difflib
+import hashlib
+import json
+import math
+import os
+import re
+import tomllib
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..catalog.errors import ConfigError
+from ..catalog.indicators import INDICATORS, IndicatorOptions
+from ..catalog.regimes import Thresholds
+from ..catalog.variables import OBSERVABLES
+from ..numerics.dop853 import RTOL_MIN
+from ..numerics.sections import REDUCED_SURFACES, SURFACES
+from ..physics.families import FAMILIES, family_parameters
+from ..physics.system import System
+from ..physics.terms import KINDS, PAIR_NAMES, TRIPLET_NAMES, make_potential, parameter_defaults
+from .build import build_system, section_event_for, term_axis_names
+from .resources import check_address, check_memory, ensure_writable
+
+
+INT64_MAX = 2 ** 63 - 1
+
+
+# thresholds that only decide the regime when the archive is written, not a cell's result
+CLASSIFICATION_ONLY = {f.name for f in fields(Thresholds)} - {"resonance_order"}
+
+
+_IND = IndicatorOptions()      # one set of defaults: the Python API's and the config's
+
+
+@dataclass(frozen=True)
+class Key:
+    kind: str            # "int", "float", "bool", "str", "floats", "ints", "strs", "table"
+    default: Any
+    doc: str
+    unit: str = ""
+    low: float | None = None        # inclusive lower bound
+    above: float | None = None      # exclusive lower bound
+    choices: tuple | None = None
+    high: float | None = None       # inclusive upper bound
+    hint: str = ""                  # why the bounds are what they are, added to range errors
+
+
+SCHEMA: dict[str, dict[str, Key]] = {
+    "survey": {
+        "name": Key("str", "survey", "name of the survey: archive title and default file name"),
+        "output": Key("str", "", "archive path (default results/<name>.nc); its folder is "
+                                 "created; checkpoints go to <output>.checkpoints/"),
+    },
+    "system": {
+        "bodies": Key("int", 3, "number of bodies N", low=3),
+        "dim": Key("int", 2, "dimension of space", choices=(2, 3)),
+        "masses": Key("floats", None, "masses, one per body (default all 1)", "mass", above=0),
+        "potential": Key("str", "perimetric_power", "triplet potential <measure>_<profile> "
+                                                    "or axilrod_teller"),
+        "params": Key("table", {}, "potential parameters, e.g. {coupling = 1, exponent = 2}; "
+                                   "any may be a grid axis named <potential>_<parameter>"),
+        "interactions": Key("terms", None, "the potential as a sum of terms, instead of "
+                                           "potential/params: [{kind = \"pair\" or "
+                                           "\"triplet\", potential = NAME, params = {...}}, "
+                                           "...]; every parameter is given, any may be a grid "
+                                           "axis named <potential>_<parameter>"),
+    },
+    "initial": {
+        "family": Key("str", None, "initial-condition family", choices=tuple(FAMILIES)),
+        "energy": Key("axis", None, "target energy: rescales centre-of-mass-frame velocities "
+                                    "so that K + U = energy (cells with U > energy are "
+                                    "inaccessible); a number or a grid axis", "energy"),
+    },
+    "integration": {
+        "t_final": Key("float", 2000.0, "integration time of every cell", "time", above=0),
+        "rtol": Key("float", 1e-12, "relative tolerance of DOP853 (at least 10 eps = "
+                                    "2.2e-15)", low=RTOL_MIN,
+                    hint="double precision cannot honour a smaller relative tolerance"),
+        "atol": Key("float", 1e-12, "absolute tolerance of DOP853", above=0),
+        "max_steps": Key("int", 10_000_000, "step attempts per orbit before step_limit", low=1),
+        "cell_time_limit": Key("float", 0.0, "wall-clock budget of a cell (all its "
+                                             "integrations), 0 for none; cells past it get "
+                                             "status time_limit", "s", low=0),
+        "control_tangents": Key("bool", False, "include tangent vectors in the error norm"),
+    },
+    "indicators": {
+        "which": Key("strs", list(INDICATORS), "indicators to compute; [] integrates "
+                     "the orbit alone", choices=INDICATORS),
+        "deviations": Key("int", _IND.deviations, "seeded deviation vectors per orbit (sali "
+                                                  "and gali2 need 2)", low=1),
+        "seed": Key("int", _IND.seed, "seed of the deviation vectors (with the cell index)",
+                    low=0),
+        "renorm_interval": Key("float", _IND.renorm_interval, "time between "
+                               "renormalisations of the deviation vectors", "time", above=0),
+        "history_points": Key("int", _IND.history_points, "points of the convergence "
+                                                          "histories", low=2),
+        "project_flow": Key("bool", _IND.project_flow, "project deviation vectors off the "
+                                                       "flow and grad H"),
+        "perturbations": Key("int", _IND.perturbations, "orbits started perturbation_size "
+                                                        "away, for the spread of ftle and "
+                                                        "megno", low=0),
+        "perturbation_size": Key("float", _IND.perturbation_size, "relative size of those "
+                                                                  "perturbations", above=0),
+    },
+    "section": {
+        "coordinate": Key("str", "phi", "surface coordinate = value", choices=SURFACES),
+        "value": Key("float", None, "surface value (default pi/2 for phi, else 0)"),
+        "direction": Key("int", 1, "+1 coordinate increasing, -1 decreasing, 0 both",
+                         choices=(-1, 0, 1)),
+        "max_crossings": Key("int", 200, "crossings kept per cell (all are counted)", low=1),
+        "triplet": Key("ints", [0, 1, 2], "bodies of the triangle for side/area surfaces",
+                       low=0),
+        "coefficients": Key("floats", None, "state coefficients of a 'linear' surface"),
+        "store_state": Key("bool", False, "also store the Cartesian state at each crossing"),
+    },
+    "tori": {
+        "analyse": Key("bool", True, "weighted Birkhoff digits and frequency analysis of "
+                                     "every orbit (needs 128 samples or more)"),
+        "sample_interval": Key("float", 0.1, "time between the orbit samples they are "
+                                             "computed from (NAFF sees frequencies up to "
+                                             "1/(2 interval))", "time", above=0),
+        "observables": Key("strs", list(OBSERVABLES), "observables of the Birkhoff "
+                                                      "averages", choices=tuple(OBSERVABLES)),
+        "lines": Key("int", 5, "NAFF lines per shape signal and half orbit", low=1, high=50),
+        **{f.name: Key(f.type if f.type in ("int", "float") else "float", f.default,
+                       f.metadata["doc"]) for f in fields(Thresholds)},
+    },
+    "dask": {
+        "workers": Key("int", 2, "local worker processes (1 thread each)", low=1),
+        "scheduler": Key("str", "", "address of an existing dask scheduler, e.g. "
+                                    "tcp://host:8786 (then workers is ignored)"),
+        "connect_timeout": Key("float", 30.0, "seconds to wait for that scheduler to answer",
+                               "s", above=0, high=3600),
+        "chunk_size": Key("int", 0, "cells per task; 0 picks about 64 tasks per worker "
+                                    "(at most 256 cells each); chunks interleave the grid so "
+                                    "that every task mixes cheap and costly cells", low=0),
+        "retries": Key("int", 2, "retries of a task whose worker raised", low=0),
+    },
+}
+
+
+def markdown_tables() -> str:
+    """The README's tables of config keys, one per table of SCHEMA."""
+    def show(v):
+        if v is None or v == "":
+            return "—"
+        if isinstance(v, list):
+            return "[" + ", ".join(map(str, v)) + "]"
+        return "{}" if v == {} else str(v).replace("|", "\\|")
+    out = []
+    for table, keys in SCHEMA.items():
+        out += [f"**[{table}]**", "", "| key | meaning | unit | default |",
+                "| --- | --- | --- | --- |"]
+        out += [f"| `{k}` | {spec.doc.replace('<', '&lt;').replace('>', '&gt;')} | "
+                f"{spec.unit or '—'} | {show(spec.default)} |" for k, spec in keys.items()]
+        out.append("")
+    return "\n".join(out).rstrip()
+
+
+@dataclass(frozen=True)
+class Axis:
+    """A grid axis: an [initial] parameter, or (term >= 0) parameter `param` of term
+    number `term` of the system."""
+
+    name: str
+    values: np.ndarray
+    term: int = -1
+    param: str = ""
+
+
+@dataclass(frozen=True, eq=False)
+class Config:
+    """A validated survey configuration. `tables` holds every value with defaults filled
+    in; `axes` the grid axes in the order written; `fixed` the other family parameters."""
+
+    tables: dict
+    axes: tuple[Axis, ...]
+    fixed: dict
+    text: str
+    source: str
+
+    # ---- derived views
+    @property
+    def name(self) -> str:
+        return self.tables["survey"]["name"]
+
+    @property
+    def output(self) -> Path:
+        out = self.tables["survey"]["output"] or f"results/{self.name}.nc"
+        return Path(out)
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return tuple(a.values.size for a in self.axes)
+
+    @property
+    def n_cells(self) -> int:
+        return int(np.prod(self.shape, dtype=np.int64))
+
+    @property
+    def sha256(self) -> str:
+        return hashlib.sha256(self.text.encode()).hexdigest()
+
+    def system(self, index: int = 0) -> System:
+        """The System of flat cell `index` (the same for every cell unless a parameter of
+        an interaction term is a grid axis)."""
+        return build_system(self.tables["system"], self.axis_values(index, terms=True))
+
+    def cell_parameters(self, index: int) -> dict:
+        """Family parameters (and target energy) of flat cell `index` (C order)."""
+        return {**self.fixed, **self.axis_values(index, terms=False)}
+
+    def axis_values(self, index: int, terms: bool) -> dict:
+        at = np.unravel_index(index, self.shape) if self.axes else ()
+        return {a.name: float(a.values[i]) for a, i in zip(self.axes, at)
+                if (a.term >= 0) == terms}
+
+    def result_key(self) -> str:
+        """Hash of everything that determines the cells' results -- the result tables, the
+        grid (axis names and values, fixed family parameters, cell count) -- and the code
+        that computes them: checkpoints are reused only under it. [dask] and [survey] do not
+        change results and are left out."""
+        h = hashlib.sha256()
+        relevant = {k: v for k, v in self.tables.items() if k not in ("dask", "survey")}
+        relevant["tori"] = {k: v for k, v in relevant["tori"].items()
+                            if k not in CLASSIFICATION_ONLY}
+        h.update(json.dumps(relevant, sort_keys=True, default=_jsonable).encode())
+        for axis in self.axes:
+            h.update(f"axis {axis.name} {axis.values.size}\n".encode())
+            h.update(np.ascontiguousarray(axis.values, dtype="<f8").tobytes())
+        fixed = {k: np.asarray(v, dtype=float).tolist() for k, v in self.fixed.items()}
+        h.update(json.dumps(fixed, sort_keys=True).encode())
+        h.update(f"cells {self.n_cells}\n".encode())
+        h.update(code_fingerprint().encode())
+        return h.hexdigest()[:20]
+
+
+def _jsonable(x):
+    return x.tolist() if isinstance(x, np.ndarray) else str(x)
+
+
+def code_fingerprint(root: Path | None = None) -> str:
+    """sha256 of every Python module of the package (or of `root`), subpackages included,
+    with their paths (a module moved or added changes it too)."""
+    root = Path(__file__).parents[1] if root is None else Path(root)
+    h = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        h.update(str(path.relative_to(root)).encode() + b"\0" + path.read_bytes())
+    return h.hexdigest()
+
+
+def load_config(source) -> Config:
+    """A Config from a TOML file path or a dict of tables (Python values: numpy scalars,
+    tuples and 1-D arrays are taken as numbers and lists; None as "not given")."""
+    if isinstance(source, dict):
+        tables = _plain(source, "")
+        return validate(tables, _to_toml(tables), "<dict>")
+    if not isinstance(source, (str, os.PathLike)):
+        raise ConfigError("config", f"expected a TOML file path or a dict of tables, got "
+                                    f"{type(source).__name__}")
+    path = Path(source)
+    if "\0" in str(path):
+        raise ConfigError("config", "the file name contains a NUL character")
+    try:
+        data = path.read_bytes()
+    except IsADirectoryError:
+        raise ConfigError(str(source), "is a folder; give a TOML file") from None
+    except FileNotFoundError:
+        raise ConfigError(str(source), "no such config file") from None
+    except OSError as exc:
+        raise ConfigError(str(source), f"cannot read it ({exc.strerror or exc})") from None
+    return parse_config(_decode(data, str(source)), str(source))
+
+
+def _decode(data: bytes, where: str) -> str:
+    """TOML files are UTF-8: anything else is named, not decoded by guesswork."""
+    if data.startswith((b"\xff\xfe", b"\xfe\xff")):
+        raise ConfigError(where, "is UTF-16 text; TOML files are UTF-8: save it as UTF-8")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(where, f"is not UTF-8 text (byte {exc.start} is not valid); a "
+                                 "config is a UTF-8 TOML file") from None
+
+
+def parse_config(text: str, where: str = "<text>", check_output: bool = True) -> Config:
+    """A Config from TOML text."""
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(where, f"not valid TOML ({exc}); fix the syntax") from None
+    return validate(raw, text, where, check_output)
+
+
+def _plain(value, where):
+    """A Python value given to the API as the TOML value it stands for."""
+    if isinstance(value, dict):
+        out = {}
+        for k, v in value.items():
+            if not isinstance(k, str):
+                raise ConfigError(f"{where}{k!r}", "table keys must be strings")
+            if v is not None:
+                out[k] = _plain(v, f"{where}[{k}]." if not where else f"{where}{k}.")
+        return out
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value)
+    if isinstance(value, str):
+        return value
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    if isinstance(value, (list, tuple, np.ndarray)):
+        if isinstance(value, np.ndarray) and value.ndim > 2:
+            raise ConfigError(where.rstrip("."), f"expected a list, got a {value.ndim}-D array")
+        return [_plain(v, where) for v in value]
+    raise ConfigError(where.rstrip(".") or "config",
+                      f"{type(value).__name__} is not a config value (numbers, strings, "
+                      "booleans, lists and tables are)")
+
+
+def _to_toml(tables: dict) -> str:
+    """Minimal TOML writer for config dicts (so an API-given config is archived as text)."""
+    def val(v):
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, float):
+            return repr(v) if math.isfinite(v) else ("nan" if v != v else
+                                                    ("inf" if v > 0 else "-inf"))
+        if isinstance(v, int):
+            return str(v)
+        if isinstance(v, str):
+            return json.dumps(v)
+        if isinstance(v, dict):
+            return "{" + ", ".join(f"{k} = {val(x)}" for k, x in v.items()) + "}"
+        return "[" + ", ".join(val(x) for x in v) + "]"
+    lines = []
+    for table, body in tables.items():
+        if not isinstance(body, dict):
+            raise ConfigError(table, "top-level entries must be tables like [system]")
+        lines.append(f"[{table}]")
+        lines += [f"{k} = {val(v)}" for k, v in body.items()]
+        lines.append("")
+    return "\n".join(lines)
+
+
+def _suggest(word, options):
+    close = difflib.get_close_matches(word, list(options), n=1)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+def _check(table: str, key: str, spec: Key, value):
+    where = f"[{table}].{key}"
+    kinds = {"int": int, "float": (int, float), "str": str, "bool": bool}
+    if spec.kind in kinds:
+        ok = isinstance(value, kinds[spec.kind]) and not (
+            spec.kind in ("int", "float") and isinstance(value, bool))
+        if not ok:
+            raise ConfigError(where, f"expected {_kind_name(spec.kind)}, got {value!r}")
+        items = [value]
+    elif spec.kind in ("floats", "ints", "strs"):
+        inner = {"floats": (int, float), "ints": int, "strs": str}[spec.kind]
+        if not isinstance(value, list) or not all(
+                isinstance(v, inner) and not isinstance(v, bool) for v in value):
+            raise ConfigError(where, f"expected a list of {_kind_name(spec.kind)}, got {value!r}")
+        items = value
+    elif spec.kind == "table":
+        if not isinstance(value, dict):
+            raise ConfigError(where, f"expected a table like {{key = value}}, got {value!r}")
+        return value
+    else:
+        return value
+    for v in items:
+        if isinstance(v, float) and not math.isfinite(v):
+            raise ConfigError(where, f"must be finite, got {v!r}")
+        if isinstance(v, int) and abs(v) > INT64_MAX:
+            raise ConfigError(where, f"{v} does not fit a 64-bit integer; use a value below "
+                                     f"{INT64_MAX:.3g}")
+        if isinstance(v, str) and "\0" in v:
+            raise ConfigError(where, "contains a NUL character")
+        if spec.choices is not None and v not in spec.choices:
+            raise ConfigError(where, f"{v!r} is not one of {', '.join(map(repr, spec.choices))}"
+                              + (_suggest(v, spec.choices) if isinstance(v, str) else ""))
+        hint = f"; {spec.hint}" if spec.hint else ""
+        if spec.low is not None and v < spec.low:
+            raise ConfigError(where, f"must be >= {spec.low:.3g}, got {v!r}{hint}")
+        if spec.above is not None and not v > spec.above:
+            raise ConfigError(where, f"must be > {spec.above:.3g}, got {v!r}{hint}")
+        if spec.high is not None and v > spec.high:
+            raise ConfigError(where, f"must be <= {spec.high:.3g}, got {v!r}{hint}")
+    return value
+
+
+def _kind_name(kind):
+    return {"int": "an integer", "float": "a number", "str": "a string", "bool": "true or false",
+            "floats": "numbers", "ints": "integers", "strs": "strings"}[kind]
+
+
+def _axis_size(value) -> int:
+    """Number of values of a grid axis as written (1 for a number or a malformed axis, which
+    is reported later): lets the memory check run before any axis is allocated."""
+    if isinstance(value, dict):
+        num = value.get("num")
+        return num if isinstance(num, int) and not isinstance(num, bool) and num > 1 else 1
+    return max(len(value), 1) if isinstance(value, list) else 1
+
+
+def _axis(where: str, value) -> np.ndarray | None:
+    """A grid axis from {start, stop, num} or a list of numbers; None for a plain number."""
+    if isinstance(value, bool):
+        raise ConfigError(where, f"expected a number or a grid axis, got {value!r}")
+    if isinstance(value, (int, float)):
+        if not math.isfinite(value):
+            raise ConfigError(where, f"must be finite, got {value!r}")
+        return None
+    if isinstance(value, dict):
+        keys = {"start", "stop", "num"}
+        extra = sorted(set(value) - keys)
+        if extra:
+            raise ConfigError(f"{where}.{extra[0]}", "a grid axis takes only start, stop, num"
+                              + _suggest(extra[0], keys))
+        missing = sorted(keys - set(value))
+        if missing:
+            raise ConfigError(where, f"a grid axis needs {', '.join(sorted(keys))}; "
+                                     f"{missing[0]} is missing")
+        for k in ("start", "stop"):
+            if isinstance(value[k], bool) or not isinstance(value[k], (int, float)) \
+                    or not math.isfinite(value[k]):
+                raise ConfigError(f"{where}.{k}", f"expected a finite number, got {value[k]!r}")
+        num = value["num"]
+        if isinstance(num, bool) or not isinstance(num, int) or num < 1:
+            raise ConfigError(f"{where}.num", f"must be an integer >= 1, got {num!r}")
+        with np.errstate(over="ignore", invalid="ignore"):
+            arr = np.linspace(float(value["start"]), float(value["stop"]), num)
+        if not np.all(np.isfinite(arr)):
+            raise ConfigError(where, "start and stop are so far apart that the grid "
+                                     "overflows; narrow the range")
+    elif isinstance(value, list):
+        if not value or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                and math.isfinite(v) for v in value):
+            raise ConfigError(where, f"a grid axis list needs finite numbers, got {value!r}")
+        arr = np.array(value, dtype=float)
+    else:
+        raise ConfigError(where, f"expected a number, a list or {{start, stop, num}}, got "
+                                 f"{value!r}")
+    if np.unique(arr).size != arr.size:
+        raise ConfigError(where, "grid axis values must be distinct (in double precision); "
+                                 "widen the range or use fewer points")
+    return arr
+
+
+def validate(raw: dict, text: str, where: str = "<config>", check_output: bool = True) -> Config:
+    """Check every table and key; fill defaults; build the grid. Raises ConfigError."""
+    unknown = sorted(set(raw) - set(SCHEMA))
+    if unknown:
+        raise ConfigError(f"[{unknown[0]}]", "unknown table" + _suggest(unknown[0], SCHEMA)
+                          + f"; tables are {', '.join(SCHEMA)}")
+    tables: dict[str, dict] = {}
+    initial_raw = raw.get("initial", {})
+    for table, keys in SCHEMA.items():
+        given = raw.get(table, {})
+        if not isinstance(given, dict):
+            raise ConfigError(f"[{table}]", "must be a table")
+        if table == "initial":
+            given = {k: v for k, v in given.items() if k in keys}
+        else:
+            extra = sorted(set(given) - set(keys))
+            if extra:
+                raise ConfigError(f"[{table}].{extra[0]}", "unknown key"
+                                  + _suggest(extra[0], keys)
+                                  + f"; keys of [{table}] are {', '.join(keys)}")
+        body = {}
+        for key, spec in keys.items():
+            if key in given:
+                body[key] = _check(table, key, spec, given[key]) if spec.kind != "axis" \
+                    else given[key]
+            else:
+                body[key] = spec.default
+        tables[table] = body
+    tables["section_enabled"] = "section" in raw
+    _validate_names(tables)
+    check_memory(tables, math.prod(_axis_size(v) for v in initial_raw.values()))
+
+    term_axes = _validate_terms(tables["system"], raw.get("system", {}))
+    system = _validate_system(tables["system"], term_axes)
+    axes, fixed = _validate_initial(dict(initial_raw), tables["initial"], system)
+    clash = {a.name for a in axes} & {a.name for a in term_axes}
+    if clash:
+        raise ConfigError(f"[initial].{sorted(clash)[0]}", "has the name of a grid axis of "
+                                                          "an interaction term")
+    axes = term_axes + axes
+    _validate_cross(tables, system)
+    config = Config(tables=tables, axes=tuple(axes), fixed=fixed, text=text, source=where)
+    if check_output:
+        ensure_writable(config.output)
+    return config
+
+
+def _validate_names(tables: dict):
+    name = tables["survey"]["name"]
+    if not name.strip() or name in (".", "..") or any(c in name for c in "/\\") \
+            or any(ord(c) < 32 for c in name):
+        raise ConfigError("[survey].name", f"{name!r} is not a usable name: it names the "
+                                           "archive file, so no path separators, control "
+                                           "characters or '..'; e.g. name = \"delta-map\"")
+    address = tables["dask"]["scheduler"]
+    if address:
+        check_address(address)
+
+
+def _validate_terms(s: dict, given: dict) -> list[Axis]:
+    """Check the interaction terms (the potential/params shorthand, or interactions) and
+    return the grid axes among their parameters."""
+    if s["interactions"] is not None:
+        both = sorted({"potential", "params"} & set(given))
+        if both:
+            raise ConfigError(f"[system].{both[0]}", "give either potential/params (one "
+                                                    "triplet term) or interactions, not both")
+        if not isinstance(s["interactions"], list) or not s["interactions"]:
+            raise ConfigError("[system].interactions", "expected a list of tables like "
+                              "{kind = \"pair\", potential = \"lennard_jones\", params = "
+                              "{epsilon = 1.0, sigma = 1.0}}")
+    grids = []         # (term, parameter, values); named once every term is known good
+    for i, entry in enumerate(s["interactions"] or [None]):
+        if entry is None:
+            where, kind, name, params = "[system.params]", "triplet", s["potential"], s["params"]
+        else:
+            where = f"[system].interactions[{i}]"
+            if not isinstance(entry, dict):
+                raise ConfigError(where, f"expected a table {{kind, potential, params}}, got "
+                                         f"{entry!r}")
+            extra = sorted(set(entry) - {"kind", "potential", "params"})
+            if extra:
+                raise ConfigError(f"{where}.{extra[0]}", "unknown key" + _suggest(
+                    extra[0], ["kind", "potential", "params"]) + "; a term has kind, "
+                    "potential and params")
+            for key in ("kind", "potential"):
+                if not isinstance(entry.get(key), str):
+                    raise ConfigError(f"{where}.{key}", "is required (a string): "
+                                      + ("\"pair\" or \"triplet\"" if key == "kind"
+                                         else "the potential's name"))
+            kind, name, params = entry["kind"], entry["potential"], entry.get("params", {})
+            if kind not in KINDS:
+                raise ConfigError(f"{where}.kind", f"{kind!r} is not one of "
+                                  f"{', '.join(map(repr, KINDS))}" + _suggest(kind, KINDS))
+            if not isinstance(params, dict):
+                raise ConfigError(f"{where}.params", f"expected a table, got {params!r}")
+            where += ".params"
+        label = "[system].potential" if entry is None else f"[system].interactions[{i}].potential"
+        if entry is None and name in PAIR_NAMES:
+            raise ConfigError(label, f"{name!r} is a pair potential; potential takes one "
+                                     f"triplet term. Write interactions = [{{kind = \"pair\", "
+                                     f"potential = \"{name}\", params = {{...}}}}]")
+        try:
+            allowed = parameter_defaults(name, kind)
+        except ValueError as exc:
+            same_kind = PAIR_NAMES if kind == "pair" else TRIPLET_NAMES
+            raise ConfigError(label, str(exc) + _suggest(name, same_kind)) from None
+        for key in params:
+            if key not in allowed:
+                raise ConfigError(f"{where}.{key}", f"not a parameter of {name}"
+                                  + _suggest(key, allowed) + f"; it takes {', '.join(allowed)}")
+        if entry is not None:
+            missing = [k for k in allowed if k not in params]
+            if missing:
+                raise ConfigError(f"{where}.{missing[0]}", f"is missing: a term in "
+                                  f"interactions gives every parameter of {name} "
+                                  f"({', '.join(allowed)})")
+        values = {}
+        for key, value in params.items():
+            grid = _axis(f"{where}.{key}", value)
+            values[key] = [float(value)] if grid is None else grid.tolist()
+            if grid is not None:
+                grids.append((i, key, grid))
+        # every value of every axis must make a valid term (the checks are per parameter)
+        first = {k: v[0] for k, v in values.items()}
+        for key, options in [(None, [None])] + list(values.items()):
+            for v in options:
+                try:
+                    make_potential(name, {**first, key: v} if key else first, kind)
+                except ValueError as exc:
+                    bad = re.search(r"parameter '(\w+)'", str(exc))
+                    at = f" (at the grid value {v:g})" if key and len(options) > 1 else ""
+                    raise ConfigError(f"{where}.{bad.group(1)}" if bad else where,
+                                      str(exc) + at) from None
+    names = term_axis_names(s)
+    return [Axis(names[i][key], grid, term=i, param=key) for i, key, grid in grids]
+
+
+def _validate_system(s: dict, term_axes: list[Axis]) -> System:
+    if s["masses"] is not None and len(s["masses"]) != s["bodies"]:
+        raise ConfigError("[system].masses", f"needs {s['bodies']} values (one per body), "
+                                            f"got {len(s['masses'])}")
+    return build_system(s, {a.name: float(a.values[0]) for a in term_axes})
+
+
+def _validate_initial(given: dict, body: dict, system: System):
+    family = body["family"]
+    if family is None:
+        raise ConfigError("[initial].family", "is required; choose one of " + ", ".join(FAMILIES))
+    defaults = family_parameters(family)
+    own = set(SCHEMA["initial"])
+    extra = sorted(set(given) - own - set(defaults))
+    if extra:
+        raise ConfigError(f"[initial].{extra[0]}", f"not a parameter of family {family!r}"
+                          + _suggest(extra[0], list(defaults) + list(own))
+                          + f"; it takes {', '.join(defaults)}")
+    if system.n_bodies != 3 and not FAMILIES[family].any_n:
+        raise ConfigError("[initial].family", f"{family!r} starts three bodies; [system].bodies "
+                                              f"is {system.n_bodies} (explicit, equilibrium "
+                                              "and microcanonical start any number)")
+    axes, fixed = [], {}
+    for key, value in given.items():
+        if key == "family":
+            continue
+        where = f"[initial].{key}"
+        default = defaults.get(key)
+        if key != "energy" and not isinstance(default, (int, float)):
+            # vector parameters: a list of numbers of the default's shape, never an axis
+            shape = np.asarray(default).tolist()
+            if default is None:      # positions, velocities: one row per body
+                default = np.zeros((system.n_bodies, system.dim))
+                shape = f"{system.n_bodies} rows (one per body) of {system.dim} numbers"
+            arr = np.asarray(value, dtype=object)
+            if np.shape(arr) != np.shape(default) or not all(
+                    isinstance(v, (int, float)) and not isinstance(v, bool)
+                    and math.isfinite(v) for v in np.ravel(arr)):
+                raise ConfigError(where, f"expected finite numbers shaped like {shape}, got "
+                                         f"{value!r}")
+            fixed[key] = np.asarray(value, dtype=float)
+            continue
+        values = _axis(where, value)
+        if values is None:
+            fixed[key] = float(value)
+        else:
+            axes.append(Axis(key, values))
+    return axes, fixed
+
+
+def _validate_cross(tables: dict, system: System):
+    ind, sec, integ = tables["indicators"], tables["section"], tables["integration"]
+    if {"sali", "gali2"} & set(ind["which"]) and ind["deviations"] < 2:
+        raise ConfigError("[indicators].deviations", "sali and gali2 need 2 deviation vectors; "
+                                                     "set deviations = 2 or drop them from which")
+    if ind["renorm_interval"] > integ["t_final"]:
+        raise ConfigError("[indicators].renorm_interval", "is longer than t_final")
+    if tables["tori"]["analyse"] and not tables["tori"]["observables"]:
+        raise ConfigError("[tori].observables", "needs at least one observable (or set "
+                                                "analyse = false)")
+    if tables["section_enabled"]:
+        coord = sec["coordinate"]
+        if coord in REDUCED_SURFACES and (system.n_bodies != 3 or system.dim != 2):
+            raise ConfigError("[section].coordinate", f"{coord!r} is a reduced coordinate of "
+                                                      "three bodies in the plane")
+        if coord == "linear" and (sec["coefficients"] is None
+                                  or len(sec["coefficients"]) != system.n):
+            raise ConfigError("[section].coefficients", f"a 'linear' surface needs {system.n} "
+                                                        "coefficients (one per state component)")
+        trip = sec["triplet"]
+        if len(trip) != 3 or len(set(trip)) != 3 or max(trip) >= system.n_bodies:
+            raise ConfigError("[section].triplet", f"needs three different bodies of "
+                                                   f"0..{system.n_bodies - 1}, got {trip}")
+        if sec["value"] is None:
+            sec["value"] = math.pi / 2 if coord == "phi" else 0.0
+        try:
+            section_event_for(tables, system)
+        except ValueError as exc:
+            raise ConfigError("[section]", str(exc)) from None

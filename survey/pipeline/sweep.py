@@ -1,0 +1,312 @@
+"""Grid -> chunks -> dask -> checkpointed results -> archive, and `verify`.
+
+The archive is written only when every cell is present; an interrupted survey started again
+computes only the missing cells. `verify` recomputes a sample of an archive's cells from its
+stored config and compares them bit for bit.
+"""
+from __future__ import annotations
+
+import atexit
+import contextlib
+import logging
+import os
+import shutil
+import signal
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..catalog.errors import ArchiveError, ConfigError, SurveyError
+from ..catalog.status import Status
+from . import archive
+from .cells import CellTask, build_starts, run_cells, warm_up
+from .checkpoints import (checkpoint_dir, chunk_path, loader, output_lock, save_chunk,
+                          scan_checkpoints, warn, write_error)
+from .config import Config, load_config, parse_config
+from .resources import check_address
+
+
+@contextlib.contextmanager
+def _client(config: Config, workers, address):
+    """A client of the scheduler at `address` (already reached), or of a local cluster."""
+    from dask.distributed import Client, LocalCluster
+    if address:
+        with Client(address, timeout=f"{config.tables['dask']['connect_timeout']}s") as client:
+            yield client
+        return
+    # One numba thread per worker process, and none of the monitoring meant for interactive
+    # dashboards (a 10 ms stack profiler and 1 ms GIL polling in every worker, a 20 ms
+    # event-loop tick): measured, they cost the workers several percent of two cores. Set
+    # in the environment before the workers start, which they inherit.
+    quiet = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
+             "MKL_NUM_THREADS": "1",
+             "DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED": "False",
+             "DASK_DISTRIBUTED__ADMIN__SYSTEM_MONITOR__GIL__ENABLED": "False",
+             "DASK_DISTRIBUTED__ADMIN__TICK__INTERVAL": "500ms",
+             "DASK_DISTRIBUTED__ADMIN__SYSTEM_MONITOR__INTERVAL": "2s",
+             "DASK_DISTRIBUTED__WORKER__MEMORY__MONITOR_INTERVAL": "1s"}
+    os.environ.update(quiet)
+    import dask
+    dask.config.refresh()
+    # no dashboard; the scheduler's plain HTTP endpoints on a free loopback port, not 8787
+    # (which warns "port 8787 is already in use" whenever another cluster runs)
+    with LocalCluster(n_workers=workers or config.tables["dask"]["workers"],
+                      threads_per_worker=1, processes=True, dashboard_address=None,
+                      scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+                      preload=[__name__], silence_logs=logging.ERROR) as cluster, \
+            Client(cluster) as client:
+        yield client
+
+
+def dask_setup(worker):
+    """Preload of our local workers. A terminal's Ctrl-C reaches every process of its group;
+    the driver stops the cluster and says how to resume, so the workers ignore it rather
+    than each print a traceback. A worker process leaves without the interpreter's teardown
+    of numba and LLVM (registered first, this runs after every other exit handler): the
+    cluster's shutdown waits for it."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    atexit.register(os._exit, 0)
+
+
+def _reach(address: str, timeout: float):
+    """Ask the address who it is, within `timeout` seconds in all: a port that accepts TCP
+    but never speaks dask's protocol (e.g. the dashboard's 8787) would otherwise hang the
+    client forever."""
+    import asyncio
+
+    from distributed.core import rpc
+
+    async def identity():
+        r = rpc(address, timeout=timeout)
+        try:
+            return await r.identity()
+        finally:
+            await r.close_rpc()
+
+    fix = ("start one with `dask scheduler` or give its address, e.g. tcp://host:8786 "
+           "(8787 is the dashboard, not the scheduler)")
+    try:
+        info = asyncio.run(asyncio.wait_for(identity(), timeout))
+    except (asyncio.TimeoutError, TimeoutError):
+        raise ConfigError("[dask].scheduler", f"nothing at {address} answered as a dask "
+                                              f"scheduler within {timeout:g} s; {fix}") from None
+    except Exception as exc:
+        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise ConfigError("[dask].scheduler", f"cannot reach a dask scheduler at {address} "
+                                              f"({reason}); {fix}") from None
+    if not isinstance(info, dict) or info.get("type") != "Scheduler":
+        kind = info.get("type") if isinstance(info, dict) else "something else"
+        raise ConfigError("[dask].scheduler", f"{address} is a dask {kind}, not a scheduler; "
+                                              f"{fix}")
+
+
+def _chunks(ids: np.ndarray, size: int):
+    """Strided chunks of about `size` cells: chunk k holds ids k, k + K, k + 2K, ... Grids
+    are ordered by parameter and cost varies smoothly with it (chaotic cells cost more), so
+    contiguous chunks would leave the expensive ones for the end and workers idle."""
+    count = -(-ids.size // size)
+    return [ids[k::count] for k in range(count)]
+
+
+def run_survey(source, *, workers: int | None = None, scheduler: str | None = None,
+               progress: bool | None = None, command: str = "survey.run_survey",
+               timings: dict | None = None) -> Path:
+    """Run a survey (config path or dict, or a Config) to its archive; returns the archive
+    path. Resumes from checkpoints of an interrupted run of the same config. `timings`, if
+    given, receives the seconds spent preparing cells, starting the cluster, computing
+    (first task submitted to last result saved), stopping the cluster and writing the
+    archive."""
+    clock = {"start": time.perf_counter()}
+    config = source if isinstance(source, Config) else load_config(source)
+    workers, scheduler, progress = _api_arguments(workers, scheduler, progress)
+    address = scheduler or config.tables["dask"]["scheduler"]
+    if address:       # before any work: a wrong address is an input error
+        _reach(address, config.tables["dask"]["connect_timeout"])
+    if progress is None:
+        progress = sys.stderr.isatty()
+    key = config.result_key()
+    folder = checkpoint_dir(config)
+    task = CellTask.of(config)
+    with output_lock(config.output):
+        starts = build_starts(config)
+        with contextlib.ExitStack() as stack:
+            client = bar = done = None
+            for round_ in range(4):     # rounds after the first only if checkpoints vanish
+                if done is None:
+                    done = scan_checkpoints(folder, config, starts, key)
+                else:       # checked when found or written here: are they still there?
+                    done = {path: ids for path, ids in done.items() if path.exists()}
+                have = np.zeros(config.n_cells, dtype=bool)
+                for ids in done.values():
+                    have[ids] = True
+                todo = np.flatnonzero(~have)
+                if not todo.size:
+                    break
+                if round_ == 3:
+                    raise SurveyError(f"{todo.size} cells are still missing from {folder} "
+                                      "after computing them again (is something deleting "
+                                      "checkpoints?); the checkpoints are kept: run the same "
+                                      "command again")
+                if round_:
+                    warn(f"{todo.size} finished cells went missing from {folder}; computing "
+                         "them again")
+                if client is None:
+                    client = _start(stack, config, task, starts, todo, workers, address,
+                                    clock)
+                    from tqdm import tqdm
+                    bar = stack.enter_context(tqdm(total=config.n_cells, unit="cell",
+                                                   disable=not progress, desc=config.name,
+                                                   smoothing=0.1))
+                bar.n = int(have.sum())
+                bar.refresh()
+                done.update(_compute(client, task, starts, todo, folder, key, config, bar,
+                                     round_))
+                clock["computed"] = time.perf_counter()
+        clock["archive"] = time.perf_counter()
+        try:
+            path = archive.write(config, loader(config, done), command)
+        except OSError as exc:
+            raise write_error(exc, config.output, folder) from None
+        shutil.rmtree(folder, ignore_errors=True)
+        with contextlib.suppress(OSError):
+            folder.parent.rmdir()
+    if timings is not None:
+        now = time.perf_counter()
+        c = clock
+        timings.update(prepare=c.get("prepared", c["archive"]) - c["start"],
+                       cluster=c.get("cluster", c["archive"]) - c.get("prepared", c["archive"]),
+                       compute=c.get("computed", c["archive"]) - c.get("cluster", c["archive"]),
+                       shutdown=c["archive"] - c.get("computed", c["archive"]),
+                       archive=now - c["archive"], total=now - c["start"])
+    return path
+
+
+def _api_arguments(workers, scheduler, progress):
+    """run_survey's own arguments, checked like config values (numpy integers accepted)."""
+    if workers is not None:
+        if isinstance(workers, (bool, np.bool_)) or not isinstance(workers, (int, np.integer)) \
+                or workers < 1:
+            raise ConfigError("workers", f"must be an integer >= 1, got {workers!r}")
+        workers = int(workers)
+    if scheduler is not None:
+        if not isinstance(scheduler, str):
+            raise ConfigError("scheduler", f"must be an address string, got {scheduler!r}")
+        if scheduler:
+            check_address(scheduler)
+    if progress is not None and not isinstance(progress, (bool, np.bool_)):
+        raise ConfigError("progress", f"must be true, false or None, got {progress!r}")
+    return workers, scheduler or None, None if progress is None else bool(progress)
+
+
+def _start(stack, config, task, starts, todo, workers, address, clock):
+    """Compile (or load from the disk cache) the kernels once, then start the cluster and
+    let every worker load them before the first task."""
+    first = todo[~np.isnan(starts[todo, 0])][:1]
+    warm_up(task, first, starts[first])
+    clock["prepared"] = time.perf_counter()
+    client = stack.enter_context(_client(config, workers, address))
+    client.run(warm_up, task, first, starts[first])
+    clock["cluster"] = time.perf_counter()
+    return client
+
+
+def _compute(client, task, starts, todo, folder, key, config, bar, round_):
+    from dask.distributed import as_completed
+    size = config.tables["dask"]["chunk_size"] or min(
+        256, max(1, -(-todo.size // (64 * len(client.scheduler_info()["workers"])))))
+    futures = {client.submit(run_cells, task, ids, starts[ids], pure=False,
+                             key=f"cells-{key}-{round_}-{int(ids[0])}",
+                             retries=config.tables["dask"]["retries"]): ids
+               for ids in _chunks(todo, size)}
+    saved = {}
+    for future in as_completed(futures):
+        ids = futures.pop(future)
+        save_chunk(folder, key, ids, future.result())
+        saved[chunk_path(folder, ids)] = ids
+        future.release()
+        bar.update(len(ids))
+    return saved
+
+
+def run(source, **kw):
+    """Python API: run a survey and return its archive as an xarray Dataset."""
+    import xarray as xr
+    return xr.open_dataset(run_survey(source, **kw))
+
+
+def verify(path, cells: int = 8, seed: int = 0, differences: dict | None = None):
+    """Check an archive against its stored config -- the config's sha256, the grid
+    coordinates, the variables, their dimensions and attributes -- then recompute a sample
+    of cells and compare every variable the schema declares reproducible, bit for bit.
+    Returns (ok, report lines), each mismatch with its largest difference relative to the
+    value (rounding on another machine shows as ~1e-16, a real change as much more);
+    `differences`, if given, receives those per variable. A file that is not a survey
+    archive raises ArchiveError."""
+    with archive.open_archive(path) as ds:
+        try:
+            config = parse_config(ds.attrs["config"], f"{path} (stored config)",
+                                  check_output=False)
+        except ConfigError as exc:
+            return False, [f"the stored config is not valid: {exc}"]
+        found = archive.problems(ds, config)
+        if found:
+            return False, ["the archive does not match its stored config:"] + \
+                [f"  {p}" for p in found]
+        n = config.n_cells
+        others = np.random.default_rng(seed).permutation(np.arange(1, n - 1))[:max(cells - 2, 0)]
+        sample = np.unique(np.concatenate([[0, n - 1], others]))   # first, last, random
+        try:
+            stored = {v.name: ds[v.name].values.reshape((n,) + ds[v.name].shape[len(config.shape):])
+                      for v in archive.variables(config) if v.reproducible and not v.derived}
+            derived = archive.derive(ds)
+            rederived = [v.name for v in archive.variables(config) if v.derived and
+                         np.asarray(derived[v.name], dtype=v.dtype).tobytes()
+                         != ds[v.name].values.astype(v.dtype).tobytes()]
+        except (OSError, RuntimeError, ValueError) as exc:
+            raise ArchiveError(f"{path}: its data cannot be read ({exc}); the file "
+                                       "may be truncated") from None
+    timed_out = stored["status"][sample] == Status.TIME_LIMIT
+    sample = sample[~timed_out]
+    fresh = run_cells(CellTask.of(config), sample, build_starts(config)[sample])
+    lines, ok = [], True
+    for name, values in stored.items():
+        a, b = values[sample], fresh[name].astype(values.dtype)
+        if a.tobytes() != b.tobytes():
+            ok = False
+            worst = _relative_difference(a, b)
+            if differences is not None:
+                differences[name] = worst
+            lines.append(f"{name}: differs in {np.sum(~_equal(a, b))} of {len(sample)} cells; "
+                         f"largest difference {worst:.1e} of the value")
+    for name in rederived:
+        ok = False
+        lines.append(f"{name}: differs from what its evidence in the archive gives "
+                     "(tori.classify)")
+    lines.insert(0, f"recomputed cells {', '.join(map(str, sample))} of {n}: "
+                    + ("all reproducible variables match bit for bit" if ok else "MISMATCH"))
+    if timed_out.any():
+        lines.append(f"skipped {timed_out.sum()} sampled cells that hit cell_time_limit (not "
+                     "reproducible)")
+    return ok, lines
+
+
+def _relative_difference(a, b) -> float:
+    """max |a - b| / max(|a|, |b|) over the elements that differ (inf where only one is
+    NaN); integers by their absolute difference."""
+    if a.dtype.kind != "f":
+        return float(np.max(np.abs(a.astype(np.int64) - b.astype(np.int64))))
+    nan_a, nan_b = np.isnan(a), np.isnan(b)
+    if np.any(nan_a != nan_b):
+        return np.inf
+    both = ~nan_a & (a != b)
+    if not both.any():
+        return 0.0
+    return float(np.max(np.abs(a[both] - b[both]) / np.maximum(np.abs(a[both]),
+                                                                np.abs(b[both]))))
+
+
+def _equal(a, b):
+    eq = (a == b) | (np.isnan(a) & np.isnan(b)) if a.dtype.kind == "f" else a == b
+    return eq.reshape(len(a), -1).all(axis=1)

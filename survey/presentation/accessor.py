@@ -1,0 +1,37 @@
+"""`ds.survey`: the read-only side of survey on any Dataset of a survey archive --
+its regimes, figures and report -- registered as an xarray accessor when xarray is imported
+after survey (or at once, if it was imported before)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import xarray as xr
+
+
+@xr.register_dataset_accessor("survey")
+class SurveyAccessor:
+    """`ds.survey.classify()`, `ds.survey.figures(folder)`, `ds.survey.report(folder)`."""
+
+    def __init__(self, ds: xr.Dataset):
+        self._ds = ds
+
+    def classify(self, thresholds=None):
+        """(regime, confidence) of every cell from the evidence stored, with the archive's
+        thresholds unless others (catalog.regimes.Thresholds) are given."""
+        from ..analysis.classify import classify
+        return classify(self._ds, thresholds)
+
+    def figures(self, folder=None, variables=None):
+        """The figures that fit the grid; written as PNGs into `folder` if given (returns
+        their paths), else returned as matplotlib Figures by name."""
+        from . import plots
+        figs = plots.figures(self._ds, variables)
+        return figs if folder is None else plots.save(figs, folder, self._stem())
+
+    def report(self, folder) -> Path:
+        """Write the Markdown report and its figures into `folder`; returns its path."""
+        from . import report
+        return report.write(self._ds, folder, self._stem())
+
+    def _stem(self) -> str:
+        return Path(self._ds.encoding.get("source", "survey")).stem

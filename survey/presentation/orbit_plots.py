@@ -1,0 +1,124 @@
+"""The paper's single-orbit figures: paths with the Hill-type disk, the orbit in inequity
+space, P and A against time, side lengths with near collisions; several orbits in inequity
+space on one figure."""
+from __future__ import annotations
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from ..physics.geometry import area, inequities, sides
+
+
+def orbit_figures(system, t, states, title="", p_max=None, collision_fraction=0.05):
+    """The paper's single-orbit figures from an orbit sampled at times t (states (k, n)):
+    paths in the plane with the Hill-type disk |x - R| <= P_max/3, the orbit in inequity
+    space, P and A against time, side lengths against time with near collisions marked."""
+    q, _ = system.split(states)
+    u, v, w = q[:, 0], q[:, 1], q[:, 2]
+    s = sides(u, v, w)
+    out = {}
+    fig = Figure(figsize=(5.6, 5.4), layout="constrained")
+    ax = fig.add_subplot()
+    centre = system.centre_of_mass(states[0])
+    for body, colour in zip(range(3), ("tab:red", "tab:green", "tab:blue")):
+        ax.plot(q[:, body, 0], q[:, body, 1], color=colour, lw=0.8, label="uvw"[body])
+        ax.plot(q[0, body, 0], q[0, body, 1], "o", color=colour, ms=6)
+    if p_max is not None:
+        from matplotlib.patches import Circle
+        ax.add_patch(Circle(centre[:2], p_max / 3, fill=False, ls="--", color="0.4",
+                            label=rf"$|x-R| \leq P_{{max}}/3$ = {p_max / 3:.4g}"))
+    ax.set_aspect("equal")
+    ax.set_xlabel("x")
+    ax.set_ylabel("y")
+    ax.legend(fontsize="small")
+    ax.set_title(f"{title}: positions up to t = {t[-1]:g}", fontsize="medium")
+    out["paths"] = fig
+
+    fig = Figure(figsize=(5.6, 5.4), layout="constrained")
+    ax = fig.add_subplot(projection="3d")
+    ia = inequities(u, v, w)
+    ax.plot(ia[:, 0], ia[:, 1], ia[:, 2], lw=0.6, color="k")
+    _inequity_axes(ax)
+    ax.set_title(f"{title}: inequities", fontsize="medium")
+    out["inequities"] = fig
+
+    fig = Figure(figsize=(8.0, 5.0), layout="constrained")
+    ax1, ax2 = fig.subplots(2, 1, sharex=True)
+    ax1.plot(t, s.sum(axis=1), lw=0.7, color="k")
+    ax1.set_ylabel("$P$")
+    ax2.plot(t, area(u, v, w) if system.dim == 2 else np.linalg.norm(area(u, v, w), axis=1),
+             lw=0.7, color="k")
+    ax2.set_ylabel("$A$")
+    ax2.set_xlabel("t")
+    ax1.set_title(f"{title}: perimeter and area", fontsize="medium")
+    out["perimeter_area"] = fig
+
+    fig = Figure(figsize=(8.0, 3.6), layout="constrained")
+    ax = fig.add_subplot()
+    for k, (name, colour) in enumerate(zip("abc", ("tab:red", "tab:green", "tab:blue"))):
+        ax.plot(t, s[:, k], lw=0.8, color=colour, label=name)
+    close = near_collisions(t, s, collision_fraction)
+    for tc, side, value in close:
+        ax.plot(tc, value, "kv", ms=5)
+    ax.plot([], [], "kv", ms=5, label=f"near collisions ({len(close)})")
+    ax.set_xlabel("t")
+    ax.set_ylabel("side length")
+    ax.legend(fontsize="small", loc="upper left", bbox_to_anchor=(1.0, 1.0))
+    ax.set_title(f"{title}: side lengths", fontsize="medium")
+    out["sides"] = fig
+    return out
+
+
+def _inequity_axes(ax):
+    ax.set_xlabel("$i_a$")
+    ax.set_ylabel("$i_b$")
+    ax.set_zlabel("$i_c$")
+    ax.set_box_aspect(None, zoom=0.85)      # room for the labels
+
+
+def near_collisions(t, s, fraction=0.05):
+    """Local minima of each side below `fraction` of the mean side length: (t, side, value)."""
+    scale = fraction * np.mean(s)
+    out = []
+    for k in range(3):
+        x = s[:, k]
+        mins = np.flatnonzero((x[1:-1] < x[:-2]) & (x[1:-1] <= x[2:]) & (x[1:-1] < scale)) + 1
+        out += [(t[i], "abc"[k], x[i]) for i in mins]
+    return sorted(out)
+
+
+def inequity_set(system, orbits: dict) -> Figure:
+    """Several orbits in inequity space on one figure (the paper's EquilateralSet)."""
+    fig = Figure(figsize=(6.0, 5.6), layout="constrained")
+    ax = fig.add_subplot(projection="3d")
+    colours = ["k", "tab:red", "tab:blue", "0.5", "tab:green", "tab:purple"]
+    for (name, states), colour in zip(orbits.items(), colours):
+        q, _ = system.split(states)
+        ia = inequities(q[:, 0], q[:, 1], q[:, 2])
+        ax.plot(ia[:, 0], ia[:, 1], ia[:, 2], lw=0.7, color=colour, label=name)
+    _inequity_axes(ax)
+    ax.legend(fontsize="small")
+    return fig
+
+
+def spec_figures(name: str, zoom_until: float, runs) -> dict:
+    """The figures of an orbit spec's runs (pipeline.orbits.OrbitRun): the four single-orbit
+    figures (paths and side lengths up to `zoom_until` if it is > 0), or for a set of
+    orbits their common inequity-space figure."""
+    if len(runs) > 1:
+        system = runs[0].system
+        orbits = {r.label: r.outcome.samples[~np.isnan(r.outcome.samples[:, 0]), :system.n]
+                  for r in runs}
+        return {"inequities": inequity_set(system, orbits)}
+    run = runs[0]
+    system, out = run.system, run.outcome
+    t = out.t_eval
+    done = ~np.isnan(out.samples[:, 0])
+    figs = orbit_figures(system, t[done], out.samples[done, :system.n], title=name,
+                         p_max=run.p_max)
+    if zoom_until:
+        upto = done & (t <= zoom_until)
+        zoomed = orbit_figures(system, t[upto], out.samples[upto, :system.n], title=name,
+                               p_max=run.p_max)
+        figs["paths"], figs["sides"] = zoomed["paths"], zoomed["sides"]
+    return figs

@@ -1,0 +1,366 @@
+"""Figures of a survey archive (matplotlib, no pyplot state).
+
+Conventions: axes carry symbols and units, not long names; continuous indicators use
+perceptually uniform colour maps with the clipping range written in the colourbar label;
+regimes use a categorical palette; cells whose run did not finish (or that have no start)
+are masked in their own colours with their counts in the legend -- never drawn as a value
+of the indicator; point clouds are rasterised. Every function returns Figures; `save`
+writes them.
+"""
+from __future__ import annotations
+
+import itertools
+from pathlib import Path
+
+import numpy as np
+from matplotlib.colors import BoundaryNorm, ListedColormap
+from matplotlib.figure import Figure
+from matplotlib.patches import Patch
+
+from ..analysis.classify import stored_table
+from ..catalog.regimes import REGULAR, Regime, Thresholds
+from ..catalog.status import Status
+
+
+# symbols and units of the variables and grid axes the figures label
+SYMBOLS = {
+    "ftle": r"FTLE $\mu_T$ (1/time)", "ftle_wba": r"WBA growth rate (1/time)",
+    "megno": r"MEGNO $\langle Y\rangle$", "fli": "FLI", "sali": "SALI", "gali2": r"GALI$_2$",
+    "birkhoff_digits": "Birkhoff digits", "birkhoff_digits_half": "Birkhoff digits at T/2",
+    "frequency_diffusion": r"$\log_{10}|\Delta\nu|/|\nu|$", "energy_error": r"$|\Delta E/E|$",
+    "delta": r"$\delta$", "energy": "$E$", "sigma": r"$\sigma$", "p_sigma": r"$p_\sigma$",
+    "eta": r"$\eta$", "p_eta": r"$p_\eta$", "phi": r"$\phi$", "p_phi": r"$p_\phi$",
+    "theta": r"$\theta$", "side": "side", "angular_momentum": "$J$",
+    "regime": "regime", "history_time": "t",
+    "axilrod_teller_strength": r"triple-dipole strength $Z$",
+    "lennard_jones_epsilon": r"$\epsilon$", "lennard_jones_sigma": r"$\sigma_{LJ}$",
+}
+
+
+# indicator maps: (variable, colour map, clipping range or None, log scale)
+MAPS = [("megno", "viridis", (0.0, 8.0), False), ("ftle", "magma", None, True),
+        ("fli", "cividis", None, False), ("birkhoff_digits", "viridis_r", (0.0, 12.0), False)]
+
+
+REGIME_COLOURS = {Regime.TORUS: "#1f77b4", Regime.RESONANT: "#17becf",
+                  Regime.PERIODIC: "#2ca02c", Regime.STICKY: "#ff7f0e",
+                  Regime.CHAOTIC: "#d62728", Regime.COLLISION: "#000000",
+                  Regime.INACCESSIBLE: "#d9d9d9", Regime.UNDETERMINED: "#9467bd"}
+
+
+STATUS_COLOURS = {Status.COLLISION: "#000000", Status.STEP_LIMIT: "#8c564b",
+                  Status.NONFINITE: "#e377c2", Status.INACCESSIBLE: "#d9d9d9",
+                  Status.TIME_LIMIT: "#7f7f7f"}
+
+
+def label(name: str) -> str:
+    return SYMBOLS.get(name, name)
+
+
+def grid_axes(ds) -> list[str]:
+    return list(ds["status"].dims)
+
+
+def figures(ds, variables=None) -> dict[str, Figure]:
+    """The figures that fit the archive's grid: maps for two axes, scans for one, the
+    section, convergence histories and the frequency map where the data exist."""
+    axes = grid_axes(ds)
+    out = {}
+    names = [m for m in MAPS if m[0] in ds and (variables is None or m[0] in variables)]
+    if len(axes) == 2:
+        if "regime" in ds and (variables is None or "regime" in variables):
+            out["map_regime"] = regime_map(ds)
+        for name, cmap, clip, log in names:
+            out[f"map_{name}"] = indicator_map(ds, name, cmap, clip, log)
+        if all(f"crossing_{a}" in ds for a in axes) and "megno" in ds:
+            out["map_megno_section"] = indicator_map(ds, "megno", "viridis", (0.0, 8.0),
+                                                     overlay=True)
+    elif len(axes) == 1:
+        out["scan"] = scan(ds, [n for n, *_ in names] if variables is None else variables)
+    if "crossing_sigma" in ds and int(np.nansum(ds["n_crossings"].values)) > 0:
+        out["section"] = section(ds)
+    if "megno_history" in ds:
+        out["convergence"] = convergence(ds)
+    if "frequency" in ds and "regime" in ds:     # frequencies mean something on regular cells
+        regular = np.isin(ds["regime"].values, REGULAR)
+        if np.isfinite(ds["frequency"].values[regular]).any():
+            out["frequency_map"] = frequency_map(ds)
+    return out
+
+
+def save(figs: dict[str, Figure], folder, stem: str) -> list[Path]:
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for name, fig in figs.items():
+        path = folder / f"{stem}_{name}.png"
+        fig.savefig(path, dpi=130)
+        paths.append(path)
+    return paths
+
+
+def _unfinished(ds) -> np.ndarray:
+    return ~np.isin(ds["status"].values, [Status.OK, Status.EVENT])
+
+
+def _mask_layer(ax, ds, x, y):
+    """Cells whose run did not finish, in their status colours; legend handles with
+    counts."""
+    status = ds["status"].values
+    handles = []
+    for s, colour in STATUS_COLOURS.items():
+        where = status == s
+        if where.any():
+            rgba = np.zeros(status.shape + (4,))
+            rgba[where] = _rgba(colour)
+            ax.pcolormesh(x, y, np.moveaxis(rgba, 0, 1) if rgba.ndim == 3 else rgba,
+                          shading="nearest")
+            handles.append(Patch(color=colour, label=f"{s.name.lower()} ({int(where.sum())})"))
+    return handles
+
+
+def _rgba(colour):
+    from matplotlib.colors import to_rgba
+    return to_rgba(colour)
+
+
+def _two_axis_figure(ds):
+    fig = Figure(figsize=(9.0, 5.0), layout="constrained")
+    gs = fig.add_gridspec(1, 2, width_ratios=[4, 1.1])
+    ax, hist = fig.add_subplot(gs[0]), fig.add_subplot(gs[1])
+    a, b = grid_axes(ds)
+    ax.set_xlabel(label(a))
+    ax.set_ylabel(label(b))
+    return fig, ax, hist, ds[a].values, ds[b].values
+
+
+def regime_map(ds) -> Figure:
+    fig, ax, hist, x, y = _two_axis_figure(ds)
+    regime = ds["regime"].values
+    colours = [REGIME_COLOURS[r] for r in Regime]
+    cmap = ListedColormap(colours)
+    norm = BoundaryNorm(np.arange(len(Regime) + 1) - 0.5, len(Regime))
+    ax.pcolormesh(x, y, regime.T, cmap=cmap, norm=norm, shading="nearest")
+    counts = [(r, int(np.sum(regime == r))) for r in Regime]
+    ax.legend(handles=[Patch(color=REGIME_COLOURS[r], label=f"{r.name.lower()} ({n})")
+                       for r, n in counts if n], loc="upper left", bbox_to_anchor=(1.02, 1),
+              fontsize="small", title="regime (cells)")
+    hist.barh([r.name.lower() for r, n in counts if n], [n for r, n in counts if n],
+              color=[REGIME_COLOURS[r] for r, n in counts if n])
+    hist.set_xlabel("cells")
+    hist.yaxis.tick_right()
+    fig.suptitle(f"regime of each cell ({ds.attrs.get('title', '')})", fontsize="medium")
+    return fig
+
+
+def indicator_map(ds, name, cmap="viridis", clip=None, log=False, overlay=False) -> Figure:
+    """An indicator over the two grid axes with its histogram; `overlay`: when the axes are
+    section coordinates, the section crossings of every cell drawn on top."""
+    fig, ax, hist, x, y = _two_axis_figure(ds)
+    values = ds[name].values.astype(float)
+    shown = np.where(_unfinished(ds), np.nan, values)
+    finite = shown[np.isfinite(shown)]
+    if log:
+        finite = finite[finite > 0]
+    lo, hi = clip if clip else (np.nanmin(finite) if finite.size else 0.0,
+                                np.nanmax(finite) if finite.size else 1.0)
+    from matplotlib.colors import LogNorm, Normalize
+    norm = LogNorm(max(lo, 1e-6), max(hi, 2e-6)) if log else Normalize(lo, hi)
+    mesh = ax.pcolormesh(x, y, np.clip(shown, lo if not log else -np.inf, hi).T, cmap=cmap,
+                         norm=norm, shading="nearest")
+    handles = _mask_layer(ax, ds, x, y)
+    if overlay:
+        a, b = grid_axes(ds)
+        ax.scatter(ds[f"crossing_{a}"].values.ravel(), ds[f"crossing_{b}"].values.ravel(),
+                   s=0.4, lw=0, color="black", alpha=0.35, rasterized=True)
+        handles.append(Patch(color="black", alpha=0.5, label="section crossings"))
+        ax.set_xlim(x.min(), x.max())
+        ax.set_ylim(y.min(), y.max())
+    where = f"clipped to [{lo:g}, {hi:g}]" if clip else f"range [{lo:.3g}, {hi:.3g}]"
+    cb = fig.colorbar(mesh, ax=ax, location="right", pad=0.02)
+    cb.set_label(f"{label(name)}, {where}" + (", log scale" if log else ""))
+    if handles:
+        ax.legend(handles=handles, loc="lower left", bbox_to_anchor=(0.0, 1.0), ncol=3,
+                  fontsize="small", title="masked cells", frameon=False)
+    values = shown.ravel()
+    values = values[np.isfinite(values)]
+    if log:
+        values = values[values > 0]
+    hist.hist(np.clip(values, norm.vmin, norm.vmax),
+              bins=np.geomspace(norm.vmin, norm.vmax, 31) if log
+              else np.linspace(norm.vmin, norm.vmax, 31),
+              orientation="horizontal", color="0.3")
+    hist.set_yscale("log" if log else "linear")
+    hist.set_ylim(norm.vmin, norm.vmax)
+    hist.set_xlabel("cells")
+    hist.set_ylabel(label(name) + (" (clipped)" if clip else ""))
+    hist.yaxis.set_label_position("right")
+    hist.yaxis.tick_right()
+    return fig
+
+
+def scan(ds, names) -> Figure:
+    """Indicators along a one-axis grid with their ensemble spread as error bars and the
+    regime shaded behind (the paper's LyapunovSides and LyapunovScanEquil)."""
+    a = grid_axes(ds)[0]
+    x = ds[a].values
+    names = [n for n in names if n in ds]
+    fig = Figure(figsize=(8.0, 2.3 * max(len(names), 1) + 0.6), layout="constrained")
+    axes = fig.subplots(max(len(names), 1), 1, sharex=True, squeeze=False)[:, 0]
+    edges = np.concatenate([[x[0] - (x[1] - x[0]) / 2 if x.size > 1 else x[0] - 0.5],
+                            (x[1:] + x[:-1]) / 2,
+                            [x[-1] + (x[-1] - x[-2]) / 2 if x.size > 1 else x[0] + 0.5]])
+    regime = ds["regime"].values if "regime" in ds else None
+    for ax, name in zip(axes, names):
+        if regime is not None:
+            for r in Regime:
+                for i in np.flatnonzero(regime == r):
+                    ax.axvspan(edges[i], edges[i + 1], color=REGIME_COLOURS[r], alpha=0.18,
+                               lw=0)
+        y = np.where(_unfinished(ds), np.nan, ds[name].values.astype(float))
+        spread = ds.get(f"{name}_spread")
+        yerr = None if spread is None else np.where(np.isfinite(y), spread.values, np.nan)
+        ax.errorbar(x, y, yerr=yerr, fmt="o-", ms=2.5, lw=0.8, color="k", ecolor="0.4",
+                    elinewidth=0.7, capsize=1.5)
+        for level, style in _reference_lines(ds, name):
+            ax.axhline(level, color="0.3", ls=style, lw=0.8)
+        if name in ("ftle", "megno"):
+            ax.set_yscale("log")
+        ax.set_ylabel(label(name))
+    axes[-1].set_xlabel(label(a))
+    if regime is not None:
+        present = [r for r in Regime if np.any(regime == r)]
+        axes[0].legend(handles=[Patch(color=REGIME_COLOURS[r], alpha=0.4,
+                                      label=f"{r.name.lower()} ({int(np.sum(regime == r))})")
+                                for r in present], loc="lower left", fontsize="small",
+                       bbox_to_anchor=(0.0, 1.02), ncol=min(len(present), 4),
+                       title="regime (cells)", frameon=False)
+    return fig
+
+
+def _reference_lines(ds, name):
+    """Where each indicator's votes change (dashed: regular side, dotted: chaotic side)."""
+    th = Thresholds.from_table(stored_table(ds))
+    prefix = {"megno": "megno", "birkhoff_digits": "digits", "sali": "sali"}.get(name)
+    if prefix:
+        return [(getattr(th, f"{prefix}_regular"), "--"), (getattr(th, f"{prefix}_chaotic"), ":")]
+    if name == "ftle" and "t_end" in ds:
+        T = float(np.nanmax(ds["t_end"].values))
+        return [(th.ftle_regular * np.log(T) / T, "--"), (th.ftle_chaotic * np.log(T) / T, ":")]
+    return []
+
+
+def section(ds, x="sigma", y="p_sigma", colour_by="regime") -> Figure:
+    """Section crossings of every cell in the (x, y) reduced coordinates, coloured by the
+    cell's regime (or an indicator), rasterised."""
+    fig = Figure(figsize=(6.4, 5.2), layout="constrained")
+    ax = fig.add_subplot()
+    xs = ds[f"crossing_{x}"].values.reshape(-1, ds.sizes["crossing"])
+    ys = ds[f"crossing_{y}"].values.reshape(-1, ds.sizes["crossing"])
+    if colour_by == "regime" and "regime" in ds:
+        regime = ds["regime"].values.ravel()
+        for r in Regime:
+            cells = regime == r
+            if cells.any() and np.isfinite(xs[cells]).any():
+                ax.scatter(xs[cells].ravel(), ys[cells].ravel(), s=1.0, lw=0,
+                           color=REGIME_COLOURS[r], rasterized=True,
+                           label=f"{r.name.lower()} ({int(cells.sum())} cells)")
+        ax.legend(fontsize="small", markerscale=6, title="regime")
+    else:
+        value = np.repeat(ds[colour_by].values.ravel(), xs.shape[1])
+        pts = ax.scatter(xs.ravel(), ys.ravel(), c=value, s=1.0, lw=0, cmap="viridis",
+                         rasterized=True)
+        fig.colorbar(pts, ax=ax, label=label(colour_by))
+    ax.set_xlabel(label(x))
+    ax.set_ylabel(label(y))
+    section_name = ds.attrs.get("section", "")
+    ax.set_title(f"surface of section {section_name}".strip(), fontsize="medium")
+    return fig
+
+
+def convergence(ds, cells=None) -> Figure:
+    """Indicator histories of chosen cells (default: one of each regime present): has the
+    indicator converged by the end of the run?"""
+    flat = {name: ds[name].values.reshape(-1, ds.sizes["history_time"])
+            for name in ("ftle_history", "megno_history", "sali_history") if name in ds}
+    t = ds["history_time"].values
+    regime = ds["regime"].values.ravel() if "regime" in ds else None
+    if cells is None:
+        cells = [int(np.flatnonzero(regime == r)[0]) for r in Regime
+                 if regime is not None and np.any(regime == r)
+                 and r not in (Regime.INACCESSIBLE, Regime.COLLISION)][:6]
+    fig = Figure(figsize=(7.5, 2.4 * len(flat) + 0.5), layout="constrained")
+    axes = fig.subplots(len(flat), 1, sharex=True, squeeze=False)[:, 0]
+    coords = cell_labels(ds)
+    for ax, (name, values) in zip(axes, flat.items()):
+        for c in cells:
+            colour = REGIME_COLOURS[Regime(regime[c])] if regime is not None else None
+            ax.plot(t, values[c], color=colour, lw=1.2,
+                    label=coords[c] + (f" ({Regime(regime[c]).name.lower()})"
+                                       if regime is not None else ""))
+        ax.set_ylabel(label(name.replace("_history", "")))
+        if name in ("ftle_history", "sali_history"):
+            ax.set_yscale("log")
+        if name == "ftle_history":
+            ax.plot(t, np.log(t) / t, "k:", lw=1, label=r"$\ln t / t$ (torus)")
+    axes[0].legend(fontsize="x-small", ncol=2)
+    axes[-1].set_xlabel("t")
+    return fig
+
+
+def cell_labels(ds) -> list[str]:
+    """'delta=4.2, energy=90' for every cell, in flat C order."""
+    axes = grid_axes(ds)
+    mesh = np.meshgrid(*[ds[a].values for a in axes], indexing="ij")
+    return [", ".join(f"{a}={m.ravel()[i]:.6g}" for a, m in zip(axes, mesh))
+            for i in range(ds["status"].size)]
+
+
+def frequency_map(ds, order: int = 5) -> Figure:
+    """The frequency map of the regular cells: two shape frequencies divided by a third
+    (for three bodies in the plane, the rotation frequency, unless the orbits do not
+    rotate (J = 0): then the third shape frequency), with the resonance lines
+    m1 x + m2 y + m3 = 0 of order |m| <= `order` -- the Arnold web."""
+    names = [str(n) for n in ds["fundamental_name"].values]
+    f = np.abs(ds["frequency"].values.reshape(-1, len(names)))
+    regime = ds["regime"].values.ravel() if "regime" in ds else np.zeros(len(f), int)
+    ref = names.index("rotation") if "rotation" in names else 2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        spin = (f[:, ref] / f[:, 0])[np.isin(regime, [Regime.TORUS, Regime.RESONANT])]
+    if ref != 2 and np.isfinite(spin).any() and np.nanmedian(spin) < 1e-3:
+        ref = 2                      # the tori do not rotate (J = 0): nothing to divide by
+    x, y = f[:, 0] / f[:, ref], f[:, 1] / f[:, ref]
+    fig = Figure(figsize=(6.4, 5.6), layout="constrained")
+    ax = fig.add_subplot()
+    keep = np.isfinite(x) & np.isfinite(y)
+    regular = keep & np.isin(regime, REGULAR)
+    frame = regular if regular.any() else keep
+    if frame.any():
+        pad = 0.08 * max(np.ptp(x[frame]), np.ptp(y[frame]), 1e-3)
+        xl = (x[frame].min() - pad, x[frame].max() + pad)
+        yl = (y[frame].min() - pad, y[frame].max() + pad)
+        for m1, m2, m3 in itertools.product(range(-order, order + 1), repeat=3):
+            n = abs(m1) + abs(m2) + abs(m3)
+            if (m1, m2) == (0, 0) or n > order or np.gcd.reduce([m1, m2, m3]) != 1:
+                continue
+            if m2 != 0:
+                ax.plot(xl, [-(m1 * xl[0] + m3) / m2, -(m1 * xl[1] + m3) / m2],
+                        color="0.55", lw=2.0 / n, zorder=0)
+            else:
+                ax.axvline(-m3 / m1, color="0.55", lw=2.0 / n, zorder=0)
+        other = keep & ~regular
+        if other.any():
+            ax.scatter(x[other], y[other], s=4, color="0.75", rasterized=True,
+                       label=f"not regular ({int(other.sum())}; frequencies not defined)")
+        for r in REGULAR:
+            cells = regular & (regime == r)
+            if cells.any():
+                ax.scatter(x[cells], y[cells], s=12, color=REGIME_COLOURS[r],
+                           label=f"{r.name.lower()} ({int(cells.sum())})", rasterized=True)
+        ax.set_xlim(xl)
+        ax.set_ylim(yl)
+        ax.legend(fontsize="small", title="regime (cells)")
+    ax.set_xlabel(rf"$\nu_1/\nu_{{{names[ref]}}}$")
+    ax.set_ylabel(rf"$\nu_2/\nu_{{{names[ref]}}}$")
+    ax.set_title(f"frequency map with resonances of order <= {order}", fontsize="medium")
+    return fig

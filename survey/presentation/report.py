@@ -1,0 +1,220 @@
+"""The KAM-torus detection report of a survey archive: Markdown with its figures beside it,
+written for a reader who has not seen the config."""
+from __future__ import annotations
+
+import json
+import math
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from ..analysis.classify import evidence_votes, stored_table
+from ..analysis.onset import onset, runs
+from ..catalog.regimes import IRREGULAR, REGULAR, Regime, Thresholds
+from ..catalog.status import Status
+from . import plots
+
+
+def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """95% Wilson score interval of a binomial proportion k/n."""
+    if n == 0:
+        return (math.nan, math.nan)
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def write(ds, folder, stem: str | None = None, figures: bool = True) -> Path:
+    """Write STEM_report.md and its figures into `folder`; returns the report's path."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    stem = stem or Path(ds.encoding.get("source", "survey")).stem
+    figs = plots.save(plots.figures(ds), folder, stem) if figures else []
+    text = markdown(ds, [p.name for p in figs])
+    path = folder / f"{stem}_report.md"
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(text)
+    tmp.replace(path)
+    return path
+
+
+def markdown(ds, figure_names=()) -> str:
+    config = tomllib.loads(ds.attrs.get("config", ""))
+    axes = list(ds["status"].dims)
+    regime = ds["regime"].values
+    th = Thresholds(**json.loads(ds["regime"].attrs["thresholds"])) \
+        if "thresholds" in ds["regime"].attrs else Thresholds.from_table(stored_table(ds))
+    n = regime.size
+    out = [f"# {ds.attrs.get('title', 'survey report')}", ""]
+
+    out += ["## What was run", ""]
+    system = config.get("system", {})
+    integ = config.get("integration", {})
+    initial = config.get("initial", {})
+    grid = ", ".join(f"{a} from {float(ds[a].min()):g} to {float(ds[a].max()):g} "
+                     f"({ds.sizes[a]} values)" for a in axes) or "a single cell"
+    if "interactions" in system:
+        potential = "the sum of " + " + ".join(
+            f"{t.get('kind')} `{t.get('potential')}` "
+            + str({k: "(grid axis)" if isinstance(v, (dict, list)) else v
+                   for k, v in t.get("params", {}).items()})
+            for t in system["interactions"])
+    else:
+        potential = (f"potential `{system.get('potential', 'perimetric_power')}` "
+                     f"{system.get('params', {}) or '(defaults: U = P^2/2 for perimetric_power)'}")
+    out += [f"- System: {system.get('bodies', 3)} bodies in {system.get('dim', 2)}-D, "
+            f"masses {system.get('masses', 'all 1')}, {potential}.",
+            f"- Initial conditions: family `{initial.get('family')}`"
+            + "".join(f", {k} = {v}" for k, v in initial.items() if k != "family"
+                      and k not in axes) + f"; grid: {grid}; {n} cells.",
+            f"- Integration: DOP853 to t = {integ.get('t_final', 2000.0):g}, rtol = "
+            f"{integ.get('rtol', 1e-12):g}, atol = {integ.get('atol', 1e-12):g}; chaos "
+            f"indicators {config.get('indicators', {}).get('which', 'ftle, megno, fli, sali, gali2')}; "
+            f"torus analysis every {config.get('tori', {}).get('sample_interval', 0.1):g} "
+            "time units.",
+            f"- Code: survey {ds.attrs.get('version_survey', '?')}, commit "
+            f"`{ds.attrs.get('git_commit', '?')}`; {ds.attrs.get('history', '')}.", ""]
+
+    out += ["## Regimes", "", "| regime | cells | share | 95% interval | meaning |",
+            "| --- | --- | --- | --- | --- |"]
+    for r in Regime:
+        k = int(np.sum(regime == r))
+        if k:
+            lo, hi = wilson(k, n)
+            out.append(f"| {r.name.lower()} | {k} | {100 * k / n:.1f}% | "
+                       f"{100 * lo:.1f}-{100 * hi:.1f}% | {r.meaning} |")
+    out += ["", "Intervals: Wilson score, 95%, treating the cells as a sample of the "
+                "grid's region.", ""]
+
+    out += _onsets(ds, axes, regime)
+    out += _tori_table(ds, axes, regime)
+    out += _agreement(ds, th)
+    out += _thresholds(th)
+    out += _quality(ds)
+    if figure_names:
+        out += ["## Figures", ""] + [f"![{name}]({name})" for name in figure_names] + [""]
+    return "\n".join(out)
+
+
+def _onsets(ds, axes, regime) -> list[str]:
+    out = []
+    if len(axes) == 1:
+        x = ds[axes[0]].values
+        out += [f"## Regimes along {axes[0]}", ""] + [
+            f"- {axes[0]} = {x[i]:g}" + (f" to {x[j]:g}" if j > i else "") +
+            f": {Regime(regime[i]).name.lower()} ({j - i + 1} cell{'s' * (j > i)})"
+            for i, j in runs(regime)] + [""]
+        found = onset(x, regime)
+        out += ["## Where chaos sets in", ""]
+        if found is None:
+            out.append(f"The regime does not change from regular to chaotic along {axes[0]}.")
+        else:
+            out.append(f"Along {axes[0]} the orbits are regular up to {found['last_regular']:g}; "
+                       f"the first irregular cell is at {found['first_irregular']:g}: onset "
+                       f"{axes[0]} = {found['estimate']:.4g} +- {found['error']:.2g} (half the "
+                       "grid step).")
+            if found["all_irregular_from"] is not None:
+                out.append(f"Every cell is irregular from {axes[0]} = "
+                           f"{found['all_irregular_from']:g} on; in between regular islands "
+                           "and sticky or weakly chaotic cells alternate.")
+        out.append("")
+    elif len(axes) == 2:
+        a, b = axes
+        out += [f"## Where chaos sets in along {a}, for each {b}", "",
+                f"| {b} | regular cells | irregular cells | onset along {a} |",
+                "| --- | --- | --- | --- |"]
+        x = ds[a].values
+        for j, yb in enumerate(ds[b].values):
+            col = regime[:, j]
+            found = onset(x, col)
+            where = "none" if found is None else \
+                f"{found['estimate']:.4g} +- {found['error']:.2g}"
+            out.append(f"| {yb:g} | {int(np.isin(col, REGULAR).sum())} | "
+                       f"{int(np.isin(col, IRREGULAR).sum())} | {where} |")
+        out.append("")
+    return out
+
+
+def _tori_table(ds, axes, regime, rows: int = 15) -> list[str]:
+    if "frequency" not in ds:
+        return []
+    cells = np.flatnonzero(np.isin(regime.ravel(), REGULAR))
+    if not cells.size:
+        return ["## Tori", "", "No regular cell.", ""]
+    names = [str(v) for v in ds["fundamental_name"].values]
+    freq = ds["frequency"].values.reshape(-1, len(names))
+    m = ds["resonance"].values.reshape(-1, len(names))
+    dist = ds["resonance_distance"].values.ravel()
+    digits = ds["birkhoff_digits"].values.ravel()
+    coords = plots.cell_labels(ds)
+    pick = cells if cells.size <= rows else cells[np.linspace(0, cells.size - 1, rows).astype(int)]
+    out = ["## Tori found", "",
+           f"{cells.size} regular cells; {'all' if cells.size <= rows else f'{rows} evenly chosen'} "
+           "shown. Frequencies in cycles per unit time (shape basis, then rotation); the "
+           "nearest resonance m . nu = 0 and its relative distance.", "",
+           f"| cell | regime | digits | {' | '.join(names)} | nearest resonance m | distance |",
+           "| --- | --- | --- | " + " | ".join("---" for _ in names) + " | --- | --- |"]
+    for c in pick:
+        f = " | ".join("—" if not np.isfinite(v) else f"{v:.7f}" for v in freq[c])
+        out.append(f"| {coords[c]} | {Regime(regime.ravel()[c]).name.lower()} | "
+                   f"{digits[c]:.1f} | {f} | {tuple(int(v) for v in m[c])} | {dist[c]:.1e} |")
+    out.append("")
+    return out
+
+
+def _agreement(ds, th) -> list[str]:
+    votes = evidence_votes(ds, th)
+    keys = list(votes)
+    if len(keys) < 2:
+        return []
+    out = ["## Where the indicators agree", "",
+           "Share of the cells where both lines of evidence vote (regular or chaotic) in "
+           "which they vote the same way; in brackets, how many cells both voted in.", "",
+           "| | " + " | ".join(keys) + " |", "| --- |" + " --- |" * len(keys)]
+    for a in keys:
+        row = []
+        for b in keys:
+            both = (np.abs(votes[a]) == 1) & (np.abs(votes[b]) == 1)
+            k = int(both.sum())
+            row.append("—" if not k else f"{100 * np.mean(votes[a][both] == votes[b][both]):.0f}% ({k})")
+        out.append(f"| **{a}** | " + " | ".join(row) + " |")
+    mixed = sum(int(np.sum((votes[a] * votes[b]) == -1)) for i, a in enumerate(keys)
+                for b in keys[i + 1:])
+    out += ["", f"Pairs of opposite votes in all: {mixed}. A cell with opposite votes is "
+                "never called torus or chaotic: it is sticky (regular first, chaotic by T) "
+                "or undetermined.", ""]
+    return out
+
+
+def _thresholds(th) -> list[str]:
+    from dataclasses import fields
+    out = ["## Thresholds used, and why", "", "| threshold | value | why |",
+           "| --- | --- | --- |"]
+    for f in fields(th):
+        out.append(f"| {f.name} | {getattr(th, f.name):g} | "
+                   f"{f.metadata['doc'].replace('|', chr(92) + '|')} |")
+    out += ["", "Each line of evidence votes regular, chaotic or not at all; tori and chaos "
+                "need every vote cast to agree (survey.tori.classify).", ""]
+    return out
+
+
+def _quality(ds) -> list[str]:
+    status = ds["status"].values
+    out = ["## Conservation and failures", ""]
+    finished = np.isin(status, [Status.OK, Status.EVENT])
+    if finished.any():
+        dE = ds["energy_error"].values[finished]
+        out.append(f"Relative energy error over the finished cells: median {np.median(dE):.1e}, "
+                   f"largest {np.max(dE):.1e}; angular momentum error largest "
+                   f"{np.nanmax(ds['angular_momentum_error'].values[finished]):.1e}.")
+    failed = [(s, int(np.sum(status == s))) for s in Status if s not in (Status.OK, Status.EVENT)]
+    failed = [(s, k) for s, k in failed if k]
+    if failed:
+        out.append("")
+        out += [f"- {k} cells {s.name.lower()}: {s.meaning}" for s, k in failed]
+    else:
+        out.append("No cell failed.")
+    out.append("")
+    return out

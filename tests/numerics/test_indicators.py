@@ -1,0 +1,156 @@
+"""Chaos indicators against theory: tori, chaos, periodic orbits, scaling laws."""
+import math
+
+import numpy as np
+import pytest
+
+from survey.catalog.indicators import IndicatorOptions
+from survey.numerics.indicators import chaos_indicators, deviation_vectors
+from survey.numerics.integrate import integrate
+from survey.physics.families import initial_state
+from survey.physics.system import System
+
+
+@pytest.fixture(scope="module")
+def regular(paper_system):
+    y0 = initial_state(paper_system, "equilateral", delta=3.0)
+    return chaos_indicators(paper_system, y0, 5000.0, IndicatorOptions(deviations=2))
+
+
+@pytest.fixture(scope="module")
+def chaotic(paper_system):
+    y0 = initial_state(paper_system, "sides")
+    return chaos_indicators(paper_system, y0, 2000.0,
+                            IndicatorOptions(deviations=2, perturbations=3))
+
+
+def test_regular_orbit_ftle_decays_like_log_t_over_t_and_megno_tends_to_2(regular):
+    """On a torus |w| grows linearly: ln|w| ~ ln t, so FTLE ~ ln(t)/t; <Y> -> 2."""
+    t, ftle = regular.history_time, regular.ftle_history
+    late = t >= t[-1] / 4
+    slope = np.polyfit(np.log(t[late]), ftle[late] * t[late], 1)[0]
+    assert 0.7 < slope < 1.3                       # d ln|w| / d ln t = 1: linear growth
+    assert np.all((ftle * t / np.log(t))[late] < 3)   # FTLE <= 3 ln(t)/t
+    assert abs(regular.megno - 2.0) < 0.15
+    assert np.all(np.diff(regular.megno_history[len(t) // 4:]) > -0.02)   # approaching 2
+    assert abs(regular.megno_slope) < 1e-4
+    assert regular.sali > 0.1 and regular.gali2 > 0.1
+
+
+def test_chaotic_orbit_megno_grows_linearly_at_half_the_exponent(chaotic):
+    """<Y>(t) ~ lambda t / 2 in chaos: its least-squares slope matches FTLE/2."""
+    assert chaotic.ftle > 0.1
+    assert chaotic.megno > 50
+    assert chaotic.megno_slope == pytest.approx(chaotic.ftle / 2, rel=0.35)
+    assert chaotic.sali < 1e-8 and chaotic.gali2 < 1e-6
+    assert chaotic.fli > 100
+    # the honest error bar: orbits started 1e-9 apart disagree at the 10% level at T=2000
+    assert 0.005 < chaotic.ftle_spread < 0.5 * chaotic.ftle
+
+
+@pytest.mark.parametrize("exponent,megno", [(2.0, 0.0), (3.0, 2.0)])
+def test_rotating_equilateral_periodic_orbit(exponent, megno):
+    """The uniformly rotating triangle is a stable periodic orbit: no exponential growth.
+    For U = P^2/2 (homogeneous of degree 2) every nearby motion rotates at the same rate
+    omega = 3 whatever the size, so deviations stay bounded and <Y> -> 0, the value of an
+    isochronous stable periodic orbit. For U = P^3/3 the rotation rate depends on the size:
+    deviations along the family grow linearly (shear) and <Y> -> 2, as on a torus."""
+    system = System.create(exponent=exponent)
+    y0 = initial_state(system, "equilateral", delta=0.0)
+    ci = chaos_indicators(system, y0, 5000.0, IndicatorOptions(deviations=2))
+    assert ci.ftle < 2e-3
+    assert ci.megno == pytest.approx(megno, abs=0.05)
+    assert ci.fli < 1.5 * math.log(5000.0)
+
+
+def test_homogeneous_scaling_rescales_time_and_lyapunov_exponent():
+    """U = P^k/k: q -> s q, p -> s^(k/2) p maps orbits to orbits with t -> tau t,
+    tau = s^(1 - k/2); tangent vectors map the same way, so the FTLE scales by 1/tau."""
+    k, s = 4.0, 1.7
+    tau = s ** (1 - k / 2)
+    system = System.create(exponent=k)
+    y0 = initial_state(system, "sides")
+    D = np.concatenate([np.full(6, s), np.full(6, s ** (k / 2))])
+    w0 = deviation_vectors(system, y0, 1, seed=3)[0]
+    T = 40.0
+    a = integrate(system, y0, T, tangents=w0, rtol=1e-13, atol=1e-13)
+    b = integrate(system, D * y0, tau * T, tangents=D * w0, rtol=1e-13, atol=1e-13)
+    np.testing.assert_allclose(b.y, D * a.y, rtol=1e-7, atol=1e-7 * np.abs(D * a.y).max())
+    np.testing.assert_allclose(b.deviations[0], D * a.deviations[0], rtol=1e-6,
+                               atol=1e-6 * np.abs(D * a.deviations[0]).max())
+    lam_a, lam_b = a.log_growth[0] / T, b.log_growth[0] / (tau * T)
+    assert a.log_growth[0] > 3                      # chaotic: the exponent is measurable
+    # |D w| / |w| lies between s and s^(k/2): the only finite-time difference
+    assert abs(lam_b * tau - lam_a) <= math.log(s ** (k / 2) / s) / T
+
+
+def test_deviation_vectors_are_reproducible_and_carry_no_centre_of_mass_motion(paper_system):
+    y0 = initial_state(paper_system, "sides")
+    w = deviation_vectors(paper_system, y0, 3, seed=7, cell=12)
+    np.testing.assert_array_equal(w, deviation_vectors(paper_system, y0, 3, seed=7, cell=12))
+    assert not np.allclose(w, deviation_vectors(paper_system, y0, 3, seed=7, cell=13))
+    q, p = paper_system.split(w)
+    np.testing.assert_allclose(np.einsum("kid,i->kd", q, paper_system.masses), 0, atol=1e-14)
+    np.testing.assert_allclose(p.sum(axis=1), 0, atol=1e-14)
+    np.testing.assert_allclose(np.linalg.norm(w, axis=1), 1.0, rtol=1e-14)
+    wp = deviation_vectors(paper_system, y0, 3, seed=7, project_flow=True)
+    f = np.zeros(12)
+    from survey.physics.system import rhs
+    m, d, meas, prof, par = paper_system.kernel_args
+    rhs(0.0, y0, f, m.copy(), d, meas, prof, par, 0)
+    gradH = np.concatenate([-f[6:], f[:6]])
+    np.testing.assert_allclose(wp @ f, 0, atol=1e-12)
+    np.testing.assert_allclose(wp @ gradH, 0, atol=1e-12)
+
+
+def test_histories_and_status_for_an_orbit_that_stops(paper_system):
+    """A collision ends the histories with NaN past the end, never raises."""
+    system = System.create(exponent=-1.0)
+    y0 = initial_state(system, "equilateral", side=math.sqrt(3), v_rot=1e-300)
+    y0[6:] = 0.0
+    ci = chaos_indicators(system, y0, 10.0)
+    assert ci.status.name == "COLLISION" and ci.t < 5
+    assert np.isnan(ci.ftle_history[-1]) and np.isfinite(ci.ftle_history[0])
+
+
+@pytest.mark.parametrize("family,params,t_final", [("equilateral", {"delta": 3.0}, 200.0),
+                                                  ("sides", {}, 60.0)])
+def test_megno_matches_its_definition(paper_system, family, params, t_final):
+    """<Y>(T) from its definition, computed independently: Y(t) = (2/t) int_0^t u
+    (w'.w)/|w|^2 du with w' from the right-hand side at densely sampled states, then
+    <Y> = (1/T) int Y -- against survey's step-end MEGNO."""
+    from survey.physics.system import rhs
+    y0 = initial_state(paper_system, family, **params)
+    w0 = deviation_vectors(paper_system, y0, 1, seed=0)
+    t = np.linspace(0.0, t_final, 200001)
+    out = integrate(paper_system, y0, t_final, tangents=w0, megno=True, t_eval=t,
+                    sample_tangents=True, renorm_interval=1e9)
+    n = paper_system.n
+    m, d, meas, prof, par = paper_system.kernel_args
+    rate = np.empty(t.size)
+    for k, state in enumerate(out.samples):
+        dy = np.zeros(2 * n)
+        rhs(t[k], np.ascontiguousarray(state), dy, m.copy(), d, meas, prof, par, 1)
+        w, wdot = state[n:], dy[n:]
+        rate[k] = w @ wdot / (w @ w)
+    from scipy.integrate import cumulative_trapezoid
+    z1 = cumulative_trapezoid(t * rate, t, initial=0.0)
+    Y = np.divide(2 * z1, t, out=np.zeros_like(t), where=t > 0)
+    mean_Y = np.trapezoid(Y, t) / t_final
+    assert out.megno_sums[1] / out.t == pytest.approx(mean_Y, rel=1e-4)
+
+
+def test_megno_survives_a_close_approach():
+    """Under U = 2/|A| + |A|^2 this orbit passes close to collinear near t = 110, where
+    the tangent dynamics spike within one step. MEGNO (from L = ln|w| at step ends, not a
+    quadrature of the spiking rate) stays positive, grows like the FTLE says, and does not
+    depend on the tolerance -- a quadrature of the rate gave <Y> = -797 at rtol 1e-12 and
+    -67 at 1e-13."""
+    system = System.create(potential="areal_barrier")
+    y0 = initial_state(system, "equilateral", side=math.sqrt(3), delta=0.25, energy=8.0)
+    runs = [chaos_indicators(system, y0, 300.0, IndicatorOptions(perturbations=0), rtol=tol,
+                             atol=tol) for tol in (1e-12, 1e-13)]
+    assert all(ci.status.name == "OK" and ci.ftle > 0.05 for ci in runs)
+    assert runs[0].megno == pytest.approx(runs[1].megno, rel=0.05)
+    assert np.all(np.diff(runs[0].megno_history[8:]) > -0.5) and runs[0].megno > 5
+    assert runs[0].megno_slope == pytest.approx(runs[0].ftle / 2, rel=0.5)

@@ -1,0 +1,148 @@
+"""Reduced Jacobi coordinates, surfaces of section and energy-shell initial conditions."""
+import math
+
+import numpy as np
+import pytest
+
+from survey.catalog.errors import Inaccessible
+from survey.numerics.integrate import integrate
+from survey.numerics.sections import section_event
+from survey.physics.families import initial_state
+from survey.physics.geometry import area, inequities, perimeter, sides
+from survey.physics.jacobi import jacobi, reduced, reduced_energy, to_cartesian
+from survey.physics.system import System
+
+
+def random_states(system, count, seed=0):
+    rng = np.random.default_rng(seed)
+    return rng.normal(size=(count, system.n))
+
+
+@pytest.mark.parametrize("potential", ["perimetric_power", "areal_barrier", "perimetric_yukawa"])
+def test_round_trip_and_reduced_hamiltonian(potential):
+    system = System.create(masses=(1.0, 2.3, 0.6), potential=potential)
+    y = random_states(system, 200)
+    r = reduced(system, y)
+    centre, momentum = system.centre_of_mass(y), system.momentum(y)
+    back = to_cartesian(system, r, centre, momentum)
+    np.testing.assert_allclose(back, y, atol=1e-12 * np.abs(y).max())
+    # reduced H equals Cartesian H in the centre-of-mass frame
+    com = to_cartesian(system, r)
+    np.testing.assert_allclose(reduced_energy(system, r), system.energy(com), rtol=1e-12)
+    np.testing.assert_allclose(system.momentum(com), 0, atol=1e-13)
+    # J = p_theta is the angular momentum about the centre of mass
+    np.testing.assert_allclose(r.J, system.angular_momentum(com), rtol=1e-12, atol=1e-13)
+
+
+def test_area_and_sides_in_reduced_coordinates():
+    system = System.create(masses=(1.0, 2.3, 0.6))
+    y = random_states(system, 100, seed=1)
+    r = reduced(system, y)
+    np.testing.assert_allclose(area(*system.triangle(y)), 0.5 * r.sigma * r.eta * np.sin(r.phi),
+                               rtol=1e-12)
+    np.testing.assert_allclose(sides(*system.triangle(y))[:, 2], r.sigma, rtol=1e-14)
+    s, h, ps, ph = jacobi(system, y)
+    m = system.masses
+    mu1, mu2 = m[0] * m[1] / (m[0] + m[1]), (m[0] + m[1]) * m[2] / m.sum()
+    inertia = mu1 * r.sigma ** 2 + mu2 * r.eta ** 2
+    np.testing.assert_allclose(inertia, system.moment_of_inertia(y), rtol=1e-12)
+
+
+@pytest.fixture(scope="module")
+def phi_section(paper_system):
+    y0 = initial_state(paper_system, "equilateral", delta=3.0)
+    out = integrate(paper_system, y0, 200.0, events=[section_event(paper_system)])
+    return paper_system, y0, out
+
+
+def test_phi_section_crossings_lie_on_the_surface_and_the_energy_shell(phi_section):
+    system, y0, out = phi_section
+    assert out.n_crossings > 100
+    r = reduced(system, out.crossings.y)
+    s, h, _, _ = jacobi(system, out.crossings.y)
+    np.testing.assert_allclose(np.sum(s * h, axis=-1) / (r.sigma * r.eta), 0, atol=1e-12)
+    np.testing.assert_allclose(r.phi, math.pi / 2, atol=1e-12)
+    assert np.all(r.p_phi > 0)                                     # phi increasing
+    np.testing.assert_allclose(system.energy(out.crossings.y) / system.energy(y0), 1,
+                               atol=1e-11)
+    # equal masses: phi = pi/2 is the isosceles set a = b
+    a, b, c = np.moveaxis(sides(*system.triangle(out.crossings.y)), -1, 0)
+    np.testing.assert_allclose(a, b, atol=1e-11)
+
+
+def test_crossing_states_are_as_accurate_as_the_integration(phi_section):
+    """Dense-output crossing states against integrations that land exactly on the crossing
+    time, and crossing times between tolerances: errors scale with the tolerance."""
+    system, y0, out = phi_section
+    for t_c, y_c in list(zip(out.crossings.t, out.crossings.y))[:40:8]:
+        landed = integrate(system, y0, t_c).y
+        np.testing.assert_allclose(y_c, landed, atol=2e-11 * np.abs(landed).max())
+    ev = [section_event(system)]
+    t = {tol: integrate(system, y0, 50.0, events=ev, rtol=tol, atol=tol).crossings.t
+         for tol in (1e-9, 1e-11, 1e-13)}
+    assert t[1e-9].size == t[1e-11].size == t[1e-13].size
+    e9, e11 = np.abs(t[1e-9] - t[1e-13]).max(), np.abs(t[1e-11] - t[1e-13]).max()
+    assert e11 < 1e-9 and 10 < e9 / e11 < 1e4
+
+
+@pytest.mark.parametrize("coordinate,value,measure", [
+    ("sigma", 3.0, lambda s, y: reduced(s, y).sigma),
+    ("eta", 3.2, lambda s, y: reduced(s, y).eta),
+    ("phi", 1.2, lambda s, y: reduced(s, y).phi),
+    ("perimeter", 9.0, lambda s, y: perimeter(*s.triangle(y))),
+    ("i_a", 3.0, lambda s, y: inequities(*s.triangle(y))[..., 0]),
+    ("c", 3.0, lambda s, y: sides(*s.triangle(y))[..., 2]),
+    ("area", 3.0, lambda s, y: area(*s.triangle(y))),
+    ("p_sigma", 0.0, lambda s, y: reduced(s, y).p_sigma),
+])
+@pytest.mark.parametrize("direction", [1, -1])
+def test_named_surfaces_and_directions(paper_system, coordinate, value, measure, direction):
+    y0 = initial_state(paper_system, "equilateral", delta=3.0)
+    ev = section_event(paper_system, coordinate, value, direction)
+    out = integrate(paper_system, y0, 100.0, events=[ev])
+    assert out.n_crossings > 5
+    np.testing.assert_allclose(measure(paper_system, out.crossings.y), value, atol=1e-11)
+    dt = 1e-6     # the coordinate moves in the requested direction through the surface
+    after = [integrate(paper_system, y, dt).y for y in out.crossings.y[:5]]
+    moved = measure(paper_system, np.array(after)) - value
+    assert np.all(np.sign(moved) == direction)
+
+
+def test_bad_surfaces_are_rejected(paper_system):
+    with pytest.raises(ValueError, match="unknown section coordinate"):
+        section_event(paper_system, "psi", 1.0)
+    with pytest.raises(ValueError, match="only p_sigma = 0"):
+        section_event(paper_system, "p_sigma", 1.0)
+    with pytest.raises(ValueError, match="three bodies in the plane"):
+        section_event(System.create(dim=3), "phi")
+
+
+def test_section_family_starts_on_the_shell_with_requested_E_and_J(paper_system):
+    E, J = 84.45577136594005, 24.401923788646684
+    made = 0
+    for sigma in np.linspace(2.0, 5.0, 7):
+        for p_sigma in np.linspace(-3, 3, 7):
+            try:
+                y = initial_state(paper_system, "section", energy=E, angular_momentum=J,
+                                  sigma=sigma, p_sigma=p_sigma, eta=3.0, p_eta=0.5)
+            except Inaccessible:
+                continue
+            made += 1
+            assert paper_system.energy(y) == pytest.approx(E, rel=1e-13)
+            assert paper_system.angular_momentum(y) == pytest.approx(J, rel=1e-13)
+            r = reduced(paper_system, y)
+            assert r.phi == pytest.approx(math.pi / 2, abs=1e-14) and r.p_phi > 0
+            assert (r.sigma, r.p_sigma) == pytest.approx((sigma, p_sigma), abs=1e-12)
+    assert 5 < made < 49      # part of the grid is inaccessible
+    with pytest.raises(Inaccessible):
+        initial_state(paper_system, "section", energy=1.0)
+
+
+def test_energy_target_rescales_relative_velocities(paper_system):
+    y = initial_state(paper_system, "sides", energy=50.0)
+    assert paper_system.energy(y) == pytest.approx(50.0, rel=1e-14)
+    np.testing.assert_allclose(paper_system.momentum(y), 0, atol=1e-14)
+    q0 = paper_system.split(initial_state(paper_system, "sides"))[0]
+    np.testing.assert_array_equal(paper_system.split(y)[0], q0)
+    with pytest.raises(Inaccessible, match="exceeds the target energy"):
+        initial_state(paper_system, "sides", energy=10.0)     # U(q0) = 22.445

@@ -1,0 +1,190 @@
+"""Malformed configs: each is answered before any work with one line naming the key, and
+exit code 2 (no traceback)."""
+import subprocess
+import sys
+
+import pytest
+
+from survey.cli import main
+from survey.pipeline.config import load_config
+
+GOOD = """
+[survey]
+name = "t"
+output = "{out}"
+[system]
+potential = "perimetric_power"
+[initial]
+family = "equilateral"
+delta = {{start = 0.0, stop = 1.0, num = 2}}
+[integration]
+t_final = 1.0
+[section]
+coordinate = "phi"
+"""
+
+# (what to change, expected fragment of the error: always the key)
+BAD = [
+    ("[sytem]\nbodies = 3", "[sytem]: unknown table (did you mean 'system'?)"),
+    ("[system]\nmass = [1, 1, 1]", "[system].mass: unknown key (did you mean 'masses'?)"),
+    ("[system]\nmasses = 'abc'", "[system].masses: expected a list of numbers"),
+    ("[system]\nmasses = [1.0, -1.0, 1.0]", "[system].masses: must be > 0"),
+    ("[system]\nmasses = [1.0, 0.0, 1.0]", "[system].masses: must be > 0"),
+    ("[system]\nmasses = [1.0, 1.0]", "[system].masses: needs 3 values"),
+    ("[system]\nbodies = 2", "[system].bodies: must be >= 3"),
+    ("[system]\nbodies = true", "[system].bodies: expected an integer"),
+    ("[system]\ndim = 4", "[system].dim: 4 is not one of 2, 3"),
+    ("[system]\npotential = 'perimetric_cubic'", "[system].potential: unknown triplet potential 'perimetric_cubic'"),
+    ("[system]\nparams = {k = 2}", "[system.params].k: not a parameter of perimetric_power"),
+    ("[system]\npotential = 'perimetric_yukawa'\nparams = {gamma = -1.0}", "[system.params].gamma: potential parameter 'gamma' must be >= 0"),
+    ("[system]\npotential = 'lennard_jones'", "[system].potential: 'lennard_jones' is a pair potential; potential takes one triplet term"),
+    ("[system]\npotential = 'areal_power'\ninteractions = [{kind = 'pair', potential = 'power', params = {coupling = 1.0, exponent = -1.0}}]", "[system].potential: give either potential/params (one triplet term) or interactions"),
+    ("[system]\ninteractions = [{kind = 'pairs', potential = 'lennard_jones', params = {epsilon = 1.0, sigma = 1.0}}]", "[system].interactions[0].kind: 'pairs' is not one of 'pair', 'triplet' (did you mean 'pair'?)"),
+    ("[system]\ninteractions = [{potential = 'lennard_jones', params = {epsilon = 1.0, sigma = 1.0}}]", "[system].interactions[0].kind: is required"),
+    ("[system]\ninteractions = [{kind = 'pair', potential = 'axilrod_teller', params = {strength = 1.0}}]", "[system].interactions[0].potential: unknown pair potential 'axilrod_teller'; choose one of lennard_jones, yukawa, power ('axilrod_teller' is a triplet potential: give it kind = \"triplet\")"),
+    ("[system]\ninteractions = [{kind = 'triplet', potential = 'lennard_jones', params = {epsilon = 1.0, sigma = 1.0}}]", "[system].interactions[0].potential: unknown triplet potential 'lennard_jones'"),
+    ("[system]\ninteractions = [{kind = 'pair', potential = 'lenard_jones', params = {epsilon = 1.0, sigma = 1.0}}]", "(did you mean 'lennard_jones'?)"),
+    ("[system]\ninteractions = [{kind = 'pair', potential = 'lennard_jones', params = {epsilon = 1.0}}]", "[system].interactions[0].params.sigma: is missing"),
+    ("[system]\ninteractions = [{kind = 'pair', potential = 'lennard_jones', params = {epsilon = 1.0, sigma = -2.0}}]", "[system].interactions[0].params.sigma: potential parameter 'sigma' must be > 0"),
+    ("[system]\ninteractions = [{kind = 'pair', potential = 'lennard_jones', params = {epsilon = [1.0, 0.0], sigma = 1.0}}]", "[system].interactions[0].params.epsilon: potential parameter 'epsilon' must be > 0 (a well depth), got 0 (at the grid value 0)"),
+    ("[system]\ninteractions = [{kind = 'pair', potential = 'yukawa', params = {coupling = 1.0, gama = 1.0}}]", "[system].interactions[0].params.gama: not a parameter of yukawa (did you mean 'gamma'?)"),
+    ("[system]\ninteractions = []", "[system].interactions: expected a list of tables"),
+    ("[system]\ninteractions = [{kind = 'triplet', potential = 'axilrod_teller', params = {strength = [0.1, 0.2]}}, {kind = 'pair', potential = 'lenard_jones', params = {epsilon = 1.0, sigma = 1.0}}]", "[system].interactions[1].potential: unknown pair potential 'lenard_jones'"),
+    ("[integration]\nrtol = 0.0", "[integration].rtol: must be >= 2.22e-15"),
+    ("[integration]\nrtol = -1e-9", "[integration].rtol: must be >= 2.22e-15"),
+    ("[integration]\nrtol = 1e-16", "double precision cannot honour"),
+    ("[integration]\natol = 'tight'", "[integration].atol: expected a number"),
+    ("[integration]\nt_final = 0.0", "[integration].t_final: must be > 0"),
+    ("[integration]\nt_final = -5.0", "[integration].t_final: must be > 0"),
+    ("[integration]\nt_final = nan", "[integration].t_final: must be finite"),
+    ("[integration]\nmax_steps = 0", "[integration].max_steps: must be >= 1"),
+    ("[integration]\ncell_time_limit = -1.0", "[integration].cell_time_limit: must be >= 0"),
+    ("[initial]\ndelta = 1.0", "[initial].family: is required"),
+    ("[initial]\nfamily = 'equilateal'", "[initial].family: 'equilateal' is not one of"),
+    ("[initial]\nfamily = 'equilateral'\ndelt = 1.0", "[initial].delt: not a parameter of family 'equilateral' (did you mean 'delta'?)"),
+    ("[initial]\nfamily = 'equilateral'\ndelta = {start = 0, stop = 1, num = 0}", "[initial].delta.num: must be an integer >= 1"),
+    ("[initial]\nfamily = 'equilateral'\ndelta = {start = 0, num = 3}", "[initial].delta: a grid axis needs num, start, stop; stop is missing"),
+    ("[initial]\nfamily = 'equilateral'\ndelta = {start = 0, stop = 1, num = 3, step = 1}", "[initial].delta.step: a grid axis takes only start, stop, num"),
+    ("[initial]\nfamily = 'equilateral'\ndelta = []", "[initial].delta: a grid axis list needs finite numbers"),
+    ("[initial]\nfamily = 'equilateral'\ndelta = [1.0, 'x']", "[initial].delta: a grid axis list needs finite numbers"),
+    ("[initial]\nfamily = 'equilateral'\ndelta = [1.0, 1.0]", "[initial].delta: grid axis values must be distinct"),
+    ("[initial]\nfamily = 'equilateral'\ndelta = 'three'", "[initial].delta: expected a number, a list or {start, stop, num}"),
+    ("[initial]\nfamily = 'sides'\na = 5.0", "[initial]: sides (a, b, c) = (5, 2, 1.8) do not make a non-degenerate triangle"),
+    ("[initial]\nfamily = 'sides'\na = {start = 1.0, stop = 5.0, num = 3}", "[initial] at a = 5: sides"),
+    ("[initial]\nfamily = 'linear'\nvelocity_u = [1.0, 2.0, 3.0]", "[initial].velocity_u: expected finite numbers shaped like [1.5, -10.0711]"),
+    ("[survey]\noutput = '/proc/no/such/x.nc'", "[survey].output: cannot write to /proc/no/such"),
+    ("[survey]\noutput = 'tests'", "[survey].output: tests is a folder; give a file name"),
+    ("[section]\ncoordinate = 'psi'", "[section].coordinate: 'psi' is not one of"),
+    ("[section]\ndirection = 2", "[section].direction: 2 is not one of -1, 0, 1"),
+    ("[section]\ncoordinate = 'p_sigma'\nvalue = 1.0", "[section]: section p_sigma = 1.0: only p_sigma = 0"),
+    ("[section]\nmax_crossings = 0", "[section].max_crossings: must be >= 1"),
+    ("[section]\ntriplet = [0, 0, 1]", "[section].triplet: needs three different bodies"),
+    ("[section]\ncoordinate = 'linear'", "[section].coefficients: a 'linear' surface needs 12 coefficients"),
+    ("[system]\ndim = 3\n[section]\ncoordinate = 'phi'", "[section].coordinate: 'phi' is a reduced coordinate"),
+    ("[indicators]\nwhich = ['lyapunov']", "[indicators].which: 'lyapunov' is not one of"),
+    ("[indicators]\ndeviations = 1", "[indicators].deviations: sali and gali2 need 2 deviation vectors"),
+    ("[indicators]\nrenorm_interval = 5.0", "[indicators].renorm_interval: is longer than t_final"),
+    ("[indicators]\nperturbation_size = 0.0", "[indicators].perturbation_size: must be > 0"),
+    ("[dask]\nworkers = 0", "[dask].workers: must be >= 1"),
+    ("[dask]\nchunk_size = -1", "[dask].chunk_size: must be >= 0"),
+    ("[dask]\nchunksize = 4", "[dask].chunksize: unknown key (did you mean 'chunk_size'?)"),
+    ("system = 3", "[system]: must be a table"),
+    ("[system\nbodies = 3", "not valid TOML"),
+]
+
+
+def merged(change: str, out: str) -> str:
+    """GOOD with the tables in `change` replacing or extending those in GOOD."""
+    import tomllib
+    base = tomllib.loads(GOOD.format(out=out))
+    try:
+        extra = tomllib.loads(change)
+    except tomllib.TOMLDecodeError:
+        return GOOD.format(out=out) + "\n" + change
+    scalars = {k: v for k, v in extra.items() if not isinstance(v, dict)}
+    if scalars:   # a top-level value where a table belongs: write it raw, drop the table
+        for k in scalars:
+            base.pop(k, None)
+        from survey.pipeline.config import _to_toml
+        return "\n".join(f"{k} = {v!r}" for k, v in scalars.items()) + "\n" + _to_toml(base)
+    for table, body in extra.items():
+        if table == "initial":
+            base[table] = body
+        elif isinstance(body, dict) and isinstance(base.get(table), dict):
+            if "interactions" in body and "potential" not in body:   # the one or the other
+                base[table].pop("potential", None)
+            base[table].update(body)
+        else:
+            base[table] = body
+    from survey.pipeline.config import _to_toml
+    return _to_toml(base)
+
+
+def test_there_are_at_least_thirty_malformed_configs():
+    assert len(BAD) >= 30
+
+
+def test_the_good_config_is_good(tmp_path):
+    cfg = tmp_path / "good.toml"
+    cfg.write_text(GOOD.format(out=tmp_path / "x.nc"))
+    assert load_config(cfg).n_cells == 2
+
+
+@pytest.mark.parametrize("change,message", BAD, ids=[m.split(":")[0] for _, m in BAD])
+def test_malformed_config_is_one_line_with_the_key_and_exit_code_2(tmp_path, capsys, change,
+                                                                     message):
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text(merged(change, str(tmp_path / "x.nc")))
+    assert main([str(cfg), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and err.startswith("error: ")
+    assert message in err, err
+    assert not (tmp_path / "x.nc").exists()
+
+
+def test_cli_process_exits_2_without_traceback(tmp_path):
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text(merged("[integration]\natol = 0.0", str(tmp_path / "x.nc")))
+    for argv in ([str(cfg)], ["run", str(tmp_path / "missing.toml")],
+                 [str(cfg), "--workers", "0"]):
+        proc = subprocess.run([sys.executable, "-m", "survey", *argv], capture_output=True,
+                              text=True, timeout=120)
+        assert proc.returncode == 2, proc.stderr
+        assert "Traceback" not in proc.stderr and proc.stderr.startswith("error: ")
+
+
+def test_config_values_are_data_not_code(tmp_path, capsys):
+    cfg = tmp_path / "evil.toml"
+    cfg.write_text(merged("[initial]\nfamily = \"__import__('os').system('touch pwned')\"",
+                          str(tmp_path / "x.nc")))
+    assert main([str(cfg)]) == 2
+    assert not (tmp_path / "pwned").exists()
+
+
+def test_the_readme_tables_are_the_declarations():
+    """The README's config tables, variable table and status list are generated from SCHEMA,
+    VARIABLES and Status; regenerate them with survey.pipeline.config.markdown_tables() and
+    survey.catalog.variables.markdown_table() when a declaration changes."""
+    import pathlib
+
+    from survey.catalog.status import Status
+    from survey.catalog.variables import markdown_table
+    from survey.pipeline.config import markdown_tables
+    readme = (pathlib.Path(__file__).parents[2] / "README.md").read_text()
+    assert markdown_tables() in readme
+    assert markdown_table() in readme
+    for s in Status:
+        assert f"- `{s.value}` `{s.name.lower()}`: {s.meaning}" in readme
+
+
+def test_shipped_workflows_and_the_embedded_default_validate():
+    import pathlib
+    root = pathlib.Path(__file__).parents[2]
+    from survey.pipeline import orbits
+    paths = sorted((root / "workflows").glob("*.toml")) + [root / "survey" / "default.toml"]
+    assert len(paths) >= 4
+    for path in paths:
+        if orbits.is_orbit_workflow(path):
+            assert orbits.load_workflow(path)
+        else:
+            assert load_config(path).n_cells >= 1

@@ -1,0 +1,245 @@
+"""The survey pipeline against real dask clusters: archive contents and attributes,
+bit-identity across chunking and worker counts, checkpoints and resume after SIGKILL, a
+killed worker, an external scheduler, verify, atomic writes."""
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from survey.catalog.errors import SurveyError
+from survey.catalog.status import Status
+from survey.catalog.variables import BY_NAME
+from survey.pipeline.checkpoints import checkpoint_dir
+from survey.pipeline.config import load_config
+from survey.pipeline.sweep import run, run_survey, verify
+
+CONFIG = """
+[survey]
+name = "{name}"
+output = "{out}"
+[initial]
+family = "equilateral"
+delta = {{start = 0.0, stop = 6.0, num = {num}}}
+energy = {energy}
+[integration]
+t_final = {t_final}
+[indicators]
+perturbations = 1
+history_points = 8
+[section]
+max_crossings = 20
+[dask]
+chunk_size = {chunk}
+workers = {workers}
+"""
+
+
+def write_config(tmp_path, name="s", num=12, t_final=20.0, chunk=4, workers=2,
+                 energy="[84.45577136594005, 40.0]"):
+    path = tmp_path / f"{name}.toml"
+    path.write_text(CONFIG.format(name=name, out=tmp_path / f"{name}.nc", num=num,
+                                  t_final=t_final, chunk=chunk, workers=workers, energy=energy))
+    return path
+
+
+def reproducible_variables(ds: xr.Dataset) -> list[str]:
+    return [k for k in ds.data_vars if BY_NAME[k].reproducible]
+
+
+def assert_same_data(a: xr.Dataset, b: xr.Dataset):
+    names = reproducible_variables(a)
+    assert names == reproducible_variables(b) and "ftle" in names and "crossing_phi" in names
+    for name in names:
+        assert a[name].values.tobytes() == b[name].values.tobytes(), name
+    for c in a.coords:
+        np.testing.assert_array_equal(a[c].values, b[c].values)
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("ref")
+    cfg = write_config(tmp, "ref", chunk=5, workers=2)
+    return cfg, run(cfg)
+
+
+def test_archive_is_labelled_and_self_describing(reference):
+    cfg, ds = reference
+    assert ds.sizes["delta"] == 12 and ds.sizes["energy"] == 2
+    assert list(ds.ftle.dims) == ["delta", "energy"]          # axes in the order written
+    assert ds.crossing_time.dims == ("delta", "energy", "crossing")
+    for name, var in ds.data_vars.items():
+        assert "long_name" in var.attrs, name
+        assert "units" in var.attrs or "flag_meanings" in var.attrs, name
+    flags = dict(zip(ds.status.attrs["flag_meanings"].split(), ds.status.attrs["flag_values"]))
+    assert flags["ok"] == 0 and flags["inaccessible"] == Status.INACCESSIBLE
+    for key in ("Conventions", "title", "history", "source", "config", "config_sha256",
+                "version_survey", "version_numba", "version_xarray", "git_commit"):
+        assert ds.attrs[key], key
+    assert ds.attrs["config"] == Path(cfg).read_text()
+    # energy target 40 < U(q0) = 54: inaccessible, not an error; the others are ok
+    status = ds.status.values
+    assert np.all(status[:, 1] == Status.INACCESSIBLE) and np.all(status[:, 0] == Status.OK)
+    assert "energy" not in ds.data_vars            # the energy axis holds it
+    E = ds.initial_state.values[:, 0]
+    from survey.physics.system import System
+    np.testing.assert_allclose(System.create().energy(E), 84.45577136594005, rtol=1e-13)
+    assert np.all(np.isnan(ds.ftle.values[:, 1]))
+    # delta = 3 reproduces the integration of the same orbit outside the survey
+    n = ds.n_crossings.values[6, 0]
+    assert n > 5 and np.all(np.isnan(ds.crossing_time.values[6, 0, min(n, 20):]))
+
+
+@pytest.mark.parametrize("chunk,workers", [(1, 2), (7, 2), (64, 2), (5, 1)])
+def test_same_archive_whatever_the_chunking_or_worker_count(tmp_path, reference, chunk,
+                                                            workers):
+    cfg = write_config(tmp_path, "ref", chunk=chunk, workers=workers)
+    assert_same_data(run(cfg), reference[1])
+
+
+def test_resume_after_sigkill_finishes_only_what_is_missing(tmp_path):
+    cfg = write_config(tmp_path, "big", num=24, t_final=150.0, chunk=2)
+    folder = checkpoint_dir(load_config(cfg))
+    proc = subprocess.Popen([sys.executable, "-m", "survey", str(cfg), "--no-progress"],
+                            start_new_session=True, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    deadline = time.time() + 300
+    while time.time() < deadline and len(list(folder.glob("chunk-*.npz"))) < 4:
+        time.sleep(0.02)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    time.sleep(1.0)
+    files = sorted(folder.glob("chunk-*.npz"))
+    assert 4 <= len(files) < 24 and not (tmp_path / "big.nc").exists()
+    before = {}
+    for f in files:
+        with np.load(f) as z:
+            before.update(zip(z["cell_ids"].tolist(), z["wall_time"].tolist()))
+    resumed = run(cfg)
+    wall = resumed.wall_time.values.ravel()
+    for cell, seconds in before.items():      # finished cells were reused, not recomputed
+        assert wall[cell] == seconds
+    assert not folder.exists()
+    fresh_cfg = write_config(tmp_path / "..", "big-fresh", num=24, t_final=150.0, chunk=6)
+    assert_same_data(resumed, run(fresh_cfg))
+
+
+def test_changed_config_never_reuses_checkpoints(tmp_path):
+    a = load_config(write_config(tmp_path, "a"))
+    same = load_config(write_config(tmp_path, "a", chunk=3, workers=1))
+    other = load_config(write_config(tmp_path, "a", t_final=21.0))
+    assert a.result_key() == same.result_key()     # dask settings do not change results
+    assert a.result_key() != other.result_key()
+    assert checkpoint_dir(a) != checkpoint_dir(other)
+
+
+def test_a_killed_worker_does_not_lose_cells(tmp_path):
+    """SIGKILL one worker process mid-survey: dask reschedules its tasks and the archive
+    equals an undisturbed run's. The victim is a worker (a multiprocessing spawn_main
+    child), never dask's resource tracker, killed while most chunks are still to come."""
+    import psutil
+    cfg = write_config(tmp_path, "killed", num=24, t_final=150.0, chunk=1, workers=2)
+    proc = subprocess.Popen([sys.executable, "-m", "survey", str(cfg), "--no-progress"],
+                            start_new_session=True, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    folder = checkpoint_dir(load_config(cfg))
+    victim = None
+    deadline = time.time() + 300
+    while time.time() < deadline and proc.poll() is None and victim is None:
+        workers = []
+        for p in psutil.Process(proc.pid).children(recursive=True):
+            try:
+                if "spawn_main" in " ".join(p.cmdline()) and p.status() != "zombie":
+                    workers.append(p)
+            except psutil.Error:       # gone or a zombie meanwhile
+                pass
+        if len(workers) == 2 and len(list(folder.glob("chunk-*.npz"))) >= 2:
+            victim = workers[0]
+            victim.kill()
+        time.sleep(0.02)
+    out, err = proc.communicate(timeout=300)
+    assert victim is not None and proc.returncode == 0, err.decode()[-2000:]
+    other = write_config(tmp_path / "..", "killed-undisturbed", num=24, t_final=150.0,
+                         chunk=5, workers=2)
+    assert_same_data(xr.open_dataset(tmp_path / "killed.nc"), run(other))
+
+
+def test_external_scheduler_and_workers(tmp_path, reference):
+    """`dask scheduler` and `dask worker` started separately on loopback; --scheduler."""
+    sched_file = tmp_path / "scheduler.json"
+    env = dict(os.environ, NUMBA_NUM_THREADS="1")
+    dask = shutil.which("dask") or str(Path(sys.executable).parent / "dask")
+    scheduler = subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", "0",
+                                  "--no-dashboard", "--scheduler-file", str(sched_file)],
+                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                 start_new_session=True, env=env)
+    try:
+        deadline = time.time() + 60
+        while not sched_file.exists() and time.time() < deadline:
+            time.sleep(0.2)
+        import json
+        address = json.loads(sched_file.read_text())["address"]
+        worker = subprocess.Popen([dask, "worker", "--scheduler-file", str(sched_file),
+                                   "--nthreads", "1", "--nworkers", "2", "--no-dashboard"],
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                  start_new_session=True, env=env)
+        try:
+            cfg = write_config(tmp_path, "ref", chunk=3)
+            proc = subprocess.run([sys.executable, "-m", "survey", str(cfg), "--scheduler",
+                                   address, "--no-progress"], capture_output=True, text=True,
+                                  timeout=600)
+            assert proc.returncode == 0, proc.stderr[-2000:]
+            assert_same_data(xr.open_dataset(tmp_path / "ref.nc"), reference[1])
+        finally:
+            os.killpg(worker.pid, signal.SIGTERM)
+            worker.wait(timeout=60)
+    finally:
+        os.killpg(scheduler.pid, signal.SIGTERM)
+        scheduler.wait(timeout=60)
+
+
+def test_verify_recomputes_cells_bit_for_bit_and_catches_tampering(tmp_path, reference):
+    cfg, ds = reference
+    path = Path(ds.encoding["source"])
+    ok, lines = verify(path, cells=6)
+    assert ok, lines
+    tampered = tmp_path / "tampered.nc"
+    with xr.open_dataset(path) as src:
+        t = src.load()
+    t["ftle"].values[0, 0] = np.nextafter(t["ftle"].values[0, 0], 1.0)
+    t.to_netcdf(tampered)
+    from survey.cli import main
+    assert main(["verify", str(tampered), "--cells", "3"]) == 1
+
+
+def test_a_crash_while_writing_leaves_no_archive(tmp_path, monkeypatch):
+    cfg = write_config(tmp_path, "crash", num=2, t_final=5.0)
+    calls = {"n": 0}
+    original = xr.Dataset.to_netcdf
+
+    def flaky(self, *args, **kw):
+        calls["n"] += 1
+        if calls["n"] == 2:
+            raise OSError("disk full")
+        return original(self, *args, **kw)
+
+    monkeypatch.setattr(xr.Dataset, "to_netcdf", flaky)
+    with pytest.raises(SurveyError, match="disk full"):
+        run_survey(cfg, workers=1)
+    assert not (tmp_path / "crash.nc").exists()
+    assert not list(tmp_path.glob(".crash.nc.partial*"))
+    monkeypatch.setattr(xr.Dataset, "to_netcdf", original)
+    assert run_survey(cfg, workers=1).exists()       # the checkpoints were kept: resumes
+
+
+def test_progress_bar_shows_cells_rate_and_eta(tmp_path, capsys):
+    cfg = write_config(tmp_path, "p", num=2, t_final=5.0, energy="84.45577136594005")
+    run_survey(cfg, workers=1, progress=True)
+    err = capsys.readouterr().err
+    assert "2/2" in err and "cell/s" in err
