@@ -17,6 +17,7 @@ import time
 
 import numpy as np
 
+from .catalog.variables import V
 from .numerics.dop853 import error_norm, stages
 from .numerics.indicators import deviation_vectors
 from .numerics.integrate import integrate
@@ -238,6 +239,7 @@ def torus_overhead(t_final=2000.0, repeats=6, out=print):
     `repeats` interleaved runs; and the classification of a 10^4-cell grid (target: the
     analysis adds < 15% per cell)."""
     import xarray as xr
+
     from .analysis.classify import classify
     from .pipeline.cells import CellTask, build_starts, run_cells
     from .pipeline.config import load_config
@@ -261,12 +263,12 @@ def torus_overhead(t_final=2000.0, repeats=6, out=print):
         rows.append((label, best[False][2], best[True][2]))
     n = 10_000
     rng = np.random.default_rng(0)
-    grid = xr.Dataset({"status": ("cell", np.zeros(n, np.int8)),
+    grid = xr.Dataset({V.status: ("cell", np.zeros(n, np.int8)),
                        **{k: ("cell", rng.uniform(0, 10, n)) for k in
-                          ("birkhoff_digits", "birkhoff_digits_half", "megno", "sali",
-                           "frequency_diffusion")},
-                       "ftle": ("cell", rng.uniform(0, 0.2, n)),
-                       "t_end": ("cell", np.full(n, t_final))})
+                          (V.birkhoff_digits, V.birkhoff_digits_half, V.megno, V.sali,
+                           V.frequency_diffusion)},
+                       V.ftle: ("cell", rng.uniform(0, 0.2, n)),
+                       V.t_end: ("cell", np.full(n, t_final))})
     t = time.perf_counter()
     classify(grid)
     classified = time.perf_counter() - t
@@ -287,6 +289,7 @@ def survey_scaling(cells=200, t_final=2000.0, repeats=2, folder="results/bench",
     and the per-task overhead: the share of the workers' compute phase not spent inside
     cells (targets: speed-up >= 1.85, overhead < 5%)."""
     import xarray as xr
+
     from .pipeline.sweep import run_survey
     rows = {}
     for _ in range(repeats):
@@ -341,6 +344,7 @@ def survey_memory(sizes=(10_000, 100_000), folder="results/bench", out=print):
 
 def _memory_run(n, folder):
     import resource
+
     from .pipeline.sweep import run_survey
     cfg = {"survey": {"name": f"mem-{n}", "output": f"{folder}/mem-{n}.nc"},
            "initial": {"family": "equilateral",
@@ -424,7 +428,7 @@ def scan_vs_heyoka(cells=101, t_final=2000.0, tol=1e-12, repeats=2, folder="resu
                        "delta": {"start": 0.0, "stop": 10.0, "num": cells}},
            "integration": {"t_final": t_final, "rtol": tol, "atol": tol},
            "indicators": {"deviations": 1, "perturbations": 0,
-                          "which": ["ftle", "megno", "fli"]},
+                          "which": [V.ftle, V.megno, V.fli]},
            "tori": {"analyse": False},
            "dask": {"workers": 2}}
     run_survey(cfg, progress=False)     # numba's disk cache is warm from here on

@@ -5,6 +5,7 @@ import argparse
 import os
 import sys
 
+from .catalog import defaults
 
 BENCH_PARTS = ["scan", "cell", "fixed", "integrator", "step", "indicators", "tori", "terms",
                "survey", "memory"]
@@ -215,7 +216,7 @@ def build_parser():
     v.add_argument("--cells", type=int, default=8)
     v.set_defaults(func=_verify)
     b = sub.add_parser("bench", help="survey's DOP853 vs scipy and heyoka on the paper's orbits")
-    b.add_argument("--t-final", type=float, default=2000.0)
+    b.add_argument("--t-final", type=float, default=defaults.T_FINAL)
     b.add_argument("--t-scipy", type=float, default=50.0,
                    help="span scipy is run over before extrapolating (default 50)")
     b.add_argument("--repeats", type=int, default=2)
@@ -230,9 +231,10 @@ def build_parser():
     o.add_argument("--family", default="sides")
     o.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="family parameter, e.g. --param delta=3 (repeatable)")
-    o.add_argument("--potential", default="perimetric_power")
-    o.add_argument("--t-final", type=float, default=500.0)
-    o.add_argument("--tol", type=float, default=1e-12, help="rtol = atol (default 1e-12)")
+    o.add_argument("--potential", default=defaults.POTENTIAL)
+    o.add_argument("--t-final", type=float, default=defaults.ORBIT_T_FINAL)
+    o.add_argument("--tol", type=float, default=defaults.RTOL,
+                   help=f"rtol = atol (default {defaults.RTOL:g})")
     o.set_defaults(func=_orbit)
     return parser
 

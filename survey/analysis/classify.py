@@ -6,15 +6,16 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..catalog.indicators import BY_NAME, REGISTRY, TANGENT
 from ..catalog.regimes import IRREGULAR, REGULAR, Regime, Thresholds
 from ..catalog.status import Status
+from ..catalog.variables import V
 
-
-# each line of evidence: its name, the archive variable, whether larger values are more
-# regular (+1) or more chaotic (-1), and the prefix of its thresholds
-EVIDENCE = (("wba", "birkhoff_digits", +1, "digits"), ("megno", "megno", -1, "megno"),
-            ("ftle", "ftle", -1, "ftle"), ("sali", "sali", +1, "sali"),
-            ("diffusion", "frequency_diffusion", -1, "diffusion"))
+# the lines of evidence (catalog.indicators.REGISTRY): (name, how it votes)
+EVIDENCE = tuple((i.name, i.vote) for i in REGISTRY if i.vote is not None)
+# the Lyapunov-type lines, read from deviation vectors: chaotic by T means an orbit left
+# its torus, whatever the first half looked like
+LYAPUNOV = tuple(name for name, _ in EVIDENCE if BY_NAME[name].source == TANGENT)
 
 
 def evidence_votes(ds, th: Thresholds) -> dict[str, np.ndarray]:
@@ -22,19 +23,20 @@ def evidence_votes(ds, th: Thresholds) -> dict[str, np.ndarray]:
     vote (between the thresholds), NaN where the evidence is missing. The FTLE is measured
     in units of ln(T)/T, a torus's FTLE at the time reached."""
     votes = {}
-    for key, name, sign, prefix in EVIDENCE:
-        if name not in ds:
+    for key, vote in EVIDENCE:
+        if vote.variable not in ds:
             continue
-        x = ds[name].values.astype(float)
-        if name == "ftle":
-            t_end = ds["t_end"].values
+        x = ds[vote.variable].values.astype(float)
+        if vote.per_torus_rate:
+            t_end = ds[V.t_end].values
             with np.errstate(invalid="ignore", divide="ignore"):
                 x = x / (np.log(t_end) / t_end)
-        regular, chaotic = (sign * getattr(th, f"{prefix}_{side}")
+        regular, chaotic = (vote.sign * getattr(th, f"{vote.thresholds}_{side}")
                             for side in ("regular", "chaotic"))
         with np.errstate(invalid="ignore"):
-            vote = np.where(sign * x >= regular, 1.0, np.where(sign * x <= chaotic, -1.0, 0.0))
-        votes[key] = np.where(np.isfinite(x), vote, np.nan)
+            cast = np.where(vote.sign * x >= regular, 1.0,
+                            np.where(vote.sign * x <= chaotic, -1.0, 0.0))
+        votes[key] = np.where(np.isfinite(x), cast, np.nan)
     return votes
 
 
@@ -53,8 +55,8 @@ def classify(ds, thresholds: Thresholds | None = None):
     present that support the regime (0 for undetermined and for failed runs; 1 for
     collision and inaccessible, which the status states)."""
     th = thresholds or Thresholds.from_table(stored_table(ds))
-    shape = ds["status"].shape
-    status = ds["status"].values
+    shape = ds[V.status].shape
+    status = ds[V.status].values
     votes = evidence_votes(ds, th)
     stack = np.stack(list(votes.values())) if votes else np.full((1,) + shape, np.nan)
     present = np.sum(np.isfinite(stack), axis=0)
@@ -69,26 +71,26 @@ def classify(ds, thresholds: Thresholds | None = None):
     only_regular = (regular > 0) & (chaotic == 0)
     regime[only_regular] = Regime.TORUS
     confidence[only_regular] = share_reg[only_regular]
-    if "resonance_distance" in ds:
+    if V.resonance_distance in ds:
         regime[only_regular & on_resonance(ds, th)] = Regime.RESONANT
-    if "frequency" in ds:
+    if V.frequency in ds:
         labels = [str(x) for x in ds["fundamental_name"].values]
         shape_cols = [i for i, name in enumerate(labels) if name.startswith("shape")]
-        n_shape = np.sum(np.isfinite(ds["frequency"].values[..., shape_cols]), axis=-1)
+        n_shape = np.sum(np.isfinite(ds[V.frequency].values[..., shape_cols]), axis=-1)
         regime[only_regular & (n_shape <= 1)] = Regime.PERIODIC
     only_chaotic = (chaotic > 0) & (regular == 0)
     regime[only_chaotic] = Regime.CHAOTIC
     confidence[only_chaotic] = share_chaos[only_chaotic]
     mixed = (chaotic > 0) & (regular > 0)
     early = np.zeros(shape, dtype=bool)
-    if "birkhoff_digits_half" in ds:
-        early |= ds["birkhoff_digits_half"].values >= th.digits_regular
-    if "megno_history" in ds:
+    if V.birkhoff_digits_half in ds:
+        early |= ds[V.birkhoff_digits_half].values >= th.digits_regular
+    if V.megno_history in ds:
         times = ds["history_time"].values
         at_half = int(np.argmin(np.abs(times - times[-1] / 2)))
-        early |= ds["megno_history"].values[..., at_half] <= th.megno_regular
+        early |= ds[V.megno_history].values[..., at_half] <= th.megno_regular
     late = np.zeros(shape, dtype=bool)
-    for name in ("megno", "ftle", "sali"):
+    for name in LYAPUNOV:
         if name in votes:
             late |= votes[name] == -1
     sticky = mixed & early & late
@@ -109,9 +111,9 @@ def on_resonance(ds, th: Thresholds) -> np.ndarray:
     |m . nu| / (|m| max|nu|) at most that. Tighter than the detuning of small oscillations
     about the rotating triangle from its 1:2 epicyclic degeneracy (~1e-6 at delta = 0.5),
     looser than what NAFF resolves on a locked orbit at T = 2000."""
-    order = ds["resonance_order"].values
+    order = ds[V.resonance_order].values
     with np.errstate(invalid="ignore"):
-        return (ds["resonance_distance"].values <= th.resonance_width) & (order > 0) & \
+        return (ds[V.resonance_distance].values <= th.resonance_width) & (order > 0) & \
             (order <= th.resonance_order)
 
 
@@ -127,12 +129,12 @@ def stored_table(ds) -> dict | None:
 def summary(ds, regime=None) -> list[str]:
     """Counts of each regime, and for a one-axis grid where it changes from regular to
     chaotic."""
-    regime = ds["regime"].values if regime is None else regime
+    regime = ds[V.regime].values if regime is None else regime
     total = regime.size
     counts = [(r, int(np.sum(regime == r))) for r in Regime]
     lines = ["regimes: " + ", ".join(f"{r.name.lower()} {n} ({100 * n / total:.0f}%)"
                                      for r, n in counts if n)]
-    axes = [d for d in ds["status"].dims]
+    axes = [d for d in ds[V.status].dims]
     if len(axes) == 1:
         x = ds[axes[0]].values
         regular = np.isin(regime, REGULAR)

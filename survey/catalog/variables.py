@@ -11,13 +11,14 @@ histories), `component` (phase-space state), `spatial` (3-D vectors), `observabl
 from __future__ import annotations
 
 from dataclasses import dataclass
+from types import SimpleNamespace
 from typing import Any, Callable, NamedTuple
 
 import numpy as np
 
+from .indicators import OWNER
 from .regimes import Regime
 from .status import Status
-
 
 # which cells a variable has values for; elsewhere it holds its fill value
 ALL, STARTED, FINISHED = "all cells", "cells with a start", "cells with status ok or event"
@@ -56,7 +57,8 @@ class Var:
     reproducible: bool = True              # part of the bit-for-bit contract
     when: Callable = lambda config: True   # whether a config's archive holds it
     flags: Any = None                      # an IntEnum: a CF flag variable
-    derived: bool = False                  # computed from the other variables (tori.classify)
+    derived: bool = False                  # computed from the other variables (classify)
+    symbol: str = ""                       # its label on figures (matplotlib mathtext)
 
     @property
     def fill(self):
@@ -79,10 +81,6 @@ class Var:
         return attrs
 
 
-def _which(*names):
-    return lambda c: bool(set(names) & set(c.tables["indicators"]["which"]))
-
-
 def _section(c):
     return c.tables["section_enabled"]
 
@@ -92,22 +90,17 @@ def _planar3(c):
     return s["bodies"] == 3 and s["dim"] == 2
 
 
-def _tori(c):
-    return c.tables["tori"]["analyse"]
+def _measured(name, long_name, value=None, dtype="f8", extra=(), symbol=""):
+    """A variable an indicator fills (catalog.indicators.OWNER names it): in finished cells
+    of the configs that compute that indicator; by default the indicator result's field of
+    the same name."""
+    value = value or (lambda r: getattr(r.indicators, name))
+    return Var(name, long_name, value, FINISHED, dtype, extra, when=OWNER[name].computed_in,
+               symbol=symbol)
 
 
-def _torus(name, long_name, value, dtype="f8", extra=(), when=_tori):
-    return Var(name, long_name, value, FINISHED, dtype, extra, when=when)
-
-
-def _indicator(name, long_name, when):
-    return Var(name, long_name, lambda r: getattr(r.indicators, name), FINISHED, when=when)
-
-
-def _history(name, of, when):
-    return Var(f"{name}_history", f"{of} convergence history",
-               lambda r: getattr(r.indicators, f"{name}_history"), FINISHED,
-               extra=("history_time",), when=when)
+def _history(name, of):
+    return _measured(f"{name}_history", f"{of} convergence history", extra=("history_time",))
 
 
 def _reduced_crossing(q):
@@ -120,58 +113,62 @@ VARIABLES = [
     Var("status", "integration outcome of the cell", lambda r: r.status, ALL, "i1",
         flags=Status),
     Var("regime", "regular or chaotic: the verdict of all the evidence", None, ALL, "i1",
-        flags=Regime, derived=True),
+        flags=Regime, derived=True, symbol="regime"),
     Var("regime_confidence", "share of the lines of evidence present that support the "
                              "regime", None, ALL, derived=True),
     Var("t_end", "time reached by the integration", lambda r: r.t_end),
-    Var("energy", "energy H at t = 0", lambda r: r.energy),
+    Var("energy", "energy H at t = 0", lambda r: r.energy, symbol="$E$"),
     Var("angular_momentum", "total angular momentum at t = 0 (z component in 2-D)",
-        lambda r: r.angular_momentum),
+        lambda r: r.angular_momentum, symbol="$J$"),
     Var("energy_error", "max |E(t)/E(0) - 1| over the history times and the end",
-        lambda r: r.energy_error),
+        lambda r: r.energy_error, symbol=r"$|\Delta E/E|$"),
     Var("angular_momentum_error", "max |J(t) - J(0)| / max(|J(0)|, 1) over the same times",
         lambda r: r.angular_momentum_error),
-    _indicator("ftle", "finite-time maximal Lyapunov exponent at t_end, ensemble mean",
-               _which("ftle")),
-    _indicator("ftle_spread", "standard deviation of the FTLE over deviation vectors and "
-                              "perturbed starts", _which("ftle")),
-    _indicator("megno", "mean exponential growth factor of nearby orbits <Y> at t_end, "
-                        "ensemble mean", _which("megno")),
-    _indicator("megno_spread", "standard deviation of <Y> over the perturbed starts",
-               _which("megno")),
-    _indicator("megno_slope", "least-squares slope d<Y>/dt over the second half of the run "
-                              "(about ftle/2 in chaos)", _which("megno")),
-    _indicator("fli", "fast Lyapunov indicator: max ln(|w|/|w0|) of the first deviation "
-                      "vector", _which("fli")),
-    _indicator("sali", "smaller alignment index of two deviation vectors at t_end",
-               _which("sali")),
-    _indicator("gali2", "generalized alignment index |w1^ ^ w2^| at t_end", _which("gali2")),
-    _indicator("ftle_wba", "weighted Birkhoff average of the growth rate d ln|w|/dt of the "
-                           "first deviation vector (Sander & Meiss 2025)", _which("ftle")),
-    _torus("birkhoff_digits", "weighted Birkhoff digits of convergence at t_end, mean over "
-                              "the observables", lambda r: r.tori.digits),
-    _torus("birkhoff_digits_half", "weighted Birkhoff digits of convergence at t_end / 2, "
-                                   "mean over the observables", lambda r: r.tori.digits_half),
-    _torus("birkhoff_digits_observable", "weighted Birkhoff digits of convergence at t_end "
-                                         "of each observable", lambda r: r.tori.digits_each,
-           extra=("observable",)),
-    _torus("birkhoff_digits_observable_half", "weighted Birkhoff digits of convergence at "
-                                              "t_end / 2 of each observable",
-           lambda r: r.tori.digits_each_half, extra=("observable",)),
-    _torus("frequency", "fundamental frequency in cycles per unit time (mean of the two "
-                        "halves of the orbit)", lambda r: r.tori.frequencies.frequency,
-           extra=("fundamental",)),
-    _torus("frequency_change", "change of each fundamental frequency from the first half "
-                               "of the orbit to the second", lambda r: r.tori.frequencies.change,
-           extra=("fundamental",)),
-    _torus("frequency_diffusion", "log10 max |nu(second half) - nu(first half)| / max |nu|",
-           lambda r: r.tori.frequencies.diffusion),
-    _torus("resonance", "integer vector m of the nearest resonance m . nu = 0",
-           lambda r: r.tori.frequencies.resonance, "i8", ("fundamental",)),
-    _torus("resonance_order", "order |m|_1 of the nearest resonance (-1: none searched)",
-           lambda r: r.tori.frequencies.resonance_order, "i8"),
-    _torus("resonance_distance", "|m . nu| / (|m| max |nu|) of the nearest resonance",
-           lambda r: r.tori.frequencies.resonance_distance),
+    _measured("ftle", "finite-time maximal Lyapunov exponent at t_end, ensemble mean",
+              symbol=r"FTLE $\mu_T$ (1/time)"),
+    _measured("ftle_spread", "standard deviation of the FTLE over deviation vectors and "
+                             "perturbed starts"),
+    _measured("megno", "mean exponential growth factor of nearby orbits <Y> at t_end, "
+                       "ensemble mean", symbol=r"MEGNO $\langle Y\rangle$"),
+    _measured("megno_spread", "standard deviation of <Y> over the perturbed starts"),
+    _measured("megno_slope", "least-squares slope d<Y>/dt over the second half of the run "
+                             "(about ftle/2 in chaos)"),
+    _measured("fli", "fast Lyapunov indicator: max ln(|w|/|w0|) of the first deviation "
+                     "vector", symbol="FLI"),
+    _measured("sali", "smaller alignment index of two deviation vectors at t_end",
+              symbol="SALI"),
+    _measured("gali2", "generalized alignment index |w1^ ^ w2^| at t_end",
+              symbol=r"GALI$_2$"),
+    _measured("ftle_wba", "weighted Birkhoff average of the growth rate d ln|w|/dt of the "
+                          "first deviation vector (Sander & Meiss 2025)",
+              symbol="WBA growth rate (1/time)"),
+    _measured("birkhoff_digits", "weighted Birkhoff digits of convergence at t_end, mean over "
+                                 "the observables", lambda r: r.tori.digits,
+              symbol="Birkhoff digits"),
+    _measured("birkhoff_digits_half", "weighted Birkhoff digits of convergence at t_end / 2, "
+                                      "mean over the observables", lambda r: r.tori.digits_half,
+              symbol="Birkhoff digits at T/2"),
+    _measured("birkhoff_digits_observable", "weighted Birkhoff digits of convergence at t_end "
+                                            "of each observable", lambda r: r.tori.digits_each,
+              extra=("observable",)),
+    _measured("birkhoff_digits_observable_half", "weighted Birkhoff digits of convergence at "
+                                                 "t_end / 2 of each observable",
+              lambda r: r.tori.digits_each_half, extra=("observable",)),
+    _measured("frequency", "fundamental frequency in cycles per unit time (mean of the two "
+                           "halves of the orbit)", lambda r: r.tori.frequencies.frequency,
+              extra=("fundamental",)),
+    _measured("frequency_change", "change of each fundamental frequency from the first half "
+                                  "of the orbit to the second",
+              lambda r: r.tori.frequencies.change, extra=("fundamental",)),
+    _measured("frequency_diffusion", "log10 max |nu(second half) - nu(first half)| / max "
+                                     "|nu|", lambda r: r.tori.frequencies.diffusion,
+              symbol=r"$\log_{10}|\Delta\nu|/|\nu|$"),
+    _measured("resonance", "integer vector m of the nearest resonance m . nu = 0",
+              lambda r: r.tori.frequencies.resonance, "i8", ("fundamental",)),
+    _measured("resonance_order", "order |m|_1 of the nearest resonance (-1: none searched)",
+              lambda r: r.tori.frequencies.resonance_order, "i8"),
+    _measured("resonance_distance", "|m . nu| / (|m| max |nu|) of the nearest resonance",
+              lambda r: r.tori.frequencies.resonance_distance),
     Var("n_steps", "accepted integration steps of the nominal orbit", lambda r: r.n_steps,
         ALL, "i8"),
     Var("n_rhs", "right-hand-side evaluations of the nominal orbit", lambda r: r.n_rhs,
@@ -188,14 +185,30 @@ VARIABLES = [
     Var("crossing_state", "phase-space state at each kept section crossing",
         lambda r: r.crossing_state, extra=("crossing", "component"),
         when=lambda c: _section(c) and c.tables["section"]["store_state"]),
-    _history("ftle", "FTLE", _which("ftle")),
-    _history("megno", "<Y>", _which("megno")),
-    _history("fli", "FLI", _which("fli")),
-    _history("sali", "SALI", _which("sali")),
+    _history("ftle", "FTLE"),
+    _history("megno", "<Y>"),
+    _history("fli", "FLI"),
+    _history("sali", "SALI"),
 ]
-
-
 BY_NAME = {v.name: v for v in VARIABLES}
+# attribute access to the declared names, so that code outside the catalog never retypes
+# one: V.ftle == "ftle" (tests/test_layers.py fails on a name written as a string)
+V = SimpleNamespace(**{v.name: v.name for v in VARIABLES})
+# figure labels of the grid axes that are not archive variables (family and term
+# parameters, coordinates)
+PARAMETER_SYMBOLS = {
+    "delta": r"$\delta$", "sigma": r"$\sigma$", "p_sigma": r"$p_\sigma$", "eta": r"$\eta$",
+    "p_eta": r"$p_\eta$", "phi": r"$\phi$", "p_phi": r"$p_\phi$", "theta": r"$\theta$",
+    "side": "side", "history_time": "t",
+    "axilrod_teller_strength": r"triple-dipole strength $Z$",
+    "lennard_jones_epsilon": r"$\epsilon$", "lennard_jones_sigma": r"$\sigma_{LJ}$",
+}
+
+
+def label(name: str) -> str:
+    """The figure label of an archive variable or grid axis (its name if none is declared)."""
+    symbol = BY_NAME[name].symbol if name in BY_NAME else ""
+    return symbol or PARAMETER_SYMBOLS.get(name, name)
 
 
 def markdown_table() -> str:

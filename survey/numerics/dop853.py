@@ -10,7 +10,6 @@ import numpy as np
 from ..physics.jit import kernel
 from ..physics.system import rhs
 
-
 EPS = np.finfo(np.float64).eps
 
 

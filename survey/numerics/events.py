@@ -15,7 +15,6 @@ from ..physics.jit import kernel
 from ..physics.system import System
 from .dop853 import EPS, dense_eval
 
-
 # ---------------------------------------------------------------- event functions
 # An event function is a scalar g(orbit state); crossings of g = 0 are located on the dense
 # output. Encoded as (code, triplet, float parameters) so the kernel stays one compiled

@@ -22,6 +22,7 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
+from ..catalog import defaults
 from ..catalog.indicators import IndicatorOptions
 from ..catalog.status import Status
 from ..catalog.variables import history_times
@@ -115,8 +116,9 @@ def conservation_errors(system: System, y0, states):
 
 
 def chaos_indicators(system: System, y0, t_final: float, options=IndicatorOptions(), *,
-                     cell: int = 0, events: Sequence[Event] = (), rtol=1e-12, atol=1e-12,
-                     max_steps=10_000_000, max_events=100_000, time_limit=0.0,
+                     cell: int = 0, events: Sequence[Event] = (), rtol=defaults.RTOL,
+                     atol=defaults.ATOL, max_steps=defaults.MAX_STEPS, max_events=100_000,
+                     time_limit=0.0,
                      control_tangents=False, t_fine=None) -> ChaosIndicators:
     """Integrate y0 to t_final with `options.deviations` tangent vectors and their MEGNO
     accumulators (plus `options.perturbations` nearby orbits) and return the indicators,

@@ -21,19 +21,84 @@ from typing import NamedTuple, Sequence
 import numpy as np
 from numba import objmode
 
+from ..catalog import defaults
 from ..catalog.status import Status
-from ..physics.jit import kernel
+from ..physics.jit import helper, kernel
 from ..physics.system import System, rhs
-from .dop853 import (BETA, EPS, RTOL_MIN, dense_eval, dense_prepare, error_norm, norm_block,
-                     stages)
-from .events import (Crossings, Event, encode_events, event_slope, event_value, may_cross,
-                     scan_events)
-
+from .dop853 import (
+    BETA,
+    EPS,
+    RTOL_MIN,
+    dense_eval,
+    dense_prepare,
+    error_norm,
+    norm_block,
+    stages,
+)
+from .events import (
+    Crossings,
+    Event,
+    encode_events,
+    event_slope,
+    event_value,
+    may_cross,
+    scan_events,
+)
 
 # the kernel returns plain integers (numba freezes module globals as constants)
 OK_, EVENT_, COLLISION_, STEP_LIMIT_, NONFINITE_, TIME_LIMIT_ = (
     int(s) for s in (Status.OK, Status.EVENT, Status.COLLISION, Status.STEP_LIMIT,
                      Status.NONFINITE, Status.TIME_LIMIT))
+
+
+class RawOutcome(NamedTuple):
+    """What the compiled driver returns (`integrate` turns it into an Outcome)."""
+
+    status: int
+    t: float                  # time reached
+    y: np.ndarray             # full state at t
+    counts: np.ndarray        # accepted steps, rejected steps, rhs evaluations, events found
+    h_range: np.ndarray       # smallest and largest accepted step
+    ev_index: np.ndarray      # recorded crossings: event index, time, orbit state
+    ev_t: np.ndarray
+    ev_y: np.ndarray
+    samples: np.ndarray       # states at t_eval (first n_eval components)
+    sample_log: np.ndarray    # accumulated log growth of each tangent vector at t_eval
+    log_growth: np.ndarray    # accumulated log growth at t (the vectors are rescaled)
+    max_log: np.ndarray       # largest ln(|w|/|w0|) seen at step ends (the FLI)
+    fine: np.ndarray          # orbit states at t_fine
+    wba: np.ndarray           # (sum of g dL, sum of g dt) over the steps, first vector: their
+    #                           ratio is the weighted Birkhoff average of the growth rate
+    #                           (g(s) = exp(-1/(s(1-s))) at the step's mid-time s;
+    #                           Sander & Meiss 2025)
+    megno_sums: np.ndarray    # (s L - int L, int Y) at t: their ratios to s are Y/2 and <Y>
+    sample_megno: np.ndarray  # the same at t_eval
+
+
+@helper
+def _initial_step(masses, d, measure, prof, par, n_tan, nf, n_err, t, y, K, yt, direction,
+                  h_max, rtol, atol):
+    """Hairer's hinit: a first step from the sizes of y, f(y) (in K[0]) and an estimate
+    of the second derivative (one evaluation, into K[1]), at most h_max."""
+    dnf = 0.0
+    dny = 0.0
+    for a in range(n_err):
+        sk = atol + rtol * abs(y[a])
+        dnf += (K[0, a] / sk) ** 2
+        dny += (y[a] / sk) ** 2
+    h = 1e-6 if (dnf <= 1e-10 or dny <= 1e-10) else 0.01 * math.sqrt(dny / dnf)
+    h = min(h, h_max)
+    for a in range(nf):
+        yt[a] = y[a] + direction * h * K[0, a]
+    rhs(t + direction * h, yt, K[1], masses, d, measure, prof, par, n_tan)
+    der2 = 0.0
+    for a in range(n_err):
+        sk = atol + rtol * abs(y[a])
+        der2 += ((K[1, a] - K[0, a]) / sk) ** 2
+    der2 = math.sqrt(der2 / max(n_err, 1)) / h
+    der12 = max(abs(der2), math.sqrt(dnf / max(n_err, 1)))
+    h1 = max(1e-6, h * 1e-3) if der12 <= 1e-15 else (0.01 / der12) ** (1.0 / 8.0)
+    return min(100.0 * h, h1, h_max)
 
 
 @kernel
@@ -60,14 +125,7 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
     wrecks any quadrature of it. int L and int Y are trapezoid sums over the steps (and at
     output times, over the part of the step before them, with L from the dense output).
 
-    Returns (status, t, y, counts[accepted, rejected, rhs evaluations, events found],
-    h_range[min, max accepted step], ev_index, ev_t, ev_y, samples, sample_log, log_growth,
-    max_log, fine, wba, megno_sums, sample_megno): max_log is the largest ln(|w|/|w0|) seen
-    at step ends (the FLI); megno_sums = (s L - int L, int Y) at the end, sample_megno the
-    same at the output times (their ratios to s are Y/2 and <Y>);
-    wba = (sum of g dL, sum of g dt) over the steps for the first tangent vector, L = ln|w|
-    and g(s) = exp(-1/(s(1-s))) at the step's mid-time s = (t - t0)/(t1 - t0): their ratio
-    is the weighted Birkhoff average of the growth rate (Sander & Meiss 2025).
+    Returns a RawOutcome.
     """
     n = 2 * masses.size * d
     nf = y0.size
@@ -108,62 +166,42 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
     status = OK_
     for a in range(nf):
         if not math.isfinite(y[a]):
-            return (NONFINITE_, t, y, counts, h_range, ev_index, ev_t, ev_y, samples,
-                    sample_log, log_growth, max_log, fine, wba, megno_sums, sample_megno)
-    for tt in range(n_tan):
-        w0 = norm_block(y, n * (1 + tt), n)
-        log_growth[tt] = -math.log(w0)
-    rhs(t, y, K[0], masses, d, measure, prof, par, n_tan)
-    counts[2] += 1
-    for a in range(nf):
-        if not math.isfinite(K[0, a]):
-            return (NONFINITE_, t, y, counts, h_range, ev_index, ev_t, ev_y, samples,
-                    sample_log, log_growth, max_log, fine, wba, megno_sums, sample_megno)
+            status = NONFINITE_
+    if status == OK_:
+        for tt in range(n_tan):
+            w0 = norm_block(y, n * (1 + tt), n)
+            log_growth[tt] = -math.log(w0)
+        rhs(t, y, K[0], masses, d, measure, prof, par, n_tan)
+        counts[2] += 1
+        for a in range(nf):
+            if not math.isfinite(K[0, a]):
+                status = NONFINITE_
     i_eval = 0
-    while i_eval < t_eval.size and t_eval[i_eval] == t0:
-        samples[i_eval, :] = y[:n_eval]
-        sample_log[i_eval, :] = log_growth
-        i_eval += 1
     i_fine = 0
-    while i_fine < t_fine.size and t_fine[i_fine] == t0:
-        fine[i_fine, :] = y[:n]
-        i_fine += 1
+    if status == OK_:
+        while i_eval < t_eval.size and t_eval[i_eval] == t0:
+            samples[i_eval, :] = y[:n_eval]
+            sample_log[i_eval, :] = log_growth
+            i_eval += 1
+        while i_fine < t_fine.size and t_fine[i_fine] == t0:
+            fine[i_fine, :] = y[:n]
+            i_fine += 1
+        for e in range(m):
+            if watch[e]:
+                g_old[e] = event_value(ep, eoff[e], y, masses, d)
+                s_old[e] = event_slope(ep, eoff[e], y, K[0], n, yd, masses, d, 1.0)
     L_prev = 0.0          # ln(|w|/|w0|) of the first tangent vector at the last step end
-    for e in range(m):
-        if watch[e]:
-            g_old[e] = event_value(ep, eoff[e], y, masses, d)
-            s_old[e] = event_slope(ep, eoff[e], y, K[0], n, yd, masses, d, 1.0)
     t_next_renorm = t0 + direction * renorm_dt
-    span = abs(t1 - t0)
-    if span == 0.0:
-        return (OK_, t, y, counts, h_range, ev_index, ev_t, ev_y, samples, sample_log,
-                log_growth, max_log, fine, wba, megno_sums, sample_megno)
+    span = abs(t1 - t0) if status == OK_ else 0.0     # 0: nothing to step
     h_max = min(h_max, span) if h_max > 0.0 else span
-
-    # initial step (Hairer's hinit)
-    if h0 > 0.0:
+    if span == 0.0:
+        h = 0.0
+    elif h0 > 0.0:
         h = min(h0, h_max)
     else:
-        dnf = 0.0
-        dny = 0.0
-        for a in range(n_err):
-            sk = atol + rtol * abs(y[a])
-            dnf += (K[0, a] / sk) ** 2
-            dny += (y[a] / sk) ** 2
-        h = 1e-6 if (dnf <= 1e-10 or dny <= 1e-10) else 0.01 * math.sqrt(dny / dnf)
-        h = min(h, h_max)
-        for a in range(nf):
-            yt[a] = y[a] + direction * h * K[0, a]
-        rhs(t + direction * h, yt, K[1], masses, d, measure, prof, par, n_tan)
+        h = _initial_step(masses, d, measure, prof, par, n_tan, nf, n_err, t, y, K, yt,
+                          direction, h_max, rtol, atol)
         counts[2] += 1
-        der2 = 0.0
-        for a in range(n_err):
-            sk = atol + rtol * abs(y[a])
-            der2 += ((K[1, a] - K[0, a]) / sk) ** 2
-        der2 = math.sqrt(der2 / max(n_err, 1)) / h
-        der12 = max(abs(der2), math.sqrt(dnf / max(n_err, 1)))
-        h1 = max(1e-6, h * 1e-3) if der12 <= 1e-15 else (0.01 / der12) ** (1.0 / 8.0)
-        h = min(100.0 * h, h1, h_max)
     h *= direction
 
     rejected_last = False
@@ -172,7 +210,7 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
     if time_limit > 0.0:
         with objmode(clock0="f8"):
             clock0 = time.perf_counter()
-    while True:
+    while span > 0.0:
         if counts[0] + counts[1] >= max_steps:
             status = STEP_LIMIT_
             break
@@ -344,8 +382,8 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
         h = direction * min(abs(h) * fac, h_max)
 
     counts[3] = n_ev_total
-    return (status, t, y, counts, h_range, ev_index, ev_t, ev_y, samples, sample_log,
-            log_growth, max_log, fine, wba, megno_sums, sample_megno)
+    return RawOutcome(status, t, y, counts, h_range, ev_index, ev_t, ev_y, samples, sample_log,
+                      log_growth, max_log, fine, wba, megno_sums, sample_megno)
 
 
 class Outcome(NamedTuple):
@@ -386,8 +424,9 @@ class Outcome(NamedTuple):
             return self.tangents / norms * scale[:, None]
 
 
-def integrate(system: System, y0, t_span, *, tangents=None, megno=False, rtol=1e-12,
-              atol=1e-12, control_tangents=False, max_steps=10_000_000, first_step=0.0,
+def integrate(system: System, y0, t_span, *, tangents=None, megno=False, rtol=defaults.RTOL,
+              atol=defaults.ATOL, control_tangents=False, max_steps=defaults.MAX_STEPS,
+              first_step=0.0,
               max_step=0.0, min_step=0.0, events: Sequence[Event] = (), max_events=100_000,
               event_substeps=8, t_eval=None, sample_tangents=False, renorm_interval=1.0,
               time_limit=0.0, t_fine=None):
@@ -424,13 +463,15 @@ def integrate(system: System, y0, t_span, *, tangents=None, megno=False, rtol=1e
                              "integration")
     n_eval = state.size if sample_tangents else n
     n_err = n * (1 + n_tan) if control_tangents else n
-    res = dop853(state, t0, t1, *system.kernel_args, n_tan, megno,
-                 float(rtol), float(atol), n_err, int(max_steps), float(first_step),
-                 float(max_step), float(min_step), encode_events(events, system),
-                 int(max_events), int(event_substeps), t_eval, n_eval, float(renorm_interval),
-                 float(time_limit), t_fine)
-    (status, t, y, counts, h_range, ev_i, ev_t, ev_y, samples, s_log, log_g, max_log, fine,
-     wba, megno_sums, sample_megno) = res
+    masses, d, measure, prof, par = system.kernel_args
+    res = dop853(y0=state, t0=t0, t1=t1, masses=masses, d=d, measure=measure, prof=prof,
+                 par=par, n_tan=n_tan, megno=megno, rtol=float(rtol), atol=float(atol),
+                 n_err=n_err, max_steps=int(max_steps), h0=float(first_step),
+                 h_max=float(max_step), h_min=float(min_step),
+                 events=encode_events(events, system), max_events=int(max_events),
+                 n_sub=int(event_substeps), t_eval=t_eval, n_eval=n_eval,
+                 renorm_dt=float(renorm_interval), time_limit=float(time_limit), t_fine=t_fine)
+    y, samples, s_log = res.y, res.samples, res.sample_log
     tans = y[n:n * (1 + n_tan)].reshape(n_tan, n)
     norms = np.linalg.norm(tans, axis=1)
     if n_tan and sample_tangents:
@@ -438,14 +479,16 @@ def integrate(system: System, y0, t_span, *, tangents=None, megno=False, rtol=1e
         s_log = s_log + np.log(np.linalg.norm(w, axis=2))
     else:
         s_log = np.full((t_eval.size, n_tan), np.nan)
+    counts, wba, log_g = res.counts, res.wba, res.log_growth
     kept = min(int(counts[3]), int(max_events))
     return Outcome(
-        status=Status(status), t=float(t), y=y[:n].copy(), tangents=tans.copy(),
+        status=Status(res.status), t=float(res.t), y=y[:n].copy(), tangents=tans.copy(),
         tangent_norms0=np.linalg.norm(tan, axis=1),
-        megno_sums=megno_sums if megno else np.zeros(0), sample_megno=sample_megno,
-        log_growth=log_g + np.log(norms), fli=np.maximum(max_log, log_g + np.log(norms)),
+        megno_sums=res.megno_sums if megno else np.zeros(0), sample_megno=res.sample_megno,
+        log_growth=log_g + np.log(norms), fli=np.maximum(res.max_log, log_g + np.log(norms)),
         n_steps=int(counts[0]), n_rejected=int(counts[1]), n_rhs=int(counts[2]),
-        h_min=float(h_range[0]), h_max=float(h_range[1]),
-        crossings=Crossings(ev_i[:kept].copy(), ev_t[:kept].copy(), ev_y[:kept].copy()),
+        h_min=float(res.h_range[0]), h_max=float(res.h_range[1]),
+        crossings=Crossings(res.ev_index[:kept].copy(), res.ev_t[:kept].copy(),
+                            res.ev_y[:kept].copy()),
         n_crossings=int(counts[3]), t_eval=t_eval, samples=samples, sample_log_growth=s_log,
-        fine=fine, ftle_wba=float(wba[0] / wba[1]) if wba[1] != 0 else np.nan)
+        fine=res.fine, ftle_wba=float(wba[0] / wba[1]) if wba[1] != 0 else np.nan)

@@ -9,7 +9,6 @@ from ..physics.jacobi import jacobi_weights, phase_form, position_form
 from ..physics.system import System
 from .events import Area, Event, Linear, Quadratic, Sides
 
-
 SIDE_WEIGHTS = {"a": (1, 0, 0), "b": (0, 1, 0), "c": (0, 0, 1), "perimeter": (1, 1, 1),
                 "i_a": (-1, 1, 1), "i_b": (1, -1, 1), "i_c": (1, 1, -1)}
 

@@ -33,6 +33,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..catalog import defaults
+from ..catalog.regimes import Thresholds
 from ..catalog.variables import OBSERVABLES, fundamental_names, shape_dof
 from ..physics.jacobi import reduced
 
@@ -192,8 +194,8 @@ class Frequencies(NamedTuple):
     resonance_distance: float   # |m . nu| / (|m| max|nu|)
 
 
-def frequency_analysis(system, states: np.ndarray, dt: float, lines: int = 5,
-                       order: int = 6, tol: float = 1e-6) -> Frequencies:
+def frequency_analysis(system, states: np.ndarray, dt: float, lines: int = defaults.NAFF_LINES,
+                       order: int = Thresholds.resonance_order, tol: float = 1e-6) -> Frequencies:
     """Fundamental frequencies on the two halves of an orbit sampled every dt, their
     diffusion, and the nearest resonance of order <= `order`."""
     names = fundamental_names(system.n_bodies, system.dim)

@@ -20,10 +20,15 @@ import numpy as np
 from ..catalog.errors import Inaccessible
 from .equilibria import equilibrium_positions, forces
 from .forces import profile
-from .jacobi import JacobiMasses, Reduced, phi_momentum_coefficient, reduced_potential, to_cartesian
+from .jacobi import (
+    JacobiMasses,
+    Reduced,
+    phi_momentum_coefficient,
+    reduced_potential,
+    to_cartesian,
+)
 from .system import System
 from .terms import AREA, PERIMETER
-
 
 SQ3 = math.sqrt(3.0)
 

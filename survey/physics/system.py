@@ -11,8 +11,19 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba.extending import overload
 
-from .forces import (areal_forces, atm_energy, atm_forces, norm, pair_forces,
-                     perimetric_forces, profile, sub, triplet_measure, vec)
+from ..catalog import defaults
+from .forces import (
+    areal_forces,
+    atm_energy,
+    atm_forces,
+    norm,
+    pair_forces,
+    perimetric_forces,
+    profile,
+    sub,
+    triplet_measure,
+    vec,
+)
 from .geometry import cross
 from .jit import helper, kernel
 from .terms import AREA, DISTANCE, NONE, PERIMETER, TRIANGLE, Potential, make_potential
@@ -27,7 +38,7 @@ class System:
     masses: np.ndarray
     dim: int = 2
     terms: tuple[Potential, ...] = field(
-        default_factory=lambda: (make_potential("perimetric_power"),))
+        default_factory=lambda: (make_potential(defaults.POTENTIAL),))
 
     def __post_init__(self):
         m = np.ascontiguousarray(self.masses, dtype=np.float64)
@@ -46,7 +57,8 @@ class System:
         object.__setattr__(self, "_par", _encode(terms))
 
     @classmethod
-    def create(cls, masses=(1.0, 1.0, 1.0), dim=2, potential="perimetric_power", **params):
+    def create(cls, masses=(1.0, 1.0, 1.0), dim=defaults.DIM, potential=defaults.POTENTIAL,
+               **params):
         return cls(np.asarray(masses, dtype=np.float64), dim, make_potential(potential, params))
 
     @property

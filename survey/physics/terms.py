@@ -1,5 +1,8 @@
-"""Interaction terms: which potentials exist, their parameters and the integer codes the
-compiled kernels select them by.
+"""Interaction terms, each declared once in TERMS: its kind, name, formula, the integer codes
+the compiled kernels select it by, and its parameters with their defaults, bounds and
+meaning. `make_potential`'s checks, the config's error messages, the README's table of
+potentials and a test battery run on every term (tests/physics/test_terms.py) all come from
+these declarations.
 
 A perimetric or areal triplet potential is U(x) of one shape measure x of the triangle: its
 perimeter P ("perimetric") or the magnitude of its area |A| ("areal"). The Axilrod-Teller-
@@ -15,63 +18,134 @@ from dataclasses import dataclass
 
 import numpy as np
 
-
 # what a term depends on: a triangle's perimeter or area, the whole triangle (ATM), or a
 # pair's distance; NONE marks "no perimetric or areal term" in the kernels' arguments
 NONE, PERIMETER, AREA, TRIANGLE, DISTANCE = -1, 0, 1, 2, 3
-
-
+# the profiles U(x) the kernels evaluate (physics.forces.profile)
 POWER, YUKAWA, BARRIER, LENNARD_JONES = 0, 1, 2, 3
-
-
-MEASURES = {"perimetric": PERIMETER, "areal": AREA}
-
-
-# profile name -> (code, formula, ordered parameters with defaults)
-PROFILES = {
-    "power": (POWER, "coupling * {x}**exponent / exponent  (coupling * log({x}) if exponent == 0)",
-              {"coupling": 1.0, "exponent": 2.0}),
-    "yukawa": (YUKAWA, "-coupling * exp(-gamma * {x}) / {x}", {"coupling": 1.0, "gamma": 1.0}),
-    "barrier": (BARRIER, "alpha / {x} + beta * {x}**2", {"alpha": 2.0, "beta": 1.0}),
-}
-
-
-ATM = "axilrod_teller"
-
-
-ATM_FORMULA = "strength * (1 + 3 cos t_i cos t_j cos t_k) / (r_ij r_jk r_ki)**3"
-
-
-TRIPLET_NAMES = tuple(f"{m}_{p}" for m in MEASURES for p in PROFILES) + (ATM,)
-
-
-POTENTIAL_NAMES = TRIPLET_NAMES      # the [system].potential shorthand: one triplet term
-
-
-# pair potential name -> (profile code, formula, ordered parameters with defaults); the
-# repulsive pair Yukawa is the YUKAWA profile with its coupling negated
-PAIR_PROFILES = {
-    "lennard_jones": (LENNARD_JONES, "4 epsilon ((sigma / r)**12 - (sigma / r)**6)",
-                      {"epsilon": 1.0, "sigma": 1.0}),
-    "yukawa": (YUKAWA, "coupling * exp(-gamma * r) / r  (repulsive for coupling > 0)",
-               {"coupling": 1.0, "gamma": 1.0}),
-    "power": (POWER, "coupling * r**exponent / exponent  (coupling * log(r) if exponent == 0)",
-              {"coupling": 1.0, "exponent": -1.0}),
-}
-
-
-PAIR_NAMES = tuple(PAIR_PROFILES)
-
-
 KINDS = ("pair", "triplet")
 
 
 @dataclass(frozen=True)
+class Parameter:
+    """A term's parameter: its default, what it means, and the values it may take."""
+
+    name: str
+    default: float
+    doc: str
+    above: float | None = None      # exclusive lower bound
+    low: float | None = None        # inclusive lower bound
+    nonzero: bool = False
+
+    def problem(self, value) -> str:
+        """Why `value` is not allowed ("" if it is)."""
+        if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                or not math.isfinite(value):
+            return f"must be a finite number, got {value!r}"
+        if self.above is not None and not value > self.above:
+            return f"must be > {self.above:g} ({self.doc}), got {value:g}"
+        if self.low is not None and value < self.low:
+            return f"must be >= {self.low:g} ({self.doc}), got {value:g}"
+        if self.nonzero and value == 0:
+            return f"must be nonzero ({self.doc}; zero means no term)"
+        return ""
+
+    def describe(self) -> str:
+        bound = (f" (> {self.above:g})" if self.above is not None else
+                 f" (>= {self.low:g})" if self.low is not None else
+                 " (nonzero)" if self.nonzero else "")
+        return f"{self.name} = {self.default:g}{bound}"
+
+
+@dataclass(frozen=True)
+class Term:
+    """A kind of interaction term: `formula` gives U in the variables of `measure`."""
+
+    kind: str                       # "triplet" (summed over triangles) or "pair"
+    name: str
+    measure: int                    # PERIMETER, AREA, TRIANGLE or DISTANCE
+    profile: int                    # POWER, YUKAWA, BARRIER or LENNARD_JONES (0 for ATM)
+    formula: str
+    parameters: tuple[Parameter, ...]
+    note: str = ""                  # the paper's case, or what it models
+
+    @property
+    def defaults(self) -> dict:
+        return {p.name: p.default for p in self.parameters}
+
+
+def _power(x, exponent):
+    return (Parameter("coupling", 1.0, "strength; its sign sets attraction", nonzero=True),
+            Parameter("exponent", exponent, "power of " + x))
+
+
+def _yukawa():
+    return (Parameter("coupling", 1.0, "strength; its sign sets attraction", nonzero=True),
+            Parameter("gamma", 1.0, "a screening rate", low=0.0))
+
+
+def _barrier():
+    return (Parameter("alpha", 2.0, "strength of the barrier at x -> 0"),
+            Parameter("beta", 1.0, "strength of the confining x^2"))
+
+
+def _triplets(measure, code, x):
+    return [
+        Term("triplet", f"{measure}_power", code, POWER,
+             f"coupling {x}^exponent / exponent (coupling ln {x} for exponent 0)",
+             _power(x, 2.0), "the paper's P^2/2" if x == "P" else ""),
+        Term("triplet", f"{measure}_yukawa", code, YUKAWA,
+             f"-coupling exp(-gamma {x}) / {x}", _yukawa(), "the screened colloid form"),
+        Term("triplet", f"{measure}_barrier", code, BARRIER, f"alpha / {x} + beta {x}^2",
+             _barrier(), "the paper's 2/|A| + |A|^2" if x == "|A|" else ""),
+    ]
+
+
+TERMS = [
+    *_triplets("perimetric", PERIMETER, "P"),
+    *_triplets("areal", AREA, "|A|"),
+    Term("triplet", "axilrod_teller", TRIANGLE, 0,
+         "strength (1 + 3 cos t_i cos t_j cos t_k) / (r_ij r_jk r_ki)^3",
+         (Parameter("strength", 1.0, "the triple-dipole strength Z"),),
+         "the triple dipole (paper eq. ATMPotential)"),
+    Term("pair", "lennard_jones", DISTANCE, LENNARD_JONES,
+         "4 epsilon ((sigma/r)^12 - (sigma/r)^6)",
+         (Parameter("epsilon", 1.0, "a well depth", above=0.0),
+          Parameter("sigma", 1.0, "a length", above=0.0))),
+    Term("pair", "yukawa", DISTANCE, YUKAWA, "coupling exp(-gamma r) / r", _yukawa(),
+         "repulsive for coupling > 0: the colloids' pair term"),
+    Term("pair", "power", DISTANCE, POWER,
+         "coupling r^exponent / exponent (coupling ln r for exponent 0)", _power("r", -1.0)),
+]
+BY_KIND = {kind: {t.name: t for t in TERMS if t.kind == kind} for kind in KINDS}
+TRIPLET_NAMES = tuple(BY_KIND["triplet"])
+PAIR_NAMES = tuple(BY_KIND["pair"])
+
+
+def term(name: str, kind: str = "triplet") -> Term:
+    """The declaration of a term; unknown names raise ValueError, with a hint when the name
+    is a term of the other kind."""
+    if kind not in KINDS:
+        raise ValueError(f"unknown interaction kind {kind!r}; choose one of {', '.join(KINDS)}")
+    if name not in BY_KIND[kind]:
+        other = "pair" if kind == "triplet" else "triplet"
+        hint = (f" ({name!r} is a {other} potential: give it kind = \"{other}\")"
+                if name in BY_KIND[other] else "")
+        raise ValueError(f"unknown {kind} potential {name!r}; choose one of "
+                         f"{', '.join(BY_KIND[kind])}{hint}")
+    return BY_KIND[kind][name]
+
+
+def parameter_defaults(name: str, kind: str = "triplet") -> dict:
+    """The parameters of a potential with their defaults (see `term`)."""
+    return term(name, kind).defaults
+
+
+@dataclass(frozen=True)
 class Potential:
-    """One term of a system's potential, chosen by kind and name: a triplet potential summed
-    over all triangles, e.g. ``perimetric_power`` (the paper's P**2/2 with the defaults),
-    ``areal_barrier`` (the paper's 2/|A| + |A|**2) or ``axilrod_teller``, or a pair
-    potential summed over all pairs, e.g. ``lennard_jones``."""
+    """One term of a system's potential with its parameter values, e.g. ``perimetric_power``
+    (the paper's P**2/2 with the defaults), ``areal_barrier`` (the paper's 2/|A| + |A|**2),
+    ``axilrod_teller``, or the pair term ``lennard_jones``."""
 
     name: str
     measure: int
@@ -85,71 +159,44 @@ class Potential:
 
     @property
     def par(self) -> np.ndarray:
-        """The parameters as the kernels read them (a pair Yukawa's coupling negated)."""
+        """The parameters as the kernels read them (a pair Yukawa's coupling negated: the
+        kernels' YUKAWA profile is the attractive triplet form)."""
         p = np.array(self.params, dtype=np.float64)
         if self.kind == "pair" and self.profile == YUKAWA:
             p[0] = -p[0]
         return p
 
     def describe(self) -> str:
-        if self.kind == "pair":
-            formula = PAIR_PROFILES[self.name][1]
-        elif self.measure == TRIANGLE:
-            formula = ATM_FORMULA
-        else:
-            x = "P" if self.measure == PERIMETER else "|A|"
-            formula = PROFILES[self.name.split("_", 1)[1]][1].format(x=x)
         values = ", ".join(f"{k}={v:g}" for k, v in zip(self.param_names, self.params))
-        return f"{self.name} ({self.kind}): U = {formula} with {values}"
-
-
-def parameter_defaults(name: str, kind: str = "triplet") -> dict:
-    """The parameters of a potential with their defaults; unknown names raise ValueError,
-    with a hint when the name is a potential of the other kind."""
-    if kind not in KINDS:
-        raise ValueError(f"unknown interaction kind {kind!r}; choose one of {', '.join(KINDS)}")
-    names, other, other_kind = ((PAIR_NAMES, TRIPLET_NAMES, "triplet") if kind == "pair"
-                                else (TRIPLET_NAMES, PAIR_NAMES, "pair"))
-    if name not in names:
-        hint = (f" ({name!r} is a {other_kind} potential: give it kind = \"{other_kind}\")"
-                if name in other else "")
-        raise ValueError(f"unknown {kind} potential {name!r}; choose one of "
-                         f"{', '.join(names)}{hint}")
-    if kind == "pair":
-        return dict(PAIR_PROFILES[name][2])
-    if name == ATM:
-        return {"strength": 1.0}
-    return dict(PROFILES[name.split("_", 1)[1]][2])
+        return f"{self.name} ({self.kind}): U = {term(self.name, self.kind).formula} with {values}"
 
 
 def make_potential(name: str, params: dict | None = None, kind: str = "triplet") -> Potential:
-    """Resolve a potential of a kind ("triplet" or "pair"), its name and its parameters;
-    anything unknown, missing or out of range raises ValueError naming it."""
+    """A term of a kind ("triplet" or "pair") with its parameters (the rest take their
+    defaults); anything unknown or outside its declared bounds raises ValueError naming it."""
+    decl = term(name, kind)
     params = dict(params or {})
-    defaults = parameter_defaults(name, kind)
-    unknown = sorted(set(params) - set(defaults))
+    unknown = sorted(set(params) - set(decl.defaults))
     if unknown:
         raise ValueError(f"potential {name!r} has no parameter {unknown[0]!r}; "
-                         f"its parameters are {', '.join(defaults)}")
-    values = {}
-    for key, default in defaults.items():
-        value = params.get(key, default)
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise ValueError(f"potential parameter {key!r} must be a finite number, got {value!r}")
-        values[key] = float(value)
-    if values.get("gamma", 0.0) < 0:
-        raise ValueError("potential parameter 'gamma' must be >= 0 (a screening rate)")
-    if values.get("coupling") == 0:      # divides by it, and means "no term"
-        raise ValueError("potential parameter 'coupling' must be nonzero")
-    for key, what in (("epsilon", "a well depth"), ("sigma", "a length")):
-        if key in values and not values[key] > 0:
-            raise ValueError(f"potential parameter {key!r} must be > 0 ({what}), "
-                             f"got {values[key]:g}")
-    if kind == "pair":
-        measure, code = DISTANCE, PAIR_PROFILES[name][0]
-    elif name == ATM:
-        measure, code = TRIANGLE, 0
-    else:
-        measure, profile_name = name.split("_", 1)
-        measure, code = MEASURES[measure], PROFILES[profile_name][0]
-    return Potential(name, measure, code, tuple(values.values()), tuple(defaults))
+                         f"its parameters are {', '.join(decl.defaults)}")
+    values = []
+    for p in decl.parameters:
+        value = params.get(p.name, p.default)
+        problem = p.problem(value)
+        if problem:
+            raise ValueError(f"potential parameter {p.name!r} {problem}")
+        values.append(float(value))
+    return Potential(name, decl.measure, decl.profile, tuple(values),
+                     tuple(p.name for p in decl.parameters))
+
+
+def markdown_table() -> str:
+    """The README's table of interaction terms."""
+    lines = ["| kind | name | U | parameters (defaults, bounds) | notes |",
+             "| --- | --- | --- | --- | --- |"]
+    for t in TERMS:
+        params = ", ".join(p.describe() for p in t.parameters)
+        lines.append(f"| {t.kind} | `{t.name}` | {t.formula.replace('|', chr(92) + '|')} | "
+                     f"{params} | {t.note.replace('|', chr(92) + '|')} |")
+    return "\n".join(lines)

@@ -18,8 +18,17 @@ import numpy as np
 from ..analysis.classify import classify, stored_table
 from ..catalog.errors import ArchiveError
 from ..catalog.regimes import Thresholds
-from ..catalog.variables import (BY_NAME, FINISHED, STARTED, VARIABLES, CellResult, Var,
-                                 fundamental_names, history_times)
+from ..catalog.variables import (
+    BY_NAME,
+    FINISHED,
+    STARTED,
+    VARIABLES,
+    CellResult,
+    V,
+    Var,
+    fundamental_names,
+    history_times,
+)
 from .build import system_terms
 from .resources import GROUP_BYTES
 
@@ -32,7 +41,7 @@ def variables(config) -> list[Var]:
     for v in VARIABLES:
         if not v.when(config) or v.name in axes:
             continue
-        if v.name == "angular_momentum" and config.tables["system"]["dim"] == 3:
+        if v.name == V.angular_momentum and config.tables["system"]["dim"] == 3:
             v = replace(v, long_name="total angular momentum at t = 0", extra=("spatial",))
         out.append(v)
     return out
@@ -234,7 +243,7 @@ def derive(ds) -> dict:
     regime and its confidence, with the thresholds that decided them."""
     thresholds = Thresholds.from_table(stored_table(ds))
     regime, confidence = classify(ds, thresholds)
-    return {"regime": regime, "regime_confidence": confidence,
+    return {V.regime: regime, V.regime_confidence: confidence,
             "regime:attrs": {"thresholds": thresholds.describe()}}
 
 

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..catalog.errors import SurveyError
+from ..catalog.variables import V
 from . import archive
 from .config import Config
 
@@ -101,7 +102,7 @@ def _chunk_problem(z, ids, slots, seen, starts, key) -> str:
             return f"lacks variable {s.name}"
         if z[s.name].shape != (ids.size,) + s.shape or z[s.name].dtype != np.dtype(s.dtype):
             return f"has variable {s.name} of the wrong shape or type"
-    stored = z["initial_state"]
+    stored = z[V.initial_state]
     if stored.tobytes() != starts[ids].tobytes():
         return "holds starts that differ from this grid's (another grid's results)"
     return ""

@@ -19,7 +19,9 @@ from typing import Any
 
 import numpy as np
 
+from ..catalog import defaults
 from ..catalog.errors import ConfigError
+from ..catalog.indicators import BY_NAME as INDICATOR
 from ..catalog.indicators import INDICATORS, IndicatorOptions
 from ..catalog.regimes import Thresholds
 from ..catalog.variables import OBSERVABLES
@@ -27,10 +29,15 @@ from ..numerics.dop853 import RTOL_MIN
 from ..numerics.sections import REDUCED_SURFACES, SURFACES
 from ..physics.families import FAMILIES, family_parameters
 from ..physics.system import System
-from ..physics.terms import KINDS, PAIR_NAMES, TRIPLET_NAMES, make_potential, parameter_defaults
+from ..physics.terms import (
+    KINDS,
+    PAIR_NAMES,
+    TRIPLET_NAMES,
+    make_potential,
+    parameter_defaults,
+)
 from .build import build_system, section_event_for, term_axis_names
 from .resources import check_address, check_memory, ensure_writable
-
 
 INT64_MAX = 2 ** 63 - 1
 
@@ -62,10 +69,10 @@ SCHEMA: dict[str, dict[str, Key]] = {
                                  "created; checkpoints go to <output>.checkpoints/"),
     },
     "system": {
-        "bodies": Key("int", 3, "number of bodies N", low=3),
-        "dim": Key("int", 2, "dimension of space", choices=(2, 3)),
+        "bodies": Key("int", defaults.BODIES, "number of bodies N", low=3),
+        "dim": Key("int", defaults.DIM, "dimension of space", choices=(2, 3)),
         "masses": Key("floats", None, "masses, one per body (default all 1)", "mass", above=0),
-        "potential": Key("str", "perimetric_power", "triplet potential <measure>_<profile> "
+        "potential": Key("str", defaults.POTENTIAL, "triplet potential <measure>_<profile> "
                                                     "or axilrod_teller"),
         "params": Key("table", {}, "potential parameters, e.g. {coupling = 1, exponent = 2}; "
                                    "any may be a grid axis named <potential>_<parameter>"),
@@ -82,12 +89,14 @@ SCHEMA: dict[str, dict[str, Key]] = {
                                     "inaccessible); a number or a grid axis", "energy"),
     },
     "integration": {
-        "t_final": Key("float", 2000.0, "integration time of every cell", "time", above=0),
-        "rtol": Key("float", 1e-12, "relative tolerance of DOP853 (at least 10 eps = "
-                                    "2.2e-15)", low=RTOL_MIN,
+        "t_final": Key("float", defaults.T_FINAL, "integration time of every cell", "time",
+                       above=0),
+        "rtol": Key("float", defaults.RTOL, "relative tolerance of DOP853 (at least 10 eps = "
+                                            "2.2e-15)", low=RTOL_MIN,
                     hint="double precision cannot honour a smaller relative tolerance"),
-        "atol": Key("float", 1e-12, "absolute tolerance of DOP853", above=0),
-        "max_steps": Key("int", 10_000_000, "step attempts per orbit before step_limit", low=1),
+        "atol": Key("float", defaults.ATOL, "absolute tolerance of DOP853", above=0),
+        "max_steps": Key("int", defaults.MAX_STEPS, "step attempts per orbit before "
+                                                    "step_limit", low=1),
         "cell_time_limit": Key("float", 0.0, "wall-clock budget of a cell (all its "
                                              "integrations), 0 for none; cells past it get "
                                              "status time_limit", "s", low=0),
@@ -126,12 +135,13 @@ SCHEMA: dict[str, dict[str, Key]] = {
     "tori": {
         "analyse": Key("bool", True, "weighted Birkhoff digits and frequency analysis of "
                                      "every orbit (needs 128 samples or more)"),
-        "sample_interval": Key("float", 0.1, "time between the orbit samples they are "
-                                             "computed from (NAFF sees frequencies up to "
-                                             "1/(2 interval))", "time", above=0),
+        "sample_interval": Key("float", defaults.SAMPLE_INTERVAL, "time between the orbit "
+                               "samples they are computed from (NAFF sees frequencies up to "
+                               "1/(2 interval))", "time", above=0),
         "observables": Key("strs", list(OBSERVABLES), "observables of the Birkhoff "
                                                       "averages", choices=tuple(OBSERVABLES)),
-        "lines": Key("int", 5, "NAFF lines per shape signal and half orbit", low=1, high=50),
+        "lines": Key("int", defaults.NAFF_LINES, "NAFF lines per shape signal and half orbit",
+                     low=1, high=50),
         **{f.name: Key(f.type if f.type in ("int", "float") else "float", f.default,
                        f.metadata["doc"]) for f in fields(Thresholds)},
     },
@@ -651,9 +661,11 @@ def _validate_initial(given: dict, body: dict, system: System):
 
 def _validate_cross(tables: dict, system: System):
     ind, sec, integ = tables["indicators"], tables["section"], tables["integration"]
-    if {"sali", "gali2"} & set(ind["which"]) and ind["deviations"] < 2:
-        raise ConfigError("[indicators].deviations", "sali and gali2 need 2 deviation vectors; "
-                                                     "set deviations = 2 or drop them from which")
+    needy = [name for name in ind["which"] if INDICATOR[name].deviations > ind["deviations"]]
+    if needy:
+        need = max(INDICATOR[name].deviations for name in needy)
+        raise ConfigError("[indicators].deviations", f"{' and '.join(needy)} need {need} "
+                          f"deviation vectors; set deviations = {need} or drop them from which")
     if ind["renorm_interval"] > integ["t_final"]:
         raise ConfigError("[indicators].renorm_interval", "is longer than t_final")
     if tables["tori"]["analyse"] and not tables["tori"]["observables"]:

@@ -24,6 +24,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..catalog import defaults
 from ..catalog.errors import ConfigError
 from ..numerics.dop853 import RTOL_MIN
 from ..numerics.indicators import deviation_vectors
@@ -38,10 +39,10 @@ class OrbitSpec:
     name: str
     family: str
     params: dict = field(default_factory=dict)
-    potential: str = "perimetric_power"
+    potential: str = defaults.POTENTIAL
     potential_params: dict = field(default_factory=dict)
-    t_final: float = 500.0
-    tol: float = 1e-12
+    t_final: float = defaults.ORBIT_T_FINAL
+    tol: float = defaults.RTOL
     zoom_until: float = 0.0      # paths and sides for t <= this (0: the whole run)
     samples: int = 20001
 

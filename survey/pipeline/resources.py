@@ -7,7 +7,6 @@ from pathlib import Path
 
 from ..catalog.errors import ConfigError
 
-
 # the archive is written a group of variables at a time, each group at most this large
 # in memory: one pass over the checkpoint files per group, not per variable
 GROUP_BYTES = 256 * 2 ** 20

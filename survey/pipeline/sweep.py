@@ -20,10 +20,19 @@ import numpy as np
 
 from ..catalog.errors import ArchiveError, ConfigError, SurveyError
 from ..catalog.status import Status
+from ..catalog.variables import V
 from . import archive
 from .cells import CellTask, build_starts, run_cells, warm_up
-from .checkpoints import (checkpoint_dir, chunk_path, loader, output_lock, save_chunk,
-                          scan_checkpoints, warn, write_error)
+from .checkpoints import (
+    checkpoint_dir,
+    chunk_path,
+    loader,
+    output_lock,
+    save_chunk,
+    scan_checkpoints,
+    warn,
+    write_error,
+)
 from .config import Config, load_config, parse_config
 from .resources import check_address
 
@@ -267,7 +276,7 @@ def verify(path, cells: int = 8, seed: int = 0, differences: dict | None = None)
         except (OSError, RuntimeError, ValueError) as exc:
             raise ArchiveError(f"{path}: its data cannot be read ({exc}); the file "
                                        "may be truncated") from None
-    timed_out = stored["status"][sample] == Status.TIME_LIMIT
+    timed_out = stored[V.status][sample] == Status.TIME_LIMIT
     sample = sample[~timed_out]
     fresh = run_cells(CellTask.of(config), sample, build_starts(config)[sample])
     lines, ok = [], True

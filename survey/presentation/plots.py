@@ -18,28 +18,13 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
 from ..analysis.classify import stored_table
+from ..catalog.indicators import OWNER, REGISTRY
 from ..catalog.regimes import REGULAR, Regime, Thresholds
 from ..catalog.status import Status
+from ..catalog.variables import V, label
 
-
-# symbols and units of the variables and grid axes the figures label
-SYMBOLS = {
-    "ftle": r"FTLE $\mu_T$ (1/time)", "ftle_wba": r"WBA growth rate (1/time)",
-    "megno": r"MEGNO $\langle Y\rangle$", "fli": "FLI", "sali": "SALI", "gali2": r"GALI$_2$",
-    "birkhoff_digits": "Birkhoff digits", "birkhoff_digits_half": "Birkhoff digits at T/2",
-    "frequency_diffusion": r"$\log_{10}|\Delta\nu|/|\nu|$", "energy_error": r"$|\Delta E/E|$",
-    "delta": r"$\delta$", "energy": "$E$", "sigma": r"$\sigma$", "p_sigma": r"$p_\sigma$",
-    "eta": r"$\eta$", "p_eta": r"$p_\eta$", "phi": r"$\phi$", "p_phi": r"$p_\phi$",
-    "theta": r"$\theta$", "side": "side", "angular_momentum": "$J$",
-    "regime": "regime", "history_time": "t",
-    "axilrod_teller_strength": r"triple-dipole strength $Z$",
-    "lennard_jones_epsilon": r"$\epsilon$", "lennard_jones_sigma": r"$\sigma_{LJ}$",
-}
-
-
-# indicator maps: (variable, colour map, clipping range or None, log scale)
-MAPS = [("megno", "viridis", (0.0, 8.0), False), ("ftle", "magma", None, True),
-        ("fli", "cividis", None, False), ("birkhoff_digits", "viridis_r", (0.0, 12.0), False)]
+# the indicators drawn as maps (and in one-axis scans), in the registry's order
+MAPS = [(i.headline, i.map) for i in REGISTRY if i.map is not None]
 
 
 REGIME_COLOURS = {Regime.TORUS: "#1f77b4", Regime.RESONANT: "#17becf",
@@ -53,12 +38,8 @@ STATUS_COLOURS = {Status.COLLISION: "#000000", Status.STEP_LIMIT: "#8c564b",
                   Status.TIME_LIMIT: "#7f7f7f"}
 
 
-def label(name: str) -> str:
-    return SYMBOLS.get(name, name)
-
-
 def grid_axes(ds) -> list[str]:
-    return list(ds["status"].dims)
+    return list(ds[V.status].dims)
 
 
 def figures(ds, variables=None) -> dict[str, Figure]:
@@ -68,22 +49,23 @@ def figures(ds, variables=None) -> dict[str, Figure]:
     out = {}
     names = [m for m in MAPS if m[0] in ds and (variables is None or m[0] in variables)]
     if len(axes) == 2:
-        if "regime" in ds and (variables is None or "regime" in variables):
+        if V.regime in ds and (variables is None or V.regime in variables):
             out["map_regime"] = regime_map(ds)
-        for name, cmap, clip, log in names:
-            out[f"map_{name}"] = indicator_map(ds, name, cmap, clip, log)
-        if all(f"crossing_{a}" in ds for a in axes) and "megno" in ds:
-            out["map_megno_section"] = indicator_map(ds, "megno", "viridis", (0.0, 8.0),
-                                                     overlay=True)
+        for name, style in names:
+            out[f"map_{name}"] = indicator_map(ds, name, style.cmap, style.clip, style.log)
+        if all(f"crossing_{a}" in ds for a in axes) and V.megno in ds:
+            style = OWNER[V.megno].map
+            out["map_megno_section"] = indicator_map(ds, V.megno, style.cmap, style.clip,
+                                                     style.log, overlay=True)
     elif len(axes) == 1:
-        out["scan"] = scan(ds, [n for n, *_ in names] if variables is None else variables)
-    if "crossing_sigma" in ds and int(np.nansum(ds["n_crossings"].values)) > 0:
+        out["scan"] = scan(ds, [n for n, _ in names] if variables is None else variables)
+    if V.crossing_sigma in ds and int(np.nansum(ds[V.n_crossings].values)) > 0:
         out["section"] = section(ds)
-    if "megno_history" in ds:
+    if V.megno_history in ds:
         out["convergence"] = convergence(ds)
-    if "frequency" in ds and "regime" in ds:     # frequencies mean something on regular cells
-        regular = np.isin(ds["regime"].values, REGULAR)
-        if np.isfinite(ds["frequency"].values[regular]).any():
+    if V.frequency in ds and V.regime in ds:     # frequencies mean something on regular cells
+        regular = np.isin(ds[V.regime].values, REGULAR)
+        if np.isfinite(ds[V.frequency].values[regular]).any():
             out["frequency_map"] = frequency_map(ds)
     return out
 
@@ -100,13 +82,13 @@ def save(figs: dict[str, Figure], folder, stem: str) -> list[Path]:
 
 
 def _unfinished(ds) -> np.ndarray:
-    return ~np.isin(ds["status"].values, [Status.OK, Status.EVENT])
+    return ~np.isin(ds[V.status].values, [Status.OK, Status.EVENT])
 
 
 def _mask_layer(ax, ds, x, y):
     """Cells whose run did not finish, in their status colours; legend handles with
     counts."""
-    status = ds["status"].values
+    status = ds[V.status].values
     handles = []
     for s, colour in STATUS_COLOURS.items():
         where = status == s
@@ -136,7 +118,7 @@ def _two_axis_figure(ds):
 
 def regime_map(ds) -> Figure:
     fig, ax, hist, x, y = _two_axis_figure(ds)
-    regime = ds["regime"].values
+    regime = ds[V.regime].values
     colours = [REGIME_COLOURS[r] for r in Regime]
     cmap = ListedColormap(colours)
     norm = BoundaryNorm(np.arange(len(Regime) + 1) - 0.5, len(Regime))
@@ -210,7 +192,7 @@ def scan(ds, names) -> Figure:
     edges = np.concatenate([[x[0] - (x[1] - x[0]) / 2 if x.size > 1 else x[0] - 0.5],
                             (x[1:] + x[:-1]) / 2,
                             [x[-1] + (x[-1] - x[-2]) / 2 if x.size > 1 else x[0] + 0.5]])
-    regime = ds["regime"].values if "regime" in ds else None
+    regime = ds[V.regime].values if V.regime in ds else None
     for ax, name in zip(axes, names):
         if regime is not None:
             for r in Regime:
@@ -224,7 +206,7 @@ def scan(ds, names) -> Figure:
                     elinewidth=0.7, capsize=1.5)
         for level, style in _reference_lines(ds, name):
             ax.axhline(level, color="0.3", ls=style, lw=0.8)
-        if name in ("ftle", "megno"):
+        if name in (V.ftle, V.megno):
             ax.set_yscale("log")
         ax.set_ylabel(label(name))
     axes[-1].set_xlabel(label(a))
@@ -239,33 +221,39 @@ def scan(ds, names) -> Figure:
 
 
 def _reference_lines(ds, name):
-    """Where each indicator's votes change (dashed: regular side, dotted: chaotic side)."""
+    """Where the indicator's votes change (dashed: regular side, dotted: chaotic side)."""
     th = Thresholds.from_table(stored_table(ds))
-    prefix = {"megno": "megno", "birkhoff_digits": "digits", "sali": "sali"}.get(name)
-    if prefix:
-        return [(getattr(th, f"{prefix}_regular"), "--"), (getattr(th, f"{prefix}_chaotic"), ":")]
-    if name == "ftle" and "t_end" in ds:
-        T = float(np.nanmax(ds["t_end"].values))
-        return [(th.ftle_regular * np.log(T) / T, "--"), (th.ftle_chaotic * np.log(T) / T, ":")]
+    for indicator in REGISTRY:
+        vote = indicator.vote
+        if vote is None or vote.variable != name:
+            continue
+        lines = [(getattr(th, f"{vote.thresholds}_{side}"), style)
+                 for side, style in (("regular", "--"), ("chaotic", ":"))]
+        if vote.per_torus_rate:
+            if V.t_end not in ds:
+                return []
+            T = float(np.nanmax(ds[V.t_end].values))
+            lines = [(level * np.log(T) / T, style) for level, style in lines]
+        return lines
     return []
 
 
-def section(ds, x="sigma", y="p_sigma", colour_by="regime") -> Figure:
+def section(ds, x="sigma", y="p_sigma", colour_by=V.regime) -> Figure:
     """Section crossings of every cell in the (x, y) reduced coordinates, coloured by the
     cell's regime (or an indicator), rasterised."""
     fig = Figure(figsize=(6.4, 5.2), layout="constrained")
     ax = fig.add_subplot()
     xs = ds[f"crossing_{x}"].values.reshape(-1, ds.sizes["crossing"])
     ys = ds[f"crossing_{y}"].values.reshape(-1, ds.sizes["crossing"])
-    if colour_by == "regime" and "regime" in ds:
-        regime = ds["regime"].values.ravel()
+    if colour_by == V.regime and V.regime in ds:
+        regime = ds[V.regime].values.ravel()
         for r in Regime:
             cells = regime == r
             if cells.any() and np.isfinite(xs[cells]).any():
                 ax.scatter(xs[cells].ravel(), ys[cells].ravel(), s=1.0, lw=0,
                            color=REGIME_COLOURS[r], rasterized=True,
                            label=f"{r.name.lower()} ({int(cells.sum())} cells)")
-        ax.legend(fontsize="small", markerscale=6, title="regime")
+        ax.legend(fontsize="small", markerscale=6, title=V.regime)
     else:
         value = np.repeat(ds[colour_by].values.ravel(), xs.shape[1])
         pts = ax.scatter(xs.ravel(), ys.ravel(), c=value, s=1.0, lw=0, cmap="viridis",
@@ -282,9 +270,9 @@ def convergence(ds, cells=None) -> Figure:
     """Indicator histories of chosen cells (default: one of each regime present): has the
     indicator converged by the end of the run?"""
     flat = {name: ds[name].values.reshape(-1, ds.sizes["history_time"])
-            for name in ("ftle_history", "megno_history", "sali_history") if name in ds}
+            for name in (V.ftle_history, V.megno_history, V.sali_history) if name in ds}
     t = ds["history_time"].values
-    regime = ds["regime"].values.ravel() if "regime" in ds else None
+    regime = ds[V.regime].values.ravel() if V.regime in ds else None
     if cells is None:
         cells = [int(np.flatnonzero(regime == r)[0]) for r in Regime
                  if regime is not None and np.any(regime == r)
@@ -299,9 +287,9 @@ def convergence(ds, cells=None) -> Figure:
                     label=coords[c] + (f" ({Regime(regime[c]).name.lower()})"
                                        if regime is not None else ""))
         ax.set_ylabel(label(name.replace("_history", "")))
-        if name in ("ftle_history", "sali_history"):
+        if name in (V.ftle_history, V.sali_history):
             ax.set_yscale("log")
-        if name == "ftle_history":
+        if name == V.ftle_history:
             ax.plot(t, np.log(t) / t, "k:", lw=1, label=r"$\ln t / t$ (torus)")
     axes[0].legend(fontsize="x-small", ncol=2)
     axes[-1].set_xlabel("t")
@@ -313,7 +301,7 @@ def cell_labels(ds) -> list[str]:
     axes = grid_axes(ds)
     mesh = np.meshgrid(*[ds[a].values for a in axes], indexing="ij")
     return [", ".join(f"{a}={m.ravel()[i]:.6g}" for a, m in zip(axes, mesh))
-            for i in range(ds["status"].size)]
+            for i in range(ds[V.status].size)]
 
 
 def frequency_map(ds, order: int = 5) -> Figure:
@@ -322,8 +310,8 @@ def frequency_map(ds, order: int = 5) -> Figure:
     rotate (J = 0): then the third shape frequency), with the resonance lines
     m1 x + m2 y + m3 = 0 of order |m| <= `order` -- the Arnold web."""
     names = [str(n) for n in ds["fundamental_name"].values]
-    f = np.abs(ds["frequency"].values.reshape(-1, len(names)))
-    regime = ds["regime"].values.ravel() if "regime" in ds else np.zeros(len(f), int)
+    f = np.abs(ds[V.frequency].values.reshape(-1, len(names)))
+    regime = ds[V.regime].values.ravel() if V.regime in ds else np.zeros(len(f), int)
     ref = names.index("rotation") if "rotation" in names else 2
     with np.errstate(invalid="ignore", divide="ignore"):
         spin = (f[:, ref] / f[:, 0])[np.isin(regime, [Regime.TORUS, Regime.RESONANT])]

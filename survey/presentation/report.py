@@ -11,8 +11,11 @@ import numpy as np
 
 from ..analysis.classify import evidence_votes, stored_table
 from ..analysis.onset import onset, runs
+from ..catalog import defaults
+from ..catalog.indicators import INDICATORS
 from ..catalog.regimes import IRREGULAR, REGULAR, Regime, Thresholds
 from ..catalog.status import Status
+from ..catalog.variables import V
 from . import plots
 
 
@@ -42,10 +45,10 @@ def write(ds, folder, stem: str | None = None, figures: bool = True) -> Path:
 
 def markdown(ds, figure_names=()) -> str:
     config = tomllib.loads(ds.attrs.get("config", ""))
-    axes = list(ds["status"].dims)
-    regime = ds["regime"].values
-    th = Thresholds(**json.loads(ds["regime"].attrs["thresholds"])) \
-        if "thresholds" in ds["regime"].attrs else Thresholds.from_table(stored_table(ds))
+    axes = list(ds[V.status].dims)
+    regime = ds[V.regime].values
+    th = Thresholds(**json.loads(ds[V.regime].attrs["thresholds"])) \
+        if "thresholds" in ds[V.regime].attrs else Thresholds.from_table(stored_table(ds))
     n = regime.size
     out = [f"# {ds.attrs.get('title', 'survey report')}", ""]
 
@@ -62,18 +65,20 @@ def markdown(ds, figure_names=()) -> str:
                    for k, v in t.get("params", {}).items()})
             for t in system["interactions"])
     else:
-        potential = (f"potential `{system.get('potential', 'perimetric_power')}` "
+        potential = (f"potential `{system.get('potential', defaults.POTENTIAL)}` "
                      f"{system.get('params', {}) or '(defaults: U = P^2/2 for perimetric_power)'}")
-    out += [f"- System: {system.get('bodies', 3)} bodies in {system.get('dim', 2)}-D, "
-            f"masses {system.get('masses', 'all 1')}, {potential}.",
+    tori = config.get("tori", {})
+    which = config.get("indicators", {}).get("which", INDICATORS)
+    out += [f"- System: {system.get('bodies', defaults.BODIES)} bodies in "
+            f"{system.get('dim', defaults.DIM)}-D, masses {system.get('masses', 'all 1')}, "
+            f"{potential}.",
             f"- Initial conditions: family `{initial.get('family')}`"
             + "".join(f", {k} = {v}" for k, v in initial.items() if k != "family"
                       and k not in axes) + f"; grid: {grid}; {n} cells.",
-            f"- Integration: DOP853 to t = {integ.get('t_final', 2000.0):g}, rtol = "
-            f"{integ.get('rtol', 1e-12):g}, atol = {integ.get('atol', 1e-12):g}; chaos "
-            f"indicators {config.get('indicators', {}).get('which', 'ftle, megno, fli, sali, gali2')}; "
-            f"torus analysis every {config.get('tori', {}).get('sample_interval', 0.1):g} "
-            "time units.",
+            f"- Integration: DOP853 to t = {integ.get('t_final', defaults.T_FINAL):g}, rtol = "
+            f"{integ.get('rtol', defaults.RTOL):g}, atol = {integ.get('atol', defaults.ATOL):g}; "
+            f"chaos indicators {', '.join(which)}; torus analysis every "
+            f"{tori.get('sample_interval', defaults.SAMPLE_INTERVAL):g} time units.",
             f"- Code: survey {ds.attrs.get('version_survey', '?')}, commit "
             f"`{ds.attrs.get('git_commit', '?')}`; {ds.attrs.get('history', '')}.", ""]
 
@@ -138,16 +143,16 @@ def _onsets(ds, axes, regime) -> list[str]:
 
 
 def _tori_table(ds, axes, regime, rows: int = 15) -> list[str]:
-    if "frequency" not in ds:
+    if V.frequency not in ds:
         return []
     cells = np.flatnonzero(np.isin(regime.ravel(), REGULAR))
     if not cells.size:
         return ["## Tori", "", "No regular cell.", ""]
     names = [str(v) for v in ds["fundamental_name"].values]
-    freq = ds["frequency"].values.reshape(-1, len(names))
-    m = ds["resonance"].values.reshape(-1, len(names))
-    dist = ds["resonance_distance"].values.ravel()
-    digits = ds["birkhoff_digits"].values.ravel()
+    freq = ds[V.frequency].values.reshape(-1, len(names))
+    m = ds[V.resonance].values.reshape(-1, len(names))
+    dist = ds[V.resonance_distance].values.ravel()
+    digits = ds[V.birkhoff_digits].values.ravel()
     coords = plots.cell_labels(ds)
     pick = cells if cells.size <= rows else cells[np.linspace(0, cells.size - 1, rows).astype(int)]
     out = ["## Tori found", "",
@@ -201,14 +206,14 @@ def _thresholds(th) -> list[str]:
 
 
 def _quality(ds) -> list[str]:
-    status = ds["status"].values
+    status = ds[V.status].values
     out = ["## Conservation and failures", ""]
     finished = np.isin(status, [Status.OK, Status.EVENT])
     if finished.any():
-        dE = ds["energy_error"].values[finished]
+        dE = ds[V.energy_error].values[finished]
         out.append(f"Relative energy error over the finished cells: median {np.median(dE):.1e}, "
                    f"largest {np.max(dE):.1e}; angular momentum error largest "
-                   f"{np.nanmax(ds['angular_momentum_error'].values[finished]):.1e}.")
+                   f"{np.nanmax(ds[V.angular_momentum_error].values[finished]):.1e}.")
     failed = [(s, int(np.sum(status == s))) for s in Status if s not in (Status.OK, Status.EVENT)]
     failed = [(s, k) for s, k in failed if k]
     if failed:

@@ -1,6 +1,7 @@
-"""Pair potentials, the Axilrod-Teller-Muto triple dipole and their mixes: forces and tangent
-forces against finite differences (N = 3, 4, 7; d = 2, 3; unequal masses), closed forms
-derived here, and the conservation laws on LJAT orbits."""
+"""Sums of terms -- pair potentials, the Axilrod-Teller-Muto triple dipole and the paper's
+terms mixed: forces and tangent forces against finite differences (N = 3, 4, 7; d = 2, 3;
+unequal masses), closed forms derived here, and the conservation laws on LJAT orbits. Each
+term alone passes the battery of tests/physics/test_terms.py."""
 import math
 
 import numpy as np
@@ -14,10 +15,6 @@ from survey.physics.terms import make_potential as term
 
 LJ = term("lennard_jones", {}, "pair")
 MIXES = {
-    "lennard_jones": [term("lennard_jones", dict(epsilon=0.8, sigma=1.1), "pair")],
-    "yukawa_pair": [term("yukawa", dict(coupling=1.5, gamma=0.7), "pair")],
-    "power_pair": [term("power", dict(coupling=0.9, exponent=-1.5), "pair")],
-    "axilrod_teller": [term("axilrod_teller", dict(strength=0.6))],
     "ljat": [LJ, term("axilrod_teller", dict(strength=0.3))],
     # the paper's term need not come first; two triplet terms and a pair
     "colloid": [term("yukawa", {}, "pair"), term("areal_barrier"),

@@ -1,13 +1,14 @@
-"""Forces and tangent forces of every built-in potential against finite differences and
-against the side-length reference, in 2-D and 3-D, N = 3 and 4, unequal masses."""
+"""The perimetric and areal potentials against the side-length reference (N = 3, 4;
+d = 2, 3; unequal masses), near collinear triangles, and bad names. The battery every term
+passes (finite differences, bounds) is tests/physics/test_terms.py."""
 import numpy as np
 import pytest
 import reference
-from conftest import derivative, energy_gradient, full_rhs
+from conftest import full_rhs
 
 from survey.physics.geometry import perimeter
 from survey.physics.system import System
-from survey.physics.terms import ATM, POTENTIAL_NAMES, make_potential
+from survey.physics.terms import make_potential
 
 PARAMS = {  # non-default parameters, so that no special case (k = 2) hides a bug
     "perimetric_power": dict(coupling=0.7, exponent=3.0),
@@ -17,7 +18,6 @@ PARAMS = {  # non-default parameters, so that no special case (k = 2) hides a bu
     "areal_yukawa": dict(coupling=1.0, gamma=0.5),
     "areal_barrier": dict(alpha=2.0, beta=1.0),
 }
-# the perimetric and areal families; axilrod_teller and the pair terms: test_interactions.py
 CASES = [(name, N, d) for name in PARAMS for N in (3, 4) for d in (2, 3)]
 
 
@@ -27,36 +27,6 @@ def make_case(name, N, d, seed=0):
                            **PARAMS[name])
     y = rng.normal(size=system.n)
     return system, y
-
-
-def test_all_named_potentials_are_tested():
-    assert set(PARAMS) | {ATM} == set(POTENTIAL_NAMES)
-
-
-@pytest.mark.parametrize("name,N,d", CASES)
-def test_forces_are_minus_gradient_of_energy(name, N, d):
-    system, y = make_case(name, N, d)
-    nq = system.n // 2
-    force = full_rhs(system, y)[nq:]
-    grad = energy_gradient(system, y)
-    np.testing.assert_allclose(force, -grad, rtol=1e-7, atol=1e-8 * np.abs(grad).max())
-
-
-@pytest.mark.parametrize("name,N,d", CASES)
-def test_tangent_forces_are_derivative_of_forces(name, N, d):
-    system, y = make_case(name, N, d, seed=1)
-    n, nq = system.n, system.n // 2
-    rng = np.random.default_rng(2)
-    tangents = rng.normal(size=(2, n))
-    out = full_rhs(system, np.concatenate([y, tangents.ravel()]), n_tan=2)
-    for t in range(2):
-        dq, dp = tangents[t, :nq], tangents[t, nq:]
-        step = np.concatenate([dq, np.zeros(nq)])
-        fd = derivative(lambda s: full_rhs(system, y + s * step)[nq:])
-        block = out[n * (1 + t):n * (2 + t)]
-        np.testing.assert_allclose(block[nq:], fd, rtol=1e-6, atol=1e-8 * np.abs(fd).max())
-        # d(dq)/dt = M^-1 dp
-        np.testing.assert_allclose(block[:nq], dp / np.repeat(system.masses, d), rtol=1e-15)
 
 
 @pytest.mark.parametrize("name,N,d", CASES)

@@ -66,8 +66,8 @@ def test_maps_label_axes_with_symbols_and_mask_unfinished_cells(grid2):
 def test_scan_shades_each_cell_by_regime_with_error_bars(grid1):
     fig = plots.figures(grid1)["scan"]
     axes = fig.axes
-    assert [a.get_ylabel() for a in axes][:2] == [r"MEGNO $\langle Y\rangle$",
-                                                  r"FTLE $\mu_T$ (1/time)"]
+    assert [a.get_ylabel() for a in axes][:2] == [r"FTLE $\mu_T$ (1/time)",
+                                                  r"MEGNO $\langle Y\rangle$"]
     assert axes[-1].get_xlabel() == r"$\delta$"
     n = grid1.sizes["delta"]
     assert len([p for p in axes[0].patches]) == n                   # one band per cell

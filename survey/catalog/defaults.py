@@ -1,0 +1,14 @@
+"""Defaults shared by more than one layer, each written once: the integration's, a single
+orbit's, the system's and the torus analysis'. The config schema, the Python API's keyword
+defaults, the command line and the report (for configs that omit a key) all read them."""
+
+T_FINAL = 2000.0            # integration time of a survey cell (the paper's T)
+RTOL = 1e-12                # DOP853 tolerances
+ATOL = 1e-12
+MAX_STEPS = 10_000_000      # step attempts per orbit before status step_limit
+ORBIT_T_FINAL = 500.0       # integration time of a single orbit (`orbit`)
+BODIES = 3
+DIM = 2
+POTENTIAL = "perimetric_power"     # with its default parameters, the paper's U = P^2/2
+SAMPLE_INTERVAL = 0.1       # time between the orbit samples of the torus analysis
+NAFF_LINES = 5              # NAFF lines per shape signal and half orbit
