@@ -52,3 +52,42 @@ def energy_gradient(system, y, h=1e-5):
     unit = np.eye(system.n)
     return np.array([derivative(lambda s: system.energy(y + s * unit[a]), h)
                      for a in range(system.n // 2)])
+
+
+def spread_state(system, rng):
+    """A state whose bodies are no closer than 0.6 (so that the r^-12 and r^-9 terms keep
+    4th-order differences accurate), with random momenta."""
+    N, d = system.n_bodies, system.dim
+    while True:
+        q = rng.uniform(-1.0, 1.0, (N, d)) * N ** (1 / d)
+        dist = np.linalg.norm(q[:, None] - q[None], axis=-1) + np.eye(N) * 9
+        if dist.min() > 0.6:
+            return system.state(q, rng.normal(size=(N, d)))
+
+
+def assert_forces_are_minus_the_gradient(system, y):
+    """Forces = -dU/dq by 4th-order differences of H (momenta zeroed, so H = U rounds at
+    the scale of U alone), and they conserve momentum."""
+    nq = system.n // 2
+    y = np.concatenate([y[:nq], np.zeros(nq)])
+    force = full_rhs(system, y)[nq:]
+    grad = energy_gradient(system, y)
+    np.testing.assert_allclose(force, -grad, rtol=1e-6, atol=1e-8 * np.abs(grad).max())
+    np.testing.assert_allclose(force.reshape(system.n_bodies, system.dim).sum(axis=0), 0.0,
+                               atol=1e-13 * np.abs(force).max())
+
+
+def assert_tangent_forces_are_the_derivative(system, y, rng):
+    """The variational equations of two random tangent vectors: d dq/dt = M^-1 dp and
+    d dp/dt = the derivative of the forces along dq (4th-order differences)."""
+    n, nq = system.n, system.n // 2
+    tangents = rng.normal(size=(2, n))
+    out = full_rhs(system, np.concatenate([y, tangents.ravel()]), n_tan=2)
+    for t in range(2):
+        dq = np.concatenate([tangents[t, :nq], np.zeros(nq)])
+        fd = derivative(lambda s: full_rhs(system, y + s * dq)[nq:])
+        block = out[n * (1 + t):n * (2 + t)]
+        np.testing.assert_allclose(block[nq:], fd, rtol=1e-6, atol=1e-8 * np.abs(fd).max())
+        np.testing.assert_allclose(block[:nq], tangents[t, nq:] / np.repeat(system.masses,
+                                                                             system.dim),
+                                   rtol=1e-15)

@@ -75,7 +75,7 @@ REGISTRY = (
               "Das, Saiki, Sander & Yorke, Nonlinearity 30 (2017) 4111",
               map=MapStyle("viridis_r", (0.0, 12.0)),
               vote=Vote("birkhoff_digits", +1, "digits")),
-    Indicator("diffusion", TORUS, ("frequency", "frequency_change", "frequency_diffusion",
+    Indicator("diffusion", TORUS, ("frequency_diffusion", "frequency", "frequency_change",
                                    "resonance", "resonance_order", "resonance_distance"),
               "Laskar, Physica D 67 (1993) 257",
               vote=Vote("frequency_diffusion", -1, "diffusion")),

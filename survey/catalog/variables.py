@@ -37,12 +37,12 @@ class CellResult(NamedTuple):
     angular_momentum: Any = np.nan
     energy_error: float = np.nan
     angular_momentum_error: float = np.nan
-    indicators: Any = None                 # indicators.ChaosIndicators
-    tori: Any = None                       # tori.TorusEvidence
+    indicators: Any = None                 # numerics.indicators.ChaosIndicators
+    tori: Any = None                       # numerics.torus.TorusEvidence
     n_crossings: int = 0
     crossing_time: np.ndarray | None = None    # kept crossings
     crossing_state: np.ndarray | None = None
-    reduced: Any = None                    # coordinates.Reduced of the kept crossings
+    reduced: Any = None                    # physics.jacobi.Reduced of the kept crossings
 
 
 @dataclass(frozen=True)
@@ -72,7 +72,7 @@ class Var:
         else:
             attrs["units"] = self.units
         if self.derived:
-            attrs["comment"] = "derived by survey.tori.classify from the other variables"
+            attrs["comment"] = "derived by survey.analysis.classify from the other variables"
         elif self.cells != ALL:
             attrs["comment"] = f"{'NaN' if self.dtype.startswith('f') else '-1'} except in " \
                                f"{self.cells}"
@@ -156,7 +156,7 @@ VARIABLES = [
               lambda r: r.tori.digits_each_half, extra=("observable",)),
     _measured("frequency", "fundamental frequency in cycles per unit time (mean of the two "
                            "halves of the orbit)", lambda r: r.tori.frequencies.frequency,
-              extra=("fundamental",)),
+              extra=("fundamental",), symbol=r"$\nu$ (cycles/time)"),
     _measured("frequency_change", "change of each fundamental frequency from the first half "
                                   "of the orbit to the second",
               lambda r: r.tori.frequencies.change, extra=("fundamental",)),

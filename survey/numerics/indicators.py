@@ -118,10 +118,10 @@ def conservation_errors(system: System, y0, states):
 def chaos_indicators(system: System, y0, t_final: float, options=IndicatorOptions(), *,
                      cell: int = 0, events: Sequence[Event] = (), rtol=defaults.RTOL,
                      atol=defaults.ATOL, max_steps=defaults.MAX_STEPS, max_events=100_000,
-                     time_limit=0.0,
-                     control_tangents=False, t_fine=None) -> ChaosIndicators:
-    """Integrate y0 to t_final with `options.deviations` tangent vectors and their MEGNO
-    accumulators (plus `options.perturbations` nearby orbits) and return the indicators,
+                     time_limit=0.0, control_tangents=False, t_fine=None) -> ChaosIndicators:
+    """Integrate y0 to t_final with `options.deviations` tangent vectors (MEGNO of the first,
+    summed by the driver at step ends), plus `options.perturbations` nearby orbits, and
+    return the indicators,
     their ensemble spread and convergence histories, and any section crossings.
     time_limit (wall-clock seconds, 0 for none) is the budget of all these integrations
     together; when it runs out the status is TIME_LIMIT. t_fine: times at which the nominal

@@ -133,7 +133,7 @@ def _exists(path: Path) -> bool:
 
 # what survey adds to an output's name and path: the archive's temporary file is
 # .NAME.partial-PID (PIDs have up to 7 digits; archive.partial_path), a checkpoint is
-# NAME.checkpoints/KEY/.chunk-FIRST-LAST-COUNT.npz.PID.tmp (sweep.save_chunk)
+# NAME.checkpoints/KEY/.chunk-FIRST-LAST-COUNT.npz.PID.tmp (checkpoints.save_chunk)
 NAME_EXTRA = 17
 
 

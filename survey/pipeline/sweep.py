@@ -292,7 +292,7 @@ def verify(path, cells: int = 8, seed: int = 0, differences: dict | None = None)
     for name in rederived:
         ok = False
         lines.append(f"{name}: differs from what its evidence in the archive gives "
-                     "(tori.classify)")
+                     "(survey.analysis.classify)")
     lines.insert(0, f"recomputed cells {', '.join(map(str, sample))} of {n}: "
                     + ("all reproducible variables match bit for bit" if ok else "MISMATCH"))
     if timed_out.any():

@@ -201,7 +201,7 @@ def _thresholds(th) -> list[str]:
         out.append(f"| {f.name} | {getattr(th, f.name):g} | "
                    f"{f.metadata['doc'].replace('|', chr(92) + '|')} |")
     out += ["", "Each line of evidence votes regular, chaotic or not at all; tori and chaos "
-                "need every vote cast to agree (survey.tori.classify).", ""]
+                "need every vote cast to agree (survey.analysis.classify).", ""]
     return out
 
 

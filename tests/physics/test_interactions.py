@@ -6,7 +6,8 @@ import math
 
 import numpy as np
 import pytest
-from conftest import derivative, energy_gradient, full_rhs
+from conftest import (assert_forces_are_minus_the_gradient,
+                      assert_tangent_forces_are_the_derivative, full_rhs, spread_state)
 
 from survey.catalog.status import Status
 from survey.numerics.integrate import integrate
@@ -24,41 +25,20 @@ CASES = [(name, N, d) for name in MIXES for N in (3, 4, 7) for d in (2, 3)]
 
 
 def make_case(name, N, d, seed):
-    """Unequal masses; positions spread so that no pair is closer than 0.6 (the r^-12 and
-    r^-9 terms keep 4th-order differences accurate)."""
     rng = np.random.default_rng(seed + 10 * N + d)
     system = System(rng.uniform(0.5, 2.0, N), d, tuple(MIXES[name]))
-    while True:
-        q = rng.uniform(-1.0, 1.0, (N, d)) * N ** (1 / d)
-        dist = np.linalg.norm(q[:, None] - q[None], axis=-1) + np.eye(N) * 9
-        if dist.min() > 0.6:
-            return system, system.state(q, rng.normal(size=(N, d)))
+    return system, spread_state(system, rng)
 
 
 @pytest.mark.parametrize("name,N,d", CASES)
 def test_forces_are_minus_gradient_of_energy(name, N, d):
-    system, y = make_case(name, N, d, seed=0)
-    nq = system.n // 2
-    force = full_rhs(system, y)[nq:]
-    grad = energy_gradient(system, y)
-    np.testing.assert_allclose(force, -grad, rtol=1e-6, atol=1e-8 * np.abs(grad).max())
-    np.testing.assert_allclose(force.reshape(N, d).sum(axis=0), 0.0,
-                               atol=1e-13 * np.abs(force).max())
+    assert_forces_are_minus_the_gradient(*make_case(name, N, d, seed=0))
 
 
 @pytest.mark.parametrize("name,N,d", CASES)
 def test_tangent_forces_are_derivative_of_forces(name, N, d):
-    system, y = make_case(name, N, d, seed=1)
-    n, nq = system.n, system.n // 2
-    tangents = np.random.default_rng(2).normal(size=(2, n))
-    out = full_rhs(system, np.concatenate([y, tangents.ravel()]), n_tan=2)
-    for t in range(2):
-        dq = np.concatenate([tangents[t, :nq], np.zeros(nq)])
-        fd = derivative(lambda s: full_rhs(system, y + s * dq)[nq:])
-        block = out[n * (1 + t):n * (2 + t)]
-        np.testing.assert_allclose(block[nq:], fd, rtol=1e-6, atol=1e-8 * np.abs(fd).max())
-        np.testing.assert_allclose(block[:nq], tangents[t, nq:] / np.repeat(system.masses, d),
-                                   rtol=1e-15)
+    assert_tangent_forces_are_the_derivative(*make_case(name, N, d, seed=1),
+                                             np.random.default_rng(2))
 
 
 def test_terms_add_up():

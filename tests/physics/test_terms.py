@@ -9,7 +9,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import derivative, energy_gradient, full_rhs
+from conftest import (
+    assert_forces_are_minus_the_gradient,
+    assert_tangent_forces_are_the_derivative,
+    spread_state,
+)
 
 from survey.physics.system import System
 from survey.physics.terms import TERMS, make_potential, markdown_table
@@ -27,16 +31,10 @@ def off_default(term) -> dict:
 
 
 def make_case(term, N, d, seed):
-    """Unequal masses; positions spread so that no pair is closer than 0.6 (the r^-12 and
-    r^-9 terms keep 4th-order differences accurate)."""
     rng = np.random.default_rng(seed + 10 * N + d)
     system = System(rng.uniform(0.5, 2.0, N), d,
                     make_potential(term.name, off_default(term), term.kind))
-    while True:
-        q = rng.uniform(-1.0, 1.0, (N, d)) * N ** (1 / d)
-        dist = np.linalg.norm(q[:, None] - q[None], axis=-1) + np.eye(N) * 9
-        if dist.min() > 0.6:
-            return system, system.state(q, rng.normal(size=(N, d)))
+    return system, spread_state(system, rng)
 
 
 @pytest.mark.parametrize("term", TERMS, ids=[f"{t.kind}-{t.name}" for t in TERMS])
@@ -63,30 +61,13 @@ def test_parameters_are_declared_and_their_bounds_enforced(term):
 
 @pytest.mark.parametrize("term,N,d", CASES, ids=IDS)
 def test_forces_are_minus_the_gradient_of_the_energy(term, N, d):
-    system, y = make_case(term, N, d, seed=0)
-    nq = system.n // 2
-    y[nq:] = 0.0      # H = U: differences of H then round at the scale of U alone
-    force = full_rhs(system, y)[nq:]
-    grad = energy_gradient(system, y)
-    np.testing.assert_allclose(force, -grad, rtol=1e-6, atol=1e-8 * np.abs(grad).max())
-    np.testing.assert_allclose(force.reshape(N, d).sum(axis=0), 0.0,
-                               atol=1e-13 * np.abs(force).max())
+    assert_forces_are_minus_the_gradient(*make_case(term, N, d, seed=0))
 
 
 @pytest.mark.parametrize("term,N,d", CASES, ids=IDS)
 def test_tangent_forces_are_the_derivative_of_the_forces(term, N, d):
-    system, y = make_case(term, N, d, seed=1)
-    n, nq = system.n, system.n // 2
-    tangents = np.random.default_rng(2).normal(size=(2, n))
-    out = full_rhs(system, np.concatenate([y, tangents.ravel()]), n_tan=2)
-    for t in range(2):
-        dq = np.concatenate([tangents[t, :nq], np.zeros(nq)])
-        fd = derivative(lambda s: full_rhs(system, y + s * dq)[nq:])
-        block = out[n * (1 + t):n * (2 + t)]
-        np.testing.assert_allclose(block[nq:], fd, rtol=1e-6, atol=1e-8 * np.abs(fd).max())
-        # d(dq)/dt = M^-1 dp
-        np.testing.assert_allclose(block[:nq], tangents[t, nq:] / np.repeat(system.masses, d),
-                                   rtol=1e-15)
+    assert_tangent_forces_are_the_derivative(*make_case(term, N, d, seed=1),
+                                             np.random.default_rng(2))
 
 
 def test_the_readme_lists_every_term_as_declared():

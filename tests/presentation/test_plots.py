@@ -205,3 +205,15 @@ def test_the_workflows_cover_the_papers_figures():
                   if len(load_config(p).axes) == 2 and "energy" in
                   {a.name for a in load_config(p).axes}}
     assert {"perimetric_power", "areal_barrier"} <= potentials
+
+
+def test_the_accessor_classifies_draws_and_reports(grid1, tmp_path):
+    from survey.analysis.classify import classify
+    regime, confidence = grid1.survey.classify()
+    np.testing.assert_array_equal(regime, grid1.regime.values)
+    np.testing.assert_array_equal(confidence, classify(grid1)[1])
+    assert set(grid1.survey.figures()) == set(plots.figures(grid1))
+    written = grid1.survey.figures(tmp_path)
+    assert (tmp_path / "g1_scan.png") in written
+    path = grid1.survey.report(tmp_path)
+    assert path == tmp_path / "g1_report.md" and "## Regimes" in path.read_text()
