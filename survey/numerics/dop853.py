@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from ..physics.jit import kernel
+from ..physics.jit import leaf
 from ..physics.system import rhs
 
 EPS = np.finfo(np.float64).eps
@@ -496,7 +496,7 @@ D7_15 = -39.17726167561544
 D7_16 = -149.72683625798564
 
 
-@kernel
+@leaf
 def stages(masses, d, measure, prof, par, n_tan, nf, t, y, h, K, yt, ynew):
     """Stages 2..12 (K[0] holds f(t, y)) and the 8th-order solution ynew."""
     for i in range(nf):
@@ -536,7 +536,7 @@ def stages(masses, d, measure, prof, par, n_tan, nf, t, y, h, K, yt, ynew):
         ynew[i] = y[i] + h * (B1 * K[0, i] + B6 * K[5, i] + B7 * K[6, i] + B8 * K[7, i] + B9 * K[8, i] + B10 * K[9, i] + B11 * K[10, i] + B12 * K[11, i])
 
 
-@kernel
+@leaf
 def error_norm(y, ynew, K, h, n_err, rtol, atol):
     """Hairer's blended 5th/3rd-order error estimate, RMS over the controlled components."""
     e5 = 0.0
@@ -553,7 +553,7 @@ def error_norm(y, ynew, K, h, n_err, rtol, atol):
     return abs(h) * e5 / math.sqrt(n_err * (e5 + 0.01 * e3))
 
 
-@kernel
+@leaf
 def dense_prepare(masses, d, measure, prof, par, n_tan, nd, full, t, y, ynew, h, K, yt, F):
     """Coefficients of the 7th-order interpolant on [t, t+h] for components < nd; K[12]
     must hold f(t+h, ynew). Stages 14-16 are evaluated for the orbit alone unless full."""
@@ -578,7 +578,7 @@ def dense_prepare(masses, d, measure, prof, par, n_tan, nd, full, t, y, ynew, h,
         F[6, i] = h * (D7_1 * K[0, i] + D7_6 * K[5, i] + D7_7 * K[6, i] + D7_8 * K[7, i] + D7_9 * K[8, i] + D7_10 * K[9, i] + D7_11 * K[10, i] + D7_12 * K[11, i] + D7_13 * K[12, i] + D7_14 * K[13, i] + D7_15 * K[14, i] + D7_16 * K[15, i])
 
 
-@kernel
+@leaf
 def dense_eval(F, y, x, nd, out):
     """Interpolated state at t + x h, x in [0, 1]."""
     x1 = 1.0 - x
@@ -587,7 +587,7 @@ def dense_eval(F, y, x, nd, out):
             F[3, i] + x * (F[4, i] + x1 * (F[5, i] + x * F[6, i]))))))
 
 
-@kernel
+@leaf
 def norm_block(y, off, n):
     s = 0.0
     for i in range(off, off + n):

@@ -11,7 +11,7 @@ from typing import NamedTuple, Sequence
 import numpy as np
 
 from ..physics.forces import cross, dot, norm, sub, vec
-from ..physics.jit import kernel
+from ..physics.jit import leaf
 from ..physics.system import System
 from .dop853 import EPS, dense_eval
 
@@ -23,7 +23,7 @@ from .dop853 import EPS, dense_eval
 EV_LINEAR, EV_QUADRATIC, EV_SIDES, EV_SIDES_RATE, EV_AREA = 0, 1, 2, 3, 4
 
 
-@kernel
+@leaf
 def event_value(ep, f0, y, masses, d):
     """Value at orbit state y of the event function whose record starts at ep[f0]:
     [code, i, j, k, offset, parameters...] (i, j, k: the triplet of side/area functions)."""
@@ -62,13 +62,13 @@ def event_value(ep, f0, y, masses, d):
     return g
 
 
-@kernel
+@leaf
 def _g_at(x, ep, f0, F, y, nd, yd, masses, d):
     dense_eval(F, y, x, nd, yd)
     return event_value(ep, f0, yd, masses, d)
 
 
-@kernel
+@leaf
 def _brent(ep, f0, a, b, fa, fb, xtol, F, y, nd, yd, masses, d):
     """Root of g(dense(x)) bracketed by [a, b] (Brent 1973); g's record starts at ep[f0]."""
     c, fc = a, fa
@@ -108,7 +108,7 @@ def _brent(ep, f0, a, b, fa, fb, xtol, F, y, nd, yd, masses, d):
     return b
 
 
-@kernel
+@leaf
 def event_slope(ep, f0, y, f, n, buf, masses, d, h):
     """dg/dt = grad g . f: exact for linear and quadratic forms, otherwise by a central
     difference along the flow (it only feeds the screening model)."""
@@ -133,7 +133,7 @@ def event_slope(ep, f0, y, f, n, buf, masses, d, h):
     return (gp - event_value(ep, f0, buf, masses, d)) / (2.0 * dt)
 
 
-@kernel
+@leaf
 def may_cross(g0, s0, g1, s1, h):
     """How g may vanish on a step, from the cubic Hermite model of g through (g0, g0') and
     (g1, g1'): 0 not at all; 1 once (a sign change at the ends, the model monotone); 2
@@ -160,7 +160,7 @@ def may_cross(g0, s0, g1, s1, h):
     return 1 if change else 0
 
 
-@kernel
+@leaf
 def scan_events(ep, f0, g0, g1, want, guard0, n_sub, h, xtol, F, y, n, yd, masses, d,
                 found_x, found_e, e, n_found):
     """Crossings of one event on a step: sign changes between n_sub sub-interval points of

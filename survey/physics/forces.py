@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 
-from .jit import helper, kernel
+from .jit import helper, leaf
 from .terms import BARRIER, PERIMETER, POWER, YUKAWA
 
 
@@ -81,7 +81,7 @@ def profile(code, par, x):
             24.0 * eps * (26.0 * r6 * r6 - 7.0 * r6) / (x * x))
 
 
-@kernel
+@leaf
 def triplet_measure(q, i, j, k, d, measure):
     """Perimeter, or |A|, of the triangle of bodies i, j, k (positions q, flat)."""
     u, v, w = vec(q, i * d, d), vec(q, j * d, d), vec(q, k * d, d)

@@ -47,6 +47,12 @@ refresh_kernel_cache()
 # exception such as ZeroDivisionError from inside a kernel; the integrator turns
 # non-finite values into a status).
 kernel = njit(cache=True, error_model="numpy")
+# A kernel that creates no array runs without numba's reference counting (NRT): the
+# incref/decref calls numba places around every array a function passes on or slices (43
+# in the right-hand side of three bodies, 58 once a branch keeps numba's pruning pass from
+# removing them) cost more than the arithmetic -- 2x on the right-hand side, measured.
+# (`_nrt` is numba's own switch for it, used by its test suite.)
+leaf = njit(cache=True, error_model="numpy", _nrt=False)
 # small helpers are inlined at numba-IR level: calls between separately compiled functions
 # otherwise cost more than the arithmetic (3x on the right-hand side).
 helper = njit(cache=True, error_model="numpy", inline="always")
