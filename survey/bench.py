@@ -18,12 +18,12 @@ import time
 import numpy as np
 
 from .catalog.variables import V
-from .numerics.dop853 import error_norm, stages
+from .numerics.dop853 import error_norms, stages
 from .numerics.indicators import deviation_vectors
-from .numerics.integrate import integrate
+from .numerics.integrate import integrate, integrate_batch
 from .physics.families import initial_state
 from .physics.jit import kernel
-from .physics.system import System, rhs
+from .physics.system import System, rhs, rhs_lanes, workspace_size
 
 CASES = [("chaotic 'sides'", "sides", {}),
          ("regular equilateral d=3", "equilateral", {"delta": 3.0})]
@@ -635,68 +635,86 @@ def default_cell(t_final=2000.0, repeats=5, folder="results/bench", out=print):
 
 
 @kernel
-def _rhs_loop(y, reps, masses, d, measure, prof, par, n_tan):
-    """reps times the 12 right-hand-side evaluations of a step, at one state."""
-    K = np.zeros((16, y.size))
+def _rhs_loop(Y, reps, L, masses, d, measure, prof, par, n_tan):
+    """reps times the 12 right-hand-side evaluations of a step of L lanes, at one state."""
+    K = np.zeros((16, Y.size))
+    W = np.zeros(workspace_size(L, Y.size // L))
     for _ in range(reps):
         for s in range(12):
-            rhs(0.0, y, K[s], masses, d, measure, prof, par, n_tan)
+            if L == 1:
+                rhs(0.0, Y, K[s], masses, d, measure, prof, par, n_tan)
+            else:
+                rhs_lanes(0.0, Y, K[s], L, masses, d, measure, prof, par, n_tan, W)
     return K[11, 0]
 
 
 @kernel
-def _stage_loop(y, reps, h, masses, d, measure, prof, par, n_tan):
-    """reps times a step's stages and error norm, from one state."""
-    nf = y.size
-    K, yt, ynew = np.zeros((16, nf)), np.zeros(nf), np.zeros(nf)
-    rhs(0.0, y, K[0], masses, d, measure, prof, par, n_tan)
+def _stage_loop(Y, reps, h, L, masses, d, measure, prof, par, n_tan):
+    """reps times a step's stages and error norms of L lanes, from one state."""
+    nf = Y.size // L
+    K, YT, YN = np.zeros((16, Y.size)), np.zeros(Y.size), np.zeros(Y.size)
+    W, S = np.zeros(workspace_size(L, nf)), np.zeros(2 * Y.size)
+    H, err = np.full(L, h), np.zeros(2 * L)
+    HH = np.full(Y.size, h)
+    if L == 1:
+        rhs(0.0, Y, K[0], masses, d, measure, prof, par, n_tan)
+    else:
+        rhs_lanes(0.0, Y, K[0], L, masses, d, measure, prof, par, n_tan, W)
     acc = 0.0
     for _ in range(reps):
-        stages(masses, d, measure, prof, par, n_tan, nf, 0.0, y, h, K, yt, ynew)
-        acc += error_norm(y, ynew, K, h, 2 * masses.size * d, 1e-12, 1e-12)
+        stages(masses, d, measure, prof, par, n_tan, L, Y, HH, K, YT, YN, W)
+        error_norms(Y, YN, K, L, 2 * masses.size * d, 1e-12, 1e-12, H, err, S)
+        acc += err[0]
     return acc
 
 
-def step_costs(t_final=2000.0, repeats=7, out=print):
-    """Where a DOP853 step's time goes, on the paper's two orbits: the right-hand-side
-    evaluations (12 per accepted step), the stage combinations with the error norm (the same
-    11 evaluations subtracted), and the rest of `integrate`'s loop (step control, finiteness
-    checks, tangent renormalisation, MEGNO), as shares of `integrate`'s time per attempted
-    step; compiled loops over survey's own kernels at the orbit's start, best of `repeats`
-    interleaved runs."""
+def step_costs(t_final=2000.0, repeats=5, lanes=(1, 32), out=print):
+    """Where a DOP853 step's time goes, per orbit-step, on the paper's two orbits, for one
+    orbit alone and for lanes of copies of it: the right-hand-side evaluations (12 per
+    accepted step), the stage combinations with the error norm (the same 11 evaluations
+    subtracted), and the rest of the driver (step control, events, samples, tangent
+    renormalisation, MEGNO), as shares of `integrate_batch`'s time; compiled loops over
+    survey's own kernels at the orbit's start, best of `repeats` interleaved runs."""
     system = System.create()
     rows = []
     for label, family, params in CASES:
         y0 = initial_state(system, family, **params)
         for n_tan in (0, 1):
             w = deviation_vectors(system, y0, n_tan, seed=0) if n_tan else None
-            y = np.concatenate([y0, *w]) if n_tan else y0.copy()
-            res = integrate(system, y0, t_final, tangents=w, megno=n_tan > 0)
-            steps = res.n_steps + res.n_rejected
-            h = t_final / res.n_steps
+            one = integrate(system, y0, t_final, tangents=w, megno=n_tan > 0)
+            steps = one.n_steps + one.n_rejected
+            h = t_final / one.n_steps
             args = system.kernel_args
-            _rhs_loop(y, 1, *args, n_tan)
-            _stage_loop(y, 1, h, *args, n_tan)
-            # interleaved, so a slow spell of the machine does not fall on one of the three
-            best = [math.inf] * 3
-            for _ in range(repeats):
-                for k, go in enumerate((
-                        lambda: _rhs_loop(y, steps, *args, n_tan),
-                        lambda: _stage_loop(y, steps, h, *args, n_tan),
-                        lambda: integrate(system, y0, t_final, tangents=w, megno=n_tan > 0))):
-                    best[k] = min(best[k], _best_time(go, 1)[0])
-            t_rhs, t_stage, t_all = best
-            rows.append((label, n_tan, steps, t_all, t_rhs, t_stage - t_rhs * 11 / 12))
+            for L in lanes:
+                y = np.concatenate([y0, *w]) if n_tan else y0.copy()
+                Y = np.repeat(y[:, None], L, 1).ravel()
+                starts = np.repeat(y0[None], L, 0)
+                tangents = np.repeat(w[None], L, 0) if n_tan else None
+                _rhs_loop(Y, 1, L, *args, n_tan)
+                _stage_loop(Y, 1, h, L, *args, n_tan)
+                reps = max(1, steps // L)
+                # interleaved, so a slow spell of the machine does not fall on one of three
+                best = [math.inf] * 3
+                for _ in range(repeats):
+                    for k, go in enumerate((
+                            lambda: _rhs_loop(Y, reps, L, *args, n_tan),
+                            lambda: _stage_loop(Y, reps, h, L, *args, n_tan),
+                            lambda: integrate_batch(system, starts, t_final, tangents=tangents,
+                                                    megno=n_tan > 0, lanes=L))):
+                        best[k] = min(best[k], _best_time(go, 1)[0])
+                t_rhs, t_stage = best[0] * steps / (reps * L), best[1] * steps / (reps * L)
+                t_all = best[2] / L
+                rows.append((label, n_tan, L, steps, t_all, t_rhs, t_stage - t_rhs * 11 / 12))
     out("")
-    out(f"Where a step goes (t = {t_final:g}, tol 1e-12; per attempted step, ns; shares of "
-        f"integrate's time)")
-    out(f"{'case':26s} {'tangents':>8s} {'steps':>7s} {'step ns':>8s} {'12 rhs':>7s} "
-        f"{'stages+norm':>12s} {'rest':>6s}")
-    for label, n_tan, steps, t_all, t_rhs, t_comb in rows:
+    out(f"Where a step goes (t = {t_final:g}, tol 1e-12; per orbit-step, ns; shares of "
+        "integrate_batch's time; L orbits as SIMD lanes)")
+    out(f"{'case':26s} {'tangents':>8s} {'lanes':>5s} {'steps':>7s} {'step ns':>8s} "
+        f"{'12 rhs':>7s} {'stages+norm':>12s} {'rest':>6s}")
+    for label, n_tan, L, steps, t_all, t_rhs, t_comb in rows:
         ns = 1e9 / steps
         rest = t_all - t_rhs - t_comb
-        out(f"{label:26s} {n_tan:8d} {steps:7d} {t_all * ns:8.0f} {t_rhs / t_all:7.0%} "
-            f"{t_comb / t_all:12.0%} {rest / t_all:6.0%}")
+        out(f"{label:26s} {n_tan:8d} {L:5d} {steps:7d} {t_all * ns:8.0f} "
+            f"{t_rhs / t_all:7.0%} {t_comb / t_all:12.0%} {rest / t_all:6.0%}")
     return rows
 
 

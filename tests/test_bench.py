@@ -11,12 +11,15 @@ def test_bench_parts_run_and_print_their_ratios(tmp_path):
     bench.fixed_costs(folder=str(tmp_path), repeats=1, out=lines.append)
     rows = bench.interaction_terms(t_final=2.0, repeats=1, out=lines.append)
     assert all(r["same"] for r in rows)     # the two paths give the same orbit, bit for bit
-    steps = bench.step_costs(t_final=2.0, repeats=1, out=lines.append)
-    assert [(r[0], r[1]) for r in steps] == [(c[0], k) for c in bench.CASES for k in (0, 1)]
-    assert all(r[2] > 0 and r[4] > 0 for r in steps)      # steps taken, RHS time measured
+    steps = bench.step_costs(t_final=2.0, repeats=1, lanes=(1, 16), out=lines.append)
+    assert [(r[0], r[1], r[2]) for r in steps] == [(c[0], k, L) for c in bench.CASES
+                                                   for k in (0, 1) for L in (1, 16)]
+    assert all(r[3] > 0 and r[5] > 0 for r in steps)      # steps taken, RHS time measured
     text = "\n".join(lines)
-    assert "survey end to end" in text and "cluster" in text and "archive" in text
-    assert "heyoka is not installed" in text or "survey / heyoka =" in text
+    assert "compute phase" in text and "cluster" in text and "archive" in text
+    assert "python -m survey run" in text and "the same with [tori]" in text
+    assert "heyoka is not installed" in text or ("survey / heyoka: compute" in text and
+                                                 "largest energy error" in text)
     assert text.count("x\n") >= 1 and "Default survey cell" in text
     assert "Where a step goes" in text and "stages+norm" in text
     assert "general/own" in text and "Fixed costs" in text and "shutdown" in text and "python -m survey run" in text

@@ -1,16 +1,23 @@
-"""The driver: an orbit (and its tangent vectors) stepped by DOP853 from t0 to t1 with
-events, samples, periodic renormalisation and the MEGNO/FLI/WBA accumulators, compiled; and
-`integrate`, its validating Python wrapper returning a typed `Outcome`.
+"""The driver: orbits (each with its tangent vectors) stepped by DOP853 as SIMD lanes, with
+events, samples, periodic renormalisation and the MEGNO/FLI/WBA accumulators, compiled;
+`integrate_batch`, its validating Python wrapper for many orbits, and `integrate` for one,
+each returning typed outcomes.
 
-The kernel `dop853` is one compiled function for every system, potential and event set
-(all chosen by integer codes and parameter arrays), so it is cached on disk and callable
-from other compiled loops. Nothing raises inside it: failures come back as a `Status`.
+Lanes: L orbits advance together in flat variable-major state (component i of lane k at
+Y[i * L + k]), so the stage combinations, error norms, dense output and -- for three
+bodies in the plane -- the right-hand side are loops over lanes that the compiler turns
+into SIMD instructions. Each lane has its own time, step, error norm, accept/reject,
+budget, status, events, samples and accumulators; every decision is taken lane by lane
+with the arithmetic of one orbit, so a lane gives the bits one orbit alone gives (L = 1),
+whatever the lane count and whatever the other lanes hold (tests/numerics/test_lanes.py).
+A lane whose orbit ends takes the next start of the batch: no lane waits for the slowest.
 
-Error control covers the first `n_err` components (the orbit by default; the tangent
-vectors optionally). Dense output is built only for steps that need it: a step holding
-requested output times, and every step while events are watched -- then for the orbit
-alone (3 extra evaluations of the orbit's right-hand side, not of the tangent dynamics),
-unless the full state is asked for.
+The kernel is one compiled function for every system, potential and event set (all chosen
+by integer codes and parameter arrays), so it is cached on disk. Nothing raises inside it:
+failures come back as a `Status`. Error control covers the first `n_err` components of
+each orbit (the orbit by default; the tangent vectors optionally). Dense output is built
+only for steps that need it -- a step holding requested output times, and every step while
+events are watched -- for all lanes at once when any lane needs it.
 """
 from __future__ import annotations
 
@@ -23,56 +30,92 @@ from numba import objmode
 
 from ..catalog import defaults
 from ..catalog.status import Status
-from ..physics.jit import helper, kernel
-from ..physics.system import System, rhs
-from .dop853 import (
-    BETA,
-    EPS,
-    RTOL_MIN,
-    dense_eval,
-    dense_prepare,
-    error_norm,
-    norm_block,
-    stages,
-)
-from .events import (
-    Crossings,
-    Event,
-    encode_events,
-    event_slope,
-    event_value,
-    may_cross,
-    scan_events,
-)
+from ..physics.jit import helper, kernel, leaf
+from ..physics.system import SIMD_LANES, System, rhs, rhs_lanes, workspace_size
+from .dop853 import (BETA, EPS, RTOL_MIN, dense_eval, dense_prepare, error_norms,
+                     norm_block, stages)
+from .events import (Crossings, Event, encode_events, event_slope, event_value, may_cross,
+                     scan_events)
 
 # the kernel returns plain integers (numba freezes module globals as constants)
 OK_, EVENT_, COLLISION_, STEP_LIMIT_, NONFINITE_, TIME_LIMIT_ = (
     int(s) for s in (Status.OK, Status.EVENT, Status.COLLISION, Status.STEP_LIMIT,
                      Status.NONFINITE, Status.TIME_LIMIT))
+RUNNING = -1
+# what a job records besides its end state: crossings of the watched events, samples at
+# t_eval, orbit samples at t_fine
+EVENTS, EVAL, FINE = 1, 2, 4
 
 
 class RawOutcome(NamedTuple):
-    """What the compiled driver returns (`integrate` turns it into an Outcome)."""
+    """What the compiled driver returns, one row per job (`integrate_batch` turns it into
+    Outcomes). Rows of the event, sample and fine arrays belong to the jobs that record
+    them, in job order."""
 
-    status: int
-    t: float                  # time reached
-    y: np.ndarray             # full state at t
-    counts: np.ndarray        # accepted steps, rejected steps, rhs evaluations, events found
-    h_range: np.ndarray       # smallest and largest accepted step
-    ev_index: np.ndarray      # recorded crossings: event index, time, orbit state
+    status: np.ndarray        # (M,)
+    t: np.ndarray             # (M,) time reached
+    y: np.ndarray             # (M, nf) full state at t
+    counts: np.ndarray        # (M, 4) accepted steps, rejected, rhs evaluations, events found
+    h_range: np.ndarray       # (M, 2) smallest and largest accepted step
+    ev_index: np.ndarray      # (Me, max_events) recorded crossings: event, time, orbit state
     ev_t: np.ndarray
     ev_y: np.ndarray
-    samples: np.ndarray       # states at t_eval (first n_eval components)
-    sample_log: np.ndarray    # accumulated log growth of each tangent vector at t_eval
-    log_growth: np.ndarray    # accumulated log growth at t (the vectors are rescaled)
-    max_log: np.ndarray       # largest ln(|w|/|w0|) seen at step ends (the FLI)
-    fine: np.ndarray          # orbit states at t_fine
-    wba: np.ndarray           # (sum of g dL, sum of g dt) over the steps, first vector: their
-    #                           ratio is the weighted Birkhoff average of the growth rate
-    #                           (g(s) = exp(-1/(s(1-s))) at the step's mid-time s;
-    #                           Sander & Meiss 2025)
-    megno_sums: np.ndarray    # (s L - int L, int Y) at t: their ratios to s are Y/2 and <Y>
-    sample_megno: np.ndarray  # the same at t_eval
+    samples: np.ndarray       # (Ms, T, n_eval) states at t_eval
+    sample_log: np.ndarray    # (Ms, T, n_tan) accumulated log growth at t_eval
+    log_growth: np.ndarray    # (M, n_tan) accumulated log growth at t (vectors rescaled)
+    max_log: np.ndarray       # (M, n_tan) largest ln(|w|/|w0|) at step ends (the FLI)
+    fine: np.ndarray          # (Mf, Tf, n) orbit states at t_fine
+    wba: np.ndarray           # (M, 2) (sum of g dL, sum of g dt) over the steps, first
+    #                           vector: their ratio is the weighted Birkhoff average of the
+    #                           growth rate (g(s) = exp(-1/(s(1-s))) at the step's mid-time
+    #                           s; Sander & Meiss 2025)
+    megno_sums: np.ndarray    # (M, 2) (s L - int L, int Y) at t: ratios to s are Y/2, <Y>
+    sample_megno: np.ndarray  # (Ms, T, 2) the same at t_eval
+
+
+class Lanes(NamedTuple):
+    """The driver's per-lane state: variable-major buffers of L orbits, and one entry (or
+    row) per lane of every scalar the one-orbit driver keeps."""
+
+    Y: np.ndarray             # (nf L,) states
+    K: np.ndarray             # (16, nf L) stage derivatives
+    YT: np.ndarray            # (nf L,) stage states
+    YN: np.ndarray            # (nf L,) candidate states
+    F: np.ndarray             # (7, nf L) dense-output coefficients
+    HH: np.ndarray            # (nf L,) each lane's step at each of its components
+    W: np.ndarray             # rhs_lanes workspace
+    S: np.ndarray             # (2 nf L,) scratch
+    err: np.ndarray           # (2 L,) error norms
+    NW: np.ndarray            # (n_tan L,) tangent vectors' norms; (L,) finiteness
+    taken: np.ndarray         # (L,) 1.0 where the lane takes its new state
+    job: np.ndarray           # (L,) the job a lane runs, -1: idle
+    t: np.ndarray
+    h: np.ndarray
+    h_max: np.ndarray
+    err_old: np.ndarray
+    flags: np.ndarray         # (L, 4) rejected last, nonfinite last, last step, tried
+    i_eval: np.ndarray        # (L,) next t_eval / t_fine sample
+    i_fine: np.ndarray
+    t_next_renorm: np.ndarray
+    acc: np.ndarray           # (L, 4) MEGNO: L at the last step end, int L, Y; clock start
+    g_old: np.ndarray         # (L, m) watched events at the last step end, and slopes
+    s_old: np.ndarray
+    g_new: np.ndarray         # (m,) scratch of one lane
+    s_new: np.ndarray
+    todo: np.ndarray
+    found_x: np.ndarray
+    found_e: np.ndarray
+    yd: np.ndarray            # (nf,) scratch of one lane
+    y1: np.ndarray            # (nf,) contiguous copy of one lane (starts)
+    k1: np.ndarray            # (2, nf)
+
+
+@helper
+def _finite(x):
+    for a in range(x.size):
+        if not math.isfinite(x[a]):
+            return False
+    return True
 
 
 @helper
@@ -101,21 +144,448 @@ def _initial_step(masses, d, measure, prof, par, n_tan, nf, n_err, t, y, K, yt, 
     return min(100.0 * h, h1, h_max)
 
 
-@kernel
-def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, n_err,
-           max_steps, h0, h_max, h_min, events, max_events, n_sub, t_eval, n_eval, renorm_dt,
-           time_limit, t_fine):
-    """Integrate the orbit (+ n_tan tangent vectors) from t0 to t1.
+@helper
+def _finish(k, ln, out, status, rows):
+    """Lane k's job ends with `status`: its time and state into the outputs; the lane
+    becomes idle."""
+    j = ln.job[k]
+    L = ln.job.size
+    out.status[j] = status
+    out.t[j] = ln.t[k]
+    for i in range(out.y.shape[1]):
+        out.y[j, i] = ln.Y[i * L + k]
+    ln.job[k] = -1
 
-    events: (offsets, records, direction, terminal, guard, watch) arrays; a watched
-    event e records every crossing of g_e = 0 in its direction (+1 rising in time, -1
-    falling, 0 both) where its guard function (index, or -1) is > 0; n_sub sub-intervals per
-    step are scanned, so two crossings in one step are both found. t_eval: output times
-    (monotone in the direction of integration), sampled on the dense output for the first
-    n_eval components. t_fine: a second grid of output times for the orbit alone (its dense
-    output costs 3 orbit evaluations, not the tangents'): the time series the torus analysis
-    reads. Tangent vectors are rescaled to unit norm every renorm_dt (<= 0: every step),
-    their logs accumulated in log_growth, which starts at -ln|w(t0)|.
+
+@helper
+def _start(k, j, ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, n_err,
+           rtol, atol, h0, h_max, events, t_eval, n_eval, t_fine, renorm_dt, now):
+    """Job j into lane k: its start, first evaluation, samples at t0, events' first values
+    and first step. Returns False if the job ended at once (nonfinite start, zero span)."""
+    L = ln.job.size
+    nf = y0s.shape[1]
+    n = 2 * masses.size * d
+    eoff, ep, direc, terminal, guard, watch = events
+    y, K = ln.y1, ln.k1
+    ln.job[k] = j
+    ln.t[k] = t0
+    for i in range(nf):
+        y[i] = y0s[j, i]
+        ln.Y[i * L + k] = y[i]
+    out.h_range[j, 0] = np.inf
+    ln.acc[k, 0] = ln.acc[k, 1] = ln.acc[k, 2] = 0.0
+    ln.acc[k, 3] = now
+    ln.i_eval[k] = 0
+    ln.i_fine[k] = 0
+    direction = 1.0 if t1 >= t0 else -1.0
+    ln.t_next_renorm[k] = t0 + direction * renorm_dt
+    for f in range(4):
+        ln.flags[k, f] = 0
+    ln.err_old[k] = 1e-4
+    if not _finite(y):
+        _finish(k, ln, out, NONFINITE_, rows)
+        return False
+    for tt in range(n_tan):
+        out.log_growth[j, tt] = -math.log(norm_block(y, n * (1 + tt), n))
+    rhs(t0, y, K[0], masses, d, measure, prof, par, n_tan)
+    out.counts[j, 2] += 1
+    for i in range(nf):
+        ln.K[0, i * L + k] = K[0, i]
+    if not _finite(K[0]):
+        _finish(k, ln, out, NONFINITE_, rows)
+        return False
+    r = rows[1, j]
+    if r >= 0:
+        while ln.i_eval[k] < t_eval.size and t_eval[ln.i_eval[k]] == t0:
+            for i in range(n_eval):
+                out.samples[r, ln.i_eval[k], i] = y[i]
+            for tt in range(n_tan):
+                out.sample_log[r, ln.i_eval[k], tt] = out.log_growth[j, tt]
+            ln.i_eval[k] += 1
+    r = rows[2, j]
+    if r >= 0:
+        while ln.i_fine[k] < t_fine.size and t_fine[ln.i_fine[k]] == t0:
+            for i in range(n):
+                out.fine[r, ln.i_fine[k], i] = y[i]
+            ln.i_fine[k] += 1
+    if rows[0, j] >= 0:
+        for e in range(eoff.size - 1):
+            if watch[e]:
+                ln.g_old[k, e] = event_value(ep, eoff[e], y, masses, d)
+                ln.s_old[k, e] = event_slope(ep, eoff[e], y, K[0], n, ln.yd, masses, d, 1.0)
+    span = abs(t1 - t0)
+    if span == 0.0:
+        _finish(k, ln, out, OK_, rows)
+        return False
+    ln.h_max[k] = min(h_max, span) if h_max > 0.0 else span
+    if h0 > 0.0:
+        h = min(h0, ln.h_max[k])
+    else:
+        h = _initial_step(masses, d, measure, prof, par, n_tan, nf, n_err, t0, y, K, ln.YT,
+                          direction, ln.h_max[k], rtol, atol)
+        out.counts[j, 2] += 1
+    ln.h[k] = h * direction
+    return True
+
+
+@helper
+def _record(k, ln, out, rows, t0, t1, masses, d, megno, events, max_events, n_sub, t_eval,
+            n_eval, t_fine):
+    """What lane k's accepted step [t, t + h] records, before the lane takes its new state
+    (its dense output prepared if it needs one): counters, event crossings, samples.
+    Returns EVENT_ at a terminal event (the state and time then the event's), else
+    RUNNING."""
+    L = ln.job.size
+    nf = ln.Y.size // L
+    n = 2 * masses.size * d
+    j = ln.job[k]
+    y, ynew = ln.Y[k::L], ln.YN[k::L]
+    F = ln.F[:, k::L]
+    yd = ln.yd
+    t, h = ln.t[k], ln.h[k]
+    last = ln.flags[k, 2] == 1
+    direction = 1.0 if t1 >= t0 else -1.0
+    eoff, ep, direc, terminal, guard, watch = events
+    m = eoff.size - 1
+    counts = out.counts[j]
+    counts[0] += 1
+    out.h_range[j, 0] = min(out.h_range[j, 0], abs(h))
+    out.h_range[j, 1] = max(out.h_range[j, 1], abs(h))
+    t_new = t1 if last else t + h
+    nd_ready = 0
+    x_stop = 1.0
+    terminal_hit = False
+    re = rows[0, j]
+    if m > 0 and re >= 0:
+        # screen every watched event on a cubic model of g(t); scan only steps whose model
+        # may cross zero, on the 7th-order dense output
+        scan = False
+        for e in range(m):
+            if watch[e]:
+                ln.g_new[e] = event_value(ep, eoff[e], ynew, masses, d)
+                ln.s_new[e] = event_slope(ep, eoff[e], ynew, ln.K[12, k::L], n, yd, masses,
+                                          d, h)
+                ln.todo[e] = may_cross(ln.g_old[k, e], ln.s_old[k, e], ln.g_new[e],
+                                       ln.s_new[e], h)
+                scan = scan or ln.todo[e] > 0
+        n_found = 0
+        if scan:
+            counts[2] += 3
+            nd_ready = n
+            xtol = 4.0 * EPS * max(abs(t), abs(t_new)) / abs(h)
+            for e in range(m):
+                if ln.todo[e]:
+                    g0 = eoff[guard[e]] if guard[e] >= 0 else -1
+                    n_found = scan_events(ep, eoff[e], ln.g_old[k, e], ln.g_new[e], direc[e],
+                                          g0, n_sub if ln.todo[e] == 2 else 1, h, xtol, F, y,
+                                          n, yd, masses, d, ln.found_x, ln.found_e, e,
+                                          n_found)
+        for e in range(m):
+            ln.g_old[k, e] = ln.g_new[e]
+            ln.s_old[k, e] = ln.s_new[e]
+        for p in range(n_found):
+            xr = ln.found_x[p]
+            if counts[3] < max_events:
+                dense_eval(F, y, xr, n, yd)
+                out.ev_index[re, counts[3]] = ln.found_e[p]
+                out.ev_t[re, counts[3]] = t + xr * h
+                for i in range(n):
+                    out.ev_y[re, counts[3], i] = yd[i]
+            counts[3] += 1
+            if terminal[ln.found_e[p]]:
+                terminal_hit = True
+                x_stop = xr
+                break
+    t_stop = t + x_stop * h if terminal_hit else t_new
+    need = nf if terminal_hit else 0
+    rs, rf = rows[1, j], rows[2, j]
+    i_eval, i_fine = ln.i_eval[k], ln.i_fine[k]
+    if rs >= 0 and i_eval < t_eval.size and direction * (t_eval[i_eval] - t_stop) <= 0.0:
+        need = max(need, n_eval)
+    if rf >= 0 and i_fine < t_fine.size and direction * (t_fine[i_fine] - t_stop) <= 0.0:
+        need = max(need, n)
+    if need > nd_ready:
+        counts[2] += 3
+    log_growth = out.log_growth[j]
+    L_prev, int_L, Y_prev = ln.acc[k, 0], ln.acc[k, 1], ln.acc[k, 2]
+    megno_sums = out.megno_sums[j]
+    while rs >= 0 and i_eval < t_eval.size and direction * (t_eval[i_eval] - t_stop) <= 0.0:
+        sample = out.samples[rs, i_eval]
+        if t_eval[i_eval] == t_new:
+            for i in range(n_eval):
+                sample[i] = ynew[i]
+        else:
+            dense_eval(F, y, (t_eval[i_eval] - t) / h, n_eval, yd)
+            for i in range(n_eval):
+                sample[i] = yd[i]
+        for tt in range(log_growth.size):
+            out.sample_log[rs, i_eval, tt] = log_growth[tt]
+        if megno and n_eval >= 2 * n:
+            part = t_eval[i_eval] - t
+            L_at = log_growth[0] + math.log(norm_block(sample, n, n))
+            elapsed = t_eval[i_eval] - t0
+            int_at = int_L + 0.5 * part * (L_prev + L_at)
+            Y_at = 2.0 * (elapsed * L_at - int_at) / elapsed if elapsed != 0.0 else 0.0
+            out.sample_megno[rs, i_eval, 0] = elapsed * L_at - int_at
+            out.sample_megno[rs, i_eval, 1] = megno_sums[1] + 0.5 * part * (Y_prev + Y_at)
+        i_eval += 1
+    while rf >= 0 and i_fine < t_fine.size and direction * (t_fine[i_fine] - t_stop) <= 0.0:
+        if t_fine[i_fine] == t_new:
+            for i in range(n):
+                out.fine[rf, i_fine, i] = ynew[i]
+        else:
+            dense_eval(F, y, (t_fine[i_fine] - t) / h, n, yd)
+            for i in range(n):
+                out.fine[rf, i_fine, i] = yd[i]
+        i_fine += 1
+    ln.i_eval[k], ln.i_fine[k] = i_eval, i_fine
+    if terminal_hit:
+        dense_eval(F, y, x_stop, nf, yd)
+        for a in range(nf):
+            y[a] = yd[a]
+        ln.t[k] = t_stop
+        return EVENT_
+    return RUNNING
+
+
+@helper
+def _advance(k, ln, out, t0, t1, n, n_tan, megno, renorm_dt, NW):
+    """Lane k after its accepted step (its state already the new one): the time, and its
+    tangent vectors' growth (FLI), renormalisation, MEGNO and WBA, from their norms NW.
+    Returns OK_ if the job reached t1, else RUNNING."""
+    L = ln.job.size
+    j = ln.job[k]
+    last = ln.flags[k, 2] == 1
+    direction = 1.0 if t1 >= t0 else -1.0
+    t_old = ln.t[k]
+    t = t1 if last else t_old + ln.h[k]
+    ln.t[k] = t
+    log_growth = out.log_growth[j]
+    L_prev, int_L, Y_prev = ln.acc[k, 0], ln.acc[k, 1], ln.acc[k, 2]
+    megno_sums = out.megno_sums[j]
+    # ---- tangent vectors: track growth (FLI) and renormalise when due
+    if n_tan > 0:
+        due = direction * (t - ln.t_next_renorm[k]) >= 0.0
+        if due:
+            ln.t_next_renorm[k] = t + direction * renorm_dt
+        for tt in range(n_tan):
+            off = n * (1 + tt)
+            wn = NW[tt * L + k]
+            Lw = log_growth[tt] + math.log(wn)
+            out.max_log[j, tt] = max(out.max_log[j, tt], Lw)
+            if tt == 0:
+                x = (0.5 * (t_old + t) - t0) / (t1 - t0)
+                g = math.exp(-1.0 / (x * (1.0 - x))) if 0.0 < x < 1.0 else 0.0
+                out.wba[j, 0] += g * (Lw - L_prev)
+                out.wba[j, 1] += g * (t - t_old)
+                if megno:
+                    int_L += 0.5 * (t - t_old) * (L_prev + Lw)
+                    elapsed = t - t0
+                    Y_new = 2.0 * (elapsed * Lw - int_L) / elapsed
+                    megno_sums[0] = elapsed * Lw - int_L
+                    megno_sums[1] += 0.5 * (t - t_old) * (Y_prev + Y_new)
+                    Y_prev = Y_new
+                L_prev = Lw
+            if due or wn > 1e100 or wn < 1e-100:
+                inv = 1.0 / wn
+                y, K0 = ln.Y[k::L], ln.K[0, k::L]
+                for a in range(off, off + n):
+                    y[a] *= inv
+                    K0[a] *= inv
+                log_growth[tt] += math.log(wn)
+    ln.acc[k, 0], ln.acc[k, 1], ln.acc[k, 2] = L_prev, int_L, Y_prev
+    return OK_ if last else RUNNING
+
+
+@leaf
+def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol,
+         n_err, max_steps, h0, h_max, h_min, events, max_events, n_sub, t_eval, n_eval,
+         renorm_dt, time_limit, t_fine, next_job, iterations, now):
+    """At most `iterations` steps of every lane (the kernel checks the clock between
+    calls); returns the next job to start, or -1 when every job has ended."""
+    L = ln.job.size
+    nf = y0s.shape[1]
+    M = y0s.shape[0]
+    direction = 1.0 if t1 >= t0 else -1.0
+    for _ in range(iterations):
+        # ---- lanes without a job take the next one; lanes whose job must end, end it
+        active = 0
+        for k in range(L):
+            while ln.job[k] < 0 and next_job < M:
+                next_job += 1
+                _start(k, next_job - 1, ln, out, y0s, rows, t0, t1, masses, d, measure,
+                       prof, par, n_tan, n_err, rtol, atol, h0, h_max, events, t_eval,
+                       n_eval, t_fine, renorm_dt, now)
+            j = ln.job[k]
+            if j < 0:
+                ln.h[k] = 0.0
+                continue
+            counts = out.counts[j]
+            if counts[0] + counts[1] >= max_steps:
+                _finish(k, ln, out, STEP_LIMIT_, rows)
+            elif time_limit > 0.0 and now - ln.acc[k, 3] > time_limit:
+                _finish(k, ln, out, TIME_LIMIT_, rows)
+            elif not (abs(ln.h[k]) > max(h_min, 10.0 * EPS * abs(ln.t[k]), 1e-300)):
+                _finish(k, ln, out, NONFINITE_ if ln.flags[k, 1] else COLLISION_, rows)
+            if ln.job[k] < 0:          # ended now: take the next job at the next round
+                ln.h[k] = 0.0
+                continue
+            active += 1
+            last = direction * (ln.t[k] + ln.h[k] - t1) >= 0.0
+            ln.flags[k, 2] = 1 if last else 0
+            if last:
+                ln.h[k] = t1 - ln.t[k]
+        if active == 0:
+            if next_job >= M:
+                return -1
+            continue
+        _spread(ln.h, ln.HH, L, nf)
+        # ---- one attempt of every lane's step
+        stages(masses, d, measure, prof, par, n_tan, L, ln.Y, ln.HH, ln.K, ln.YT, ln.YN,
+               ln.W)
+        error_norms(ln.Y, ln.YN, ln.K, L, n_err, rtol, atol, ln.h, ln.err, ln.S)
+        rhs_lanes(0.0, ln.YN, ln.K[12], L, masses, d, measure, prof, par, n_tan, ln.W)
+        _finite_lanes(ln.YN, ln.K[12], L, nf, ln.YT, ln.NW)
+        dense = False
+        for k in range(L):
+            j = ln.job[k]
+            ln.flags[k, 3] = 0
+            if j < 0:
+                continue
+            counts = out.counts[j]
+            counts[2] += 11
+            err = ln.err[k]
+            ok = math.isfinite(err)
+            if ok and err <= 1.0:
+                counts[2] += 1
+                ok = math.isfinite(ln.NW[k])
+            if not ok:
+                counts[1] += 1
+                ln.h[k] *= 0.25
+                ln.flags[k, 0] = 1
+                ln.flags[k, 1] = 1
+                continue
+            ln.flags[k, 1] = 0
+            if err > 1.0:
+                counts[1] += 1
+                ln.h[k] *= max(1.0 / 3.0, 0.9 * err ** (-1.0 / 8.0))
+                ln.flags[k, 0] = 1
+                continue
+            ln.flags[k, 3] = 1          # accepted
+            dense = dense or _needs_dense(k, ln, rows, t1, direction, events, t_eval,
+                                          t_fine)
+        if dense:
+            dense_prepare(masses, d, measure, prof, par, n_tan, L, nf, True, ln.Y, ln.YN,
+                          ln.HH, ln.K, ln.YT, ln.F, ln.W)
+        for k in range(L):
+            if ln.flags[k, 3] and _record(k, ln, out, rows, t0, t1, masses, d, megno,
+                                          events, max_events, n_sub, t_eval, n_eval,
+                                          t_fine) == EVENT_:
+                _finish(k, ln, out, EVENT_, rows)
+                ln.flags[k, 3] = 0
+            ln.taken[k] = ln.flags[k, 3]
+        # ---- accepted lanes take their new states, then their tangent vectors' norms
+        _take(ln.Y, ln.YN, ln.K[0], ln.K[12], ln.taken, ln.HH, L, nf)
+        _tangent_norms(ln.Y, L, 2 * masses.size * d, n_tan, ln.YT, ln.NW)
+        for k in range(L):
+            if not ln.flags[k, 3]:
+                continue
+            if _advance(k, ln, out, t0, t1, 2 * masses.size * d, n_tan, megno, renorm_dt,
+                        ln.NW) == OK_:
+                _finish(k, ln, out, OK_, rows)
+                continue
+            err = ln.err[k]
+            fac = 0.9 * max(err, 1e-10) ** (-1.0 / 8.0 + 0.2 * BETA) * ln.err_old[k] ** BETA
+            ln.err_old[k] = max(err, 1e-4)
+            fac = min(6.0, max(1.0 / 3.0, fac))
+            if ln.flags[k, 0]:
+                fac = min(fac, 1.0)
+            ln.flags[k, 0] = 0
+            ln.h[k] = direction * min(abs(ln.h[k]) * fac, ln.h_max[k])
+    return next_job
+
+
+# Work on every lane at once: flat loops over all components of all lanes, which the
+# compiler vectorises, then per-lane sums in the components' order (as one orbit sums).
+
+@leaf
+def _spread(h, HH, L, nf):
+    """Each lane's value h[k] at each of its components."""
+    for k in range(L):
+        for i in range(nf):
+            HH[i * L + k] = h[k]
+
+
+@leaf
+def _finite_lanes(Y, K, L, nf, scratch, out):
+    """out[k]: finite iff every component of lane k in Y and K is (x * 0 is NaN for inf and
+    NaN, and NaN survives the sum)."""
+    for j in range(nf * L):
+        scratch[j] = Y[j] * 0.0 + K[j] * 0.0
+    for k in range(L):
+        acc = 0.0
+        for i in range(nf):
+            acc += scratch[i * L + k]
+        out[k] = acc
+
+
+@leaf
+def _take(Y, YN, K0, K12, take, mask, L, nf):
+    """Lanes with take[k] != 0 adopt their new state YN and its derivative K12 (mask:
+    scratch)."""
+    _spread(take, mask, L, nf)
+    for j in range(nf * L):
+        if mask[j] != 0.0:
+            Y[j] = YN[j]
+            K0[j] = K12[j]
+
+
+@leaf
+def _tangent_norms(Y, L, n, n_tan, scratch, NW):
+    """NW[t * L + k]: the norm of lane k's tangent vector t, summed in its components' order
+    as numerics.dop853.norm_block does."""
+    for j in range(n * L, n * (1 + n_tan) * L):
+        scratch[j] = Y[j] * Y[j]
+    for t in range(n_tan):
+        for k in range(L):
+            s = 0.0
+            for i in range(n * (1 + t), n * (2 + t)):
+                s += scratch[i * L + k]
+            NW[t * L + k] = math.sqrt(s)
+
+
+@helper
+def _needs_dense(k, ln, rows, t1, direction, events, t_eval, t_fine):
+    """Whether lane k's accepted step needs the dense output: it watches events (then every
+    step is screened, and may be scanned), or holds a sample time."""
+    j = ln.job[k]
+    if rows[0, j] >= 0 and events[0].size > 1:
+        return True
+    t_new = t1 if ln.flags[k, 2] else ln.t[k] + ln.h[k]
+    i = ln.i_eval[k]
+    if rows[1, j] >= 0 and i < t_eval.size and direction * (t_eval[i] - t_new) <= 0.0:
+        return True
+    i = ln.i_fine[k]
+    return rows[2, j] >= 0 and i < t_fine.size and direction * (t_fine[i] - t_new) <= 0.0
+
+
+@kernel
+def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol,
+           n_err, max_steps, h0, h_max, h_min, events, max_events, n_sub, t_eval, n_eval,
+           renorm_dt, time_limit, t_fine, L):
+    """Integrate M orbits (+ n_tan tangent vectors each; starts y0s, shape (M, nf)) from t0
+    to t1 in L lanes.
+
+    rows: (3, M) the row of each job in the event, sample and fine outputs (-1: the job
+    does not record them). events: (offsets, records, direction, terminal, guard, watch)
+    arrays; a watched event e records every crossing of g_e = 0 in its direction (+1
+    rising in time, -1 falling, 0 both) where its guard function (index, or -1) is > 0;
+    n_sub sub-intervals per step are scanned, so two crossings in one step are both found.
+    t_eval: output times (monotone in the direction of integration), sampled on the dense
+    output for the first n_eval components. t_fine: a second grid of output times for the
+    orbit alone: the time series the torus analysis reads. Tangent vectors are rescaled to
+    unit norm every renorm_dt (<= 0: every step), their logs accumulated in log_growth,
+    which starts at -ln|w(t0)|. time_limit: wall-clock seconds per job (0: none).
 
     MEGNO (if megno, for the first tangent vector; Cincotta & Simo 2000): with
     L(t) = ln(|w(t)|/|w0|) and s = t - t0, Y(s) = (2/s) int_0^s u dL(u) and <Y> =
@@ -124,266 +594,49 @@ def dop853(y0, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol, 
     close approach spikes within a single step (the Hessian grows like a power of 1/r) and
     wrecks any quadrature of it. int L and int Y are trapezoid sums over the steps (and at
     output times, over the part of the step before them, with L from the dense output).
-
-    Returns a RawOutcome.
     """
+    M, nf = y0s.shape
     n = 2 * masses.size * d
-    nf = y0.size
-    direction = 1.0 if t1 >= t0 else -1.0
-    K = np.zeros((16, nf))
-    F = np.zeros((7, nf))
-    y = y0.copy()
-    yt = np.zeros(nf)
-    ynew = np.zeros(nf)
-    yd = np.zeros(nf)
-    counts = np.zeros(4, dtype=np.int64)
-    h_range = np.array([np.inf, 0.0])
-    ev_index = np.full(max_events, -1, dtype=np.int64)
-    ev_t = np.full(max_events, np.nan)
-    ev_y = np.full((max_events, n), np.nan)
-    n_ev_total = 0
-    samples = np.full((t_eval.size, n_eval), np.nan)
-    sample_log = np.full((t_eval.size, n_tan), np.nan)
-    fine = np.full((t_fine.size, n), np.nan)
-    wba = np.zeros(2)
-    megno_sums = np.zeros(2)
-    sample_megno = np.full((t_eval.size, 2), np.nan)
-    int_L = 0.0           # int_0^t L of the first tangent vector, to the last step end
-    Y_prev = 0.0          # Y at the last step end
-    log_growth = np.zeros(n_tan)
-    max_log = np.zeros(n_tan)
-    eoff, ep, direc, terminal, guard, watch = events
-    m = eoff.size - 1
-    g_old = np.zeros(m)
-    s_old = np.zeros(m)
-    g_new = np.zeros(m)
-    s_new = np.zeros(m)
-    todo = np.zeros(m, dtype=np.int64)
-    found_x = np.zeros(max(1, m * n_sub))
-    found_e = np.zeros(max(1, m * n_sub), dtype=np.int64)
-
-    t = t0
-    status = OK_
-    for a in range(nf):
-        if not math.isfinite(y[a]):
-            status = NONFINITE_
-    if status == OK_:
-        for tt in range(n_tan):
-            w0 = norm_block(y, n * (1 + tt), n)
-            log_growth[tt] = -math.log(w0)
-        rhs(t, y, K[0], masses, d, measure, prof, par, n_tan)
-        counts[2] += 1
-        for a in range(nf):
-            if not math.isfinite(K[0, a]):
-                status = NONFINITE_
-    i_eval = 0
-    i_fine = 0
-    if status == OK_:
-        while i_eval < t_eval.size and t_eval[i_eval] == t0:
-            samples[i_eval, :] = y[:n_eval]
-            sample_log[i_eval, :] = log_growth
-            i_eval += 1
-        while i_fine < t_fine.size and t_fine[i_fine] == t0:
-            fine[i_fine, :] = y[:n]
-            i_fine += 1
-        for e in range(m):
-            if watch[e]:
-                g_old[e] = event_value(ep, eoff[e], y, masses, d)
-                s_old[e] = event_slope(ep, eoff[e], y, K[0], n, yd, masses, d, 1.0)
-    L_prev = 0.0          # ln(|w|/|w0|) of the first tangent vector at the last step end
-    t_next_renorm = t0 + direction * renorm_dt
-    span = abs(t1 - t0) if status == OK_ else 0.0     # 0: nothing to step
-    h_max = min(h_max, span) if h_max > 0.0 else span
-    if span == 0.0:
-        h = 0.0
-    elif h0 > 0.0:
-        h = min(h0, h_max)
-    else:
-        h = _initial_step(masses, d, measure, prof, par, n_tan, nf, n_err, t, y, K, yt,
-                          direction, h_max, rtol, atol)
-        counts[2] += 1
-    h *= direction
-
-    rejected_last = False
-    nonfinite_last = False
-    err_old = 1e-4
+    m = events[0].size - 1
+    Me, Ms, Mf = rows[0].max() + 1, rows[1].max() + 1, rows[2].max() + 1
+    T, Tf = t_eval.size, t_fine.size
+    out = RawOutcome(
+        np.full(M, OK_, dtype=np.int64), np.full(M, t0), y0s.copy(),
+        np.zeros((M, 4), dtype=np.int64), np.zeros((M, 2)),
+        np.full((Me, max_events), -1, dtype=np.int64), np.full((Me, max_events), np.nan),
+        np.full((Me, max_events, n), np.nan), np.full((Ms, T, n_eval), np.nan),
+        np.full((Ms, T, n_tan), np.nan), np.zeros((M, n_tan)), np.zeros((M, n_tan)),
+        np.full((Mf, Tf, n), np.nan), np.zeros((M, 2)), np.zeros((M, 2)),
+        np.full((Ms, T, 2), np.nan))
+    ln = Lanes(
+        np.zeros(nf * L), np.zeros((16, nf * L)), np.zeros(nf * L), np.zeros(nf * L),
+        np.zeros((7, nf * L)), np.zeros(nf * L), np.zeros(workspace_size(L, nf)),
+        np.zeros(2 * nf * L),
+        np.zeros(2 * L), np.zeros(max(1, n_tan) * L), np.zeros(L),
+        np.full(L, -1, dtype=np.int64),
+        np.zeros(L), np.zeros(L),
+        np.zeros(L), np.zeros(L), np.zeros((L, 4), dtype=np.int64),
+        np.zeros(L, dtype=np.int64), np.zeros(L, dtype=np.int64), np.zeros(L),
+        np.zeros((L, 4)), np.zeros((L, max(m, 1))), np.zeros((L, max(m, 1))),
+        np.zeros(max(m, 1)), np.zeros(max(m, 1)), np.zeros(max(m, 1), dtype=np.int64),
+        np.zeros(max(1, m * n_sub)), np.zeros(max(1, m * n_sub), dtype=np.int64),
+        np.zeros(nf), np.zeros(nf), np.zeros((2, nf)))
+    now = 0.0
     if time_limit > 0.0:
-        with objmode(clock0="f8"):
-            clock0 = time.perf_counter()
-    while span > 0.0:
-        if counts[0] + counts[1] >= max_steps:
-            status = STEP_LIMIT_
-            break
-        if time_limit > 0.0 and (counts[0] + counts[1]) % 256 == 255:
-            with objmode(clock="f8"):
-                clock = time.perf_counter()
-            if clock - clock0 > time_limit:
-                status = TIME_LIMIT_
-                break
-        if not (abs(h) > max(h_min, 10.0 * EPS * abs(t), 1e-300)):
-            status = NONFINITE_ if nonfinite_last else COLLISION_
-            break
-        last = direction * (t + h - t1) >= 0.0
-        if last:
-            h = t1 - t
-        stages(masses, d, measure, prof, par, n_tan, nf, t, y, h, K, yt, ynew)
-        counts[2] += 11
-        err = error_norm(y, ynew, K, h, n_err, rtol, atol)
-        ok = math.isfinite(err)
-        if ok and err <= 1.0:
-            rhs(t + h, ynew, K[12], masses, d, measure, prof, par, n_tan)
-            counts[2] += 1
-            for a in range(nf):
-                if not (math.isfinite(ynew[a]) and math.isfinite(K[12, a])):
-                    ok = False
-                    break
-        if not ok:
-            counts[1] += 1
-            h *= 0.25
-            rejected_last = True
-            nonfinite_last = True
-            continue
-        nonfinite_last = False
-        if err > 1.0:
-            counts[1] += 1
-            h *= max(1.0 / 3.0, 0.9 * err ** (-1.0 / 8.0))
-            rejected_last = True
-            continue
-
-        # ---- accepted step [t, t + h]
-        counts[0] += 1
-        h_range[0] = min(h_range[0], abs(h))
-        h_range[1] = max(h_range[1], abs(h))
-        t_new = t1 if last else t + h
-        nd_ready = 0
-        x_stop = 1.0
-        terminal_hit = False
-        if m > 0:
-            # screen every watched event on a cubic model of g(t); scan only steps whose
-            # model may cross zero, on the 7th-order dense output
-            scan = False
-            for e in range(m):
-                if watch[e]:
-                    g_new[e] = event_value(ep, eoff[e], ynew, masses, d)
-                    s_new[e] = event_slope(ep, eoff[e], ynew, K[12], n, yd, masses, d, h)
-                    todo[e] = may_cross(g_old[e], s_old[e], g_new[e], s_new[e], h)
-                    scan = scan or todo[e] > 0
-            n_found = 0
-            if scan:
-                dense_prepare(masses, d, measure, prof, par, n_tan, n, False, t, y,
-                               ynew, h, K, yt, F)
-                counts[2] += 3
-                nd_ready = n
-                xtol = 4.0 * EPS * max(abs(t), abs(t_new)) / abs(h)
-                for e in range(m):
-                    if todo[e]:
-                        g0 = eoff[guard[e]] if guard[e] >= 0 else -1
-                        n_found = scan_events(ep, eoff[e], g_old[e], g_new[e], direc[e], g0,
-                                        n_sub if todo[e] == 2 else 1, h, xtol, F, y, n, yd,
-                                        masses, d, found_x, found_e, e, n_found)
-            for e in range(m):
-                g_old[e] = g_new[e]
-                s_old[e] = s_new[e]
-            for p in range(n_found):
-                xr = found_x[p]
-                if n_ev_total < max_events:
-                    dense_eval(F, y, xr, n, yd)
-                    ev_index[n_ev_total] = found_e[p]
-                    ev_t[n_ev_total] = t + xr * h
-                    ev_y[n_ev_total, :] = yd[:n]
-                n_ev_total += 1
-                if terminal[found_e[p]]:
-                    terminal_hit = True
-                    x_stop = xr
-                    break
-        t_stop = t + x_stop * h if terminal_hit else t_new
-        need = nf if terminal_hit else 0
-        if i_eval < t_eval.size and direction * (t_eval[i_eval] - t_stop) <= 0.0:
-            need = max(need, n_eval)
-        if i_fine < t_fine.size and direction * (t_fine[i_fine] - t_stop) <= 0.0:
-            need = max(need, n)
-        if need > nd_ready:
-            dense_prepare(masses, d, measure, prof, par, n_tan, need, need > n, t, y, ynew, h, K, yt, F)
-            counts[2] += 3
-            nd_ready = need
-        while i_eval < t_eval.size and direction * (t_eval[i_eval] - t_stop) <= 0.0:
-            if t_eval[i_eval] == t_new:
-                samples[i_eval, :] = ynew[:n_eval]
-            else:
-                dense_eval(F, y, (t_eval[i_eval] - t) / h, n_eval, yd)
-                samples[i_eval, :] = yd[:n_eval]
-            sample_log[i_eval, :] = log_growth
-            if megno and n_eval >= 2 * n:
-                part = t_eval[i_eval] - t
-                L_at = log_growth[0] + math.log(norm_block(samples[i_eval], n, n))
-                elapsed = t_eval[i_eval] - t0
-                int_at = int_L + 0.5 * part * (L_prev + L_at)
-                Y_at = 2.0 * (elapsed * L_at - int_at) / elapsed if elapsed != 0.0 else 0.0
-                sample_megno[i_eval, 0] = elapsed * L_at - int_at
-                sample_megno[i_eval, 1] = megno_sums[1] + 0.5 * part * (Y_prev + Y_at)
-            i_eval += 1
-        while i_fine < t_fine.size and direction * (t_fine[i_fine] - t_stop) <= 0.0:
-            if t_fine[i_fine] == t_new:
-                fine[i_fine, :] = ynew[:n]
-            else:
-                dense_eval(F, y, (t_fine[i_fine] - t) / h, n, yd)
-                fine[i_fine, :] = yd[:n]
-            i_fine += 1
-        if terminal_hit:
-            dense_eval(F, y, x_stop, nf, yd)
-            y[:] = yd
-            t = t_stop
-            status = EVENT_
-            break
-        t_old = t
-        t = t_new
-        for a in range(nf):
-            y[a] = ynew[a]
-            K[0, a] = K[12, a]
-
-        # ---- tangent vectors: track growth (FLI) and renormalise when due
-        if n_tan > 0:
-            due = direction * (t - t_next_renorm) >= 0.0
-            if due:
-                t_next_renorm = t + direction * renorm_dt
-            for tt in range(n_tan):
-                off = n * (1 + tt)
-                wn = norm_block(y, off, n)
-                L = log_growth[tt] + math.log(wn)
-                max_log[tt] = max(max_log[tt], L)
-                if tt == 0:
-                    x = (0.5 * (t_old + t) - t0) / (t1 - t0)
-                    g = math.exp(-1.0 / (x * (1.0 - x))) if 0.0 < x < 1.0 else 0.0
-                    wba[0] += g * (L - L_prev)
-                    wba[1] += g * (t - t_old)
-                    if megno:
-                        int_L += 0.5 * (t - t_old) * (L_prev + L)
-                        elapsed = t - t0
-                        Y_new = 2.0 * (elapsed * L - int_L) / elapsed
-                        megno_sums[0] = elapsed * L - int_L
-                        megno_sums[1] += 0.5 * (t - t_old) * (Y_prev + Y_new)
-                        Y_prev = Y_new
-                    L_prev = L
-                if due or wn > 1e100 or wn < 1e-100:
-                    inv = 1.0 / wn
-                    for a in range(off, off + n):
-                        y[a] *= inv
-                        K[0, a] *= inv
-                    log_growth[tt] += math.log(wn)
-        if last:
-            break
-
-        fac = 0.9 * max(err, 1e-10) ** (-1.0 / 8.0 + 0.2 * BETA) * err_old ** BETA
-        err_old = max(err, 1e-4)
-        fac = min(6.0, max(1.0 / 3.0, fac))
-        if rejected_last:
-            fac = min(fac, 1.0)
-        rejected_last = False
-        h = direction * min(abs(h) * fac, h_max)
-
-    counts[3] = n_ev_total
-    return RawOutcome(status, t, y, counts, h_range, ev_index, ev_t, ev_y, samples, sample_log,
-                      log_growth, max_log, fine, wba, megno_sums, sample_megno)
+        with objmode(now="f8"):
+            now = time.perf_counter()
+    next_job = 0
+    # with a time limit, back every 256 rounds to read the clock
+    rounds = 256 if time_limit > 0.0 else 1 << 62
+    while next_job >= 0:
+        next_job = _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan,
+                        megno, rtol, atol, n_err, max_steps, h0, h_max, h_min, events,
+                        max_events, n_sub, t_eval, n_eval, renorm_dt, time_limit, t_fine,
+                        next_job, rounds, now)
+        if time_limit > 0.0:
+            with objmode(now="f8"):
+                now = time.perf_counter()
+    return out
 
 
 class Outcome(NamedTuple):
@@ -424,71 +677,121 @@ class Outcome(NamedTuple):
             return self.tangents / norms * scale[:, None]
 
 
-def integrate(system: System, y0, t_span, *, tangents=None, megno=False, rtol=defaults.RTOL,
-              atol=defaults.ATOL, control_tangents=False, max_steps=defaults.MAX_STEPS,
-              first_step=0.0,
-              max_step=0.0, min_step=0.0, events: Sequence[Event] = (), max_events=100_000,
-              event_substeps=8, t_eval=None, sample_tangents=False, renorm_interval=1.0,
-              time_limit=0.0, t_fine=None):
-    """Integrate an orbit of `system` (and optionally tangent vectors) over t_span.
+def lanes_for(jobs: int) -> int:
+    """The lane count for a batch of jobs: SIMD loops need SIMD_LANES lanes or more (then up
+    to 32, where the gain levels off); fewer jobs run one after another in one lane, where
+    one state's values stay in registers."""
+    return min(32, jobs) if jobs >= SIMD_LANES else 1
 
-    y0: orbit state (n,). t_span: t_final or (t0, t_final); backwards if t_final < t0.
-    tangents: initial deviation vectors (n_tan, n). megno: also compute the MEGNO
-    accumulators of the first tangent vector. control_tangents: include tangent vectors in the
-    error norm. t_eval: output times sampled from the dense output (orbit only unless
-    sample_tangents). t_fine: output times of the orbit alone, usually many (the torus
-    analysis). time_limit: wall-clock seconds (0: none). Returns an `Outcome`.
+
+def integrate_batch(system: System, starts, t_span, *, tangents=None, record=None,
+                    megno=False, rtol=defaults.RTOL, atol=defaults.ATOL,
+                    control_tangents=False, max_steps=defaults.MAX_STEPS, first_step=0.0,
+                    max_step=0.0, min_step=0.0, events: Sequence[Event] = (),
+                    max_events=100_000, event_substeps=8, t_eval=None, sample_tangents=False,
+                    renorm_interval=1.0, time_limit=0.0, t_fine=None,
+                    lanes=None) -> list[Outcome]:
+    """Integrate many orbits of `system` (starts (M, n)), each with its tangent vectors
+    (tangents (M, n_tan, n)), over t_span, as SIMD lanes; one Outcome per orbit, each the
+    bits `integrate` gives that orbit alone.
+
+    record: per orbit, what it records besides its end (EVENTS | EVAL | FINE: crossings of
+    `events`, samples at t_eval, orbit samples at t_fine; default all); an orbit that does
+    not record one gets an empty array of it. lanes: the lane count (default `lanes_for`).
+    time_limit: wall-clock seconds per orbit (0: none). The rest as for `integrate`.
     """
-    y0 = np.asarray(y0, dtype=np.float64).ravel()
-    if y0.size != system.n:
-        raise ValueError(f"y0 must have {system.n} components (2 N d), got {y0.size}")
+    starts = np.atleast_2d(np.asarray(starts, dtype=np.float64))
+    M, n = starts.shape
+    if n != system.n:
+        raise ValueError(f"starts must have {system.n} components (2 N d), got {n}")
     t0, t1 = (0.0, float(t_span)) if np.ndim(t_span) == 0 else map(float, t_span)
     if not (rtol >= RTOL_MIN and atol > 0):
         raise ValueError(f"rtol must be >= {RTOL_MIN:.2g} (ten units of roundoff: double "
                          f"precision cannot honour less) and atol > 0, got {rtol!r}, {atol!r}")
     if not (math.isfinite(t0) and math.isfinite(t1)):
         raise ValueError(f"t_span must be finite, got {t_span!r}")
-    n = system.n
-    tan = np.zeros((0, n)) if tangents is None else np.asarray(tangents, float).reshape(-1, n)
-    n_tan = tan.shape[0]
-    if n_tan and not np.all(np.linalg.norm(tan, axis=1) > 0):
+    tan = np.zeros((M, 0, n)) if tangents is None else \
+        np.asarray(tangents, dtype=np.float64).reshape(M, -1, n)
+    n_tan = tan.shape[1]
+    if n_tan and not np.all(np.linalg.norm(tan, axis=2) > 0):
         raise ValueError("tangent vectors must be nonzero")
     megno = bool(megno and n_tan)
-    state = np.concatenate([y0, tan.ravel()])
+    y0s = np.concatenate([starts, tan.reshape(M, -1)], axis=1)
     t_eval = np.zeros(0) if t_eval is None else np.asarray(t_eval, dtype=np.float64).ravel()
     t_fine = np.zeros(0) if t_fine is None else np.asarray(t_fine, dtype=np.float64).ravel()
     for grid in (t_eval, t_fine):
         if grid.size and np.any(np.diff(grid) * (t1 - t0) < 0):
             raise ValueError("t_eval and t_fine must be monotone in the direction of "
                              "integration")
-    n_eval = state.size if sample_tangents else n
+    record = np.full(M, EVENTS | EVAL | FINE) if record is None else \
+        np.broadcast_to(np.asarray(record, dtype=np.int64), (M,))
+    rows = np.full((3, M), -1, dtype=np.int64)
+    for r, flag in enumerate((EVENTS, EVAL, FINE)):
+        which = (record & flag) != 0
+        rows[r, which] = np.arange(which.sum())
+    n_eval = y0s.shape[1] if sample_tangents else n
     n_err = n * (1 + n_tan) if control_tangents else n
     masses, d, measure, prof, par = system.kernel_args
-    res = dop853(y0=state, t0=t0, t1=t1, masses=masses, d=d, measure=measure, prof=prof,
-                 par=par, n_tan=n_tan, megno=megno, rtol=float(rtol), atol=float(atol),
-                 n_err=n_err, max_steps=int(max_steps), h0=float(first_step),
+    res = dop853(y0s=y0s, rows=rows, t0=t0, t1=t1, masses=masses, d=d, measure=measure,
+                 prof=prof, par=par, n_tan=n_tan, megno=megno, rtol=float(rtol),
+                 atol=float(atol), n_err=n_err, max_steps=int(max_steps), h0=float(first_step),
                  h_max=float(max_step), h_min=float(min_step),
                  events=encode_events(events, system), max_events=int(max_events),
                  n_sub=int(event_substeps), t_eval=t_eval, n_eval=n_eval,
-                 renorm_dt=float(renorm_interval), time_limit=float(time_limit), t_fine=t_fine)
-    y, samples, s_log = res.y, res.samples, res.sample_log
+                 renorm_dt=float(renorm_interval), time_limit=float(time_limit),
+                 t_fine=t_fine, L=int(lanes or lanes_for(M)))
+    return [_outcome(res, j, rows[:, j], n, n_tan, tan[j], megno, max_events, t_eval, n_eval,
+                     t_fine, sample_tangents) for j in range(M)]
+
+
+def _outcome(res, j, rows, n, n_tan, tan, megno, max_events, t_eval, n_eval, t_fine,
+             sample_tangents) -> Outcome:
+    y = res.y[j]
     tans = y[n:n * (1 + n_tan)].reshape(n_tan, n)
     norms = np.linalg.norm(tans, axis=1)
-    if n_tan and sample_tangents:
+    re, rs, rf = rows
+    if rs >= 0:
+        samples, s_log, s_megno = res.samples[rs], res.sample_log[rs], res.sample_megno[rs]
+    else:
+        samples = np.zeros((0, n_eval))
+        s_log, s_megno = np.zeros((0, n_tan)), np.zeros((0, 2))
+    if n_tan and sample_tangents and rs >= 0:
         w = samples[:, n:n * (1 + n_tan)].reshape(-1, n_tan, n)
         s_log = s_log + np.log(np.linalg.norm(w, axis=2))
     else:
-        s_log = np.full((t_eval.size, n_tan), np.nan)
-    counts, wba, log_g = res.counts, res.wba, res.log_growth
+        s_log = np.full((samples.shape[0], n_tan), np.nan)
+    counts, wba, log_g = res.counts[j], res.wba[j], res.log_growth[j]
     kept = min(int(counts[3]), int(max_events))
+    crossings = Crossings(res.ev_index[re, :kept].copy(), res.ev_t[re, :kept].copy(),
+                          res.ev_y[re, :kept].copy()) if re >= 0 else \
+        Crossings(np.zeros(0, np.int64), np.zeros(0), np.zeros((0, n)))
     return Outcome(
-        status=Status(res.status), t=float(res.t), y=y[:n].copy(), tangents=tans.copy(),
-        tangent_norms0=np.linalg.norm(tan, axis=1),
-        megno_sums=res.megno_sums if megno else np.zeros(0), sample_megno=res.sample_megno,
-        log_growth=log_g + np.log(norms), fli=np.maximum(res.max_log, log_g + np.log(norms)),
+        status=Status(int(res.status[j])), t=float(res.t[j]), y=y[:n].copy(),
+        tangents=tans.copy(), tangent_norms0=np.linalg.norm(tan, axis=1),
+        megno_sums=res.megno_sums[j] if megno else np.zeros(0), sample_megno=s_megno,
+        log_growth=log_g + np.log(norms), fli=np.maximum(res.max_log[j], log_g + np.log(norms)),
         n_steps=int(counts[0]), n_rejected=int(counts[1]), n_rhs=int(counts[2]),
-        h_min=float(res.h_range[0]), h_max=float(res.h_range[1]),
-        crossings=Crossings(res.ev_index[:kept].copy(), res.ev_t[:kept].copy(),
-                            res.ev_y[:kept].copy()),
+        h_min=float(res.h_range[j, 0]), h_max=float(res.h_range[j, 1]), crossings=crossings,
         n_crossings=int(counts[3]), t_eval=t_eval, samples=samples, sample_log_growth=s_log,
-        fine=res.fine, ftle_wba=float(wba[0] / wba[1]) if wba[1] != 0 else np.nan)
+        fine=res.fine[rf] if rf >= 0 else np.zeros((0, n)),
+        ftle_wba=float(wba[0] / wba[1]) if wba[1] != 0 else np.nan)
+
+
+def integrate(system: System, y0, t_span, *, tangents=None, **options) -> Outcome:
+    """Integrate an orbit of `system` (and optionally tangent vectors) over t_span.
+
+    y0: orbit state (n,). t_span: t_final or (t0, t_final); backwards if t_final < t0.
+    tangents: initial deviation vectors (n_tan, n). megno: also compute the MEGNO
+    accumulators of the first tangent vector. control_tangents: include tangent vectors in
+    the error norm. events: Event crossings to record (max_events kept, each step scanned in
+    event_substeps parts). t_eval: output times sampled from the dense output (orbit only
+    unless sample_tangents). t_fine: output times of the orbit alone, usually many (the
+    torus analysis). renorm_interval: time between renormalisations of the tangent vectors.
+    first_step, max_step, min_step: step sizes (0: chosen). max_steps: step attempts.
+    time_limit: wall-clock seconds (0: none). Returns an `Outcome`.
+    """
+    y0 = np.asarray(y0, dtype=np.float64).ravel()
+    if y0.size != system.n:
+        raise ValueError(f"y0 must have {system.n} components (2 N d), got {y0.size}")
+    tan = None if tangents is None else np.asarray(tangents, dtype=float).reshape(1, -1, y0.size)
+    return integrate_batch(system, y0[None], t_span, tangents=tan, lanes=1, **options)[0]

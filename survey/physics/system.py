@@ -27,7 +27,8 @@ from .forces import (
 )
 from .geometry import cross
 from .jit import helper, kernel, leaf
-from .terms import AREA, DISTANCE, NONE, PERIMETER, TRIANGLE, Potential, make_potential
+from .terms import (AREA, BARRIER, DISTANCE, NONE, PERIMETER, POWER, TRIANGLE, Potential,
+                    make_potential)
 
 
 @dataclass(frozen=True, eq=False)
@@ -255,13 +256,13 @@ def _triplet_energy(q, N, d, measure, prof, par):
 @leaf
 def rhs(t, y, dy, masses, d, measure, prof, par, n_tan):
     """Hamilton's equations and the variational equations of n_tan tangent vectors
-    (d dq/dt = M^-1 dp, d dp/dt = -Hess U dq)."""
+    (d dq/dt = M^-1 dp, d dp/dt = -Hess U dq) at one state y."""
     N = masses.size
     lead = lead_params(par)
     # three bodies in the plane (every workflow, most of the paper) under a perimetric or
     # areal term run code written for them: the general path's operations on the same
     # values in the same order, without its loops, zero z components and accumulations
-    # (bit for bit the same, 2.3x faster; tests/physics/test_system.py)
+    # (bit for bit the same, 1.8x faster; tests/physics/test_system.py)
     if N == 3 and d == 2 and measure == PERIMETER:
         _planar_perimetric(y, dy, masses, prof, lead, n_tan)
     elif N == 3 and d == 2 and measure == AREA:
@@ -269,6 +270,48 @@ def rhs(t, y, dy, masses, d, measure, prof, par, n_tan):
     else:
         _leading_forces(y, dy, masses, N, d, measure, prof, lead, n_tan)
     further_forces(y, dy, N, d, 2 * N * d, n_tan, par)
+
+
+# lanes from which the compiler's SIMD loops run (its vector width, 8 doubles, times its
+# interleave of 2); with fewer, rhs_lanes runs `rhs` lane by lane, which keeps one
+# state's values in registers (27 ns with a tangent, against 72 ns in the lanes' loops for
+# one lane and 8.6 ns per lane for 32)
+SIMD_LANES = 16
+
+
+@helper
+def workspace_size(L, nf):
+    """Floats of the workspace `rhs_lanes` needs for L lanes of nf components."""
+    return max(15 * L, 2 * nf)
+
+
+@leaf
+def rhs_lanes(t, Y, dY, L, masses, d, measure, prof, par, n_tan, W):
+    """`rhs` for L states at once, stored variable-major (component i of lane k at
+    Y[i * L + k]); W: workspace_size(L, nf) floats. Three bodies in the plane under one
+    perimetric or areal term (every workflow, most of the paper) run loops over the lanes
+    that the compiler turns into SIMD instructions (from SIMD_LANES lanes on): the general
+    path's operations on the same values in the same order, without its loops, zero z
+    components and accumulations, so every lane gets the bits `rhs` gives
+    (tests/physics/test_system.py). Otherwise `rhs` runs lane by lane."""
+    N = masses.size
+    if L >= SIMD_LANES and N == 3 and d == 2 and measure == PERIMETER and par.ndim == 1:
+        _lanes_velocities(Y, dY, L, masses, n_tan)
+        _lanes_perimetric(Y, dY, L, prof, lead_params(par), n_tan, W)
+    elif L >= SIMD_LANES and N == 3 and d == 2 and measure == AREA and par.ndim == 1:
+        _lanes_velocities(Y, dY, L, masses, n_tan)
+        _lanes_areal(Y, dY, L, prof, lead_params(par), n_tan, W)
+    elif L == 1:
+        rhs(t, Y, dY, masses, d, measure, prof, par, n_tan)
+    else:
+        nf = Y.size // L
+        y, dy = W[:nf], W[nf:2 * nf]
+        for k in range(L):
+            for i in range(nf):
+                y[i] = Y[i * L + k]
+            rhs(t, y, dy, masses, d, measure, prof, par, n_tan)
+            for i in range(nf):
+                dY[i * L + k] = dy[i]
 
 
 @helper
@@ -366,6 +409,182 @@ def _planar_areal(y, dy, masses, prof, par, n_tan):
         dy[o + 9] = (0.0 + a * Gvy) + f * (-((dwx - dux) * hz) + -(swx * dhz))
         dy[o + 10] = (0.0 + a * Gwx) + f * ((duy - dvy) * hz + suy * dhz)
         dy[o + 11] = (0.0 + a * Gwy) + f * (-((dux - dvx) * hz) + -(sux * dhz))
+
+
+# The loops over the lanes below are separate compiled functions, not inlined helpers:
+# numba vectorises each alone, but not all of them inlined into one function (measured:
+# the tangent loop 1.7 ns per orbit alone, 8 ns inside the whole right-hand side).
+
+@leaf
+def _lanes_velocities(Y, dY, L, masses, n_tan):
+    """dq/dt = p/m of the orbits and d dq/dt = dp/m of their tangent vectors, three bodies
+    in the plane."""
+    for t in range(1 + n_tan):
+        # views at each block: an offset from the outer loop in the index keeps the
+        # compiler from vectorising the inner one (measured 14x)
+        y, dy = Y[12 * L * t:], dY[12 * L * t:]
+        for c in range(6):
+            inv = 1.0 / masses[c // 2]
+            for k in range(L):
+                dy[c * L + k] = y[(6 + c) * L + k] * inv
+
+
+@leaf
+def _lanes_profile(prof, par, W, x, u1, u2, L):
+    """U'(x) into W[u1 * L + k] and U''(x) into W[u2 * L + k] from x at W[x * L + k], lane by
+    lane: the paper's P^2/2 and barrier in loops the compiler vectorises (a branch on the
+    profile inside the lanes' loop costs 4x), any other profile through `profile`."""
+    if prof == POWER and par[1] == 2.0:
+        for k in range(L):
+            W[u1 * L + k], W[u2 * L + k] = par[0] * W[x * L + k], par[0]
+    elif prof == BARRIER:
+        a, b = par[0], par[1]
+        for k in range(L):
+            v = W[x * L + k]
+            W[u1 * L + k] = -a / (v * v) + 2.0 * b * v
+            W[u2 * L + k] = 2.0 * a / (v * v * v) + 2.0 * b
+    else:
+        for k in range(L):
+            _, W[u1 * L + k], W[u2 * L + k] = profile(prof, par, W[x * L + k])
+
+
+@helper
+def _lanes_perimetric(Y, dY, L, prof, par, n_tan, W):
+    """forces.perimetric_forces of bodies (0, 1, 2) in the plane, lane by lane: the side
+    unit vectors, lengths and perimeter into W, the profile, the forces, each tangent
+    vector; loops that each store to one array (one storing to both W and dY is one the
+    compiler does not vectorise). The leading `0.0 +` keeps the general path's zero signs
+    (it adds into zeros). W rows: e1x e1y e2x e2y e3x e3y L1 L2 L3 P U' U'' U'/L1 U'/L2
+    U'/L3."""
+    _perimetric_sides(Y, L, W)
+    _lanes_profile(prof, par, W, 9, 10, 11, L)
+    _perimetric_forces(dY, L, W)
+    for t in range(n_tan):
+        _perimetric_tangent(Y[12 * L * (1 + t):], dY[12 * L * (1 + t):], L, W)
+
+
+@leaf
+def _perimetric_sides(Y, L, W):
+    for k in range(L):
+        ax, ay = Y[2 * L + k] - Y[k], Y[3 * L + k] - Y[L + k]       # v - u
+        bx, by = Y[4 * L + k] - Y[2 * L + k], Y[5 * L + k] - Y[3 * L + k]   # w - v
+        cx, cy = Y[k] - Y[4 * L + k], Y[L + k] - Y[5 * L + k]       # u - w
+        L1 = math.sqrt(ax * ax + ay * ay)
+        L2 = math.sqrt(bx * bx + by * by)
+        L3 = math.sqrt(cx * cx + cy * cy)
+        r1, r2, r3 = 1.0 / L1, 1.0 / L2, 1.0 / L3
+        W[k], W[L + k] = ax * r1, ay * r1
+        W[2 * L + k], W[3 * L + k] = bx * r2, by * r2
+        W[4 * L + k], W[5 * L + k] = cx * r3, cy * r3
+        W[6 * L + k], W[7 * L + k], W[8 * L + k] = L1, L2, L3
+        W[9 * L + k] = L1 + L2 + L3
+
+
+@leaf
+def _perimetric_forces(dY, L, W):
+    for k in range(L):
+        U1 = W[10 * L + k]
+        W[12 * L + k], W[13 * L + k] = U1 / W[6 * L + k], U1 / W[7 * L + k]
+        W[14 * L + k] = U1 / W[8 * L + k]
+    for k in range(L):
+        e1x, e1y, e2x, e2y = W[k], W[L + k], W[2 * L + k], W[3 * L + k]
+        e3x, e3y, U1 = W[4 * L + k], W[5 * L + k], W[10 * L + k]
+        dY[6 * L + k] = 0.0 + U1 * (e1x - e3x)
+        dY[7 * L + k] = 0.0 + U1 * (e1y - e3y)
+        dY[8 * L + k] = 0.0 + U1 * (e2x - e1x)
+        dY[9 * L + k] = 0.0 + U1 * (e2y - e1y)
+        dY[10 * L + k] = 0.0 + U1 * (e3x - e2x)
+        dY[11 * L + k] = 0.0 + U1 * (e3y - e2y)
+
+
+@leaf
+def _perimetric_tangent(y, dy, L, W):
+    """One tangent vector's block (y, dy start at it)."""
+    for k in range(L):
+        e1x, e1y, e2x, e2y = W[k], W[L + k], W[2 * L + k], W[3 * L + k]
+        e3x, e3y, U2 = W[4 * L + k], W[5 * L + k], W[11 * L + k]
+        s1, s2, s3 = W[12 * L + k], W[13 * L + k], W[14 * L + k]
+        p1x, p1y = y[2 * L + k] - y[k], y[3 * L + k] - y[L + k]
+        p2x, p2y = y[4 * L + k] - y[2 * L + k], y[5 * L + k] - y[3 * L + k]
+        p3x, p3y = y[k] - y[4 * L + k], y[L + k] - y[5 * L + k]
+        d1 = e1x * p1x + e1y * p1y
+        d2 = e2x * p2x + e2y * p2y
+        d3 = e3x * p3x + e3y * p3y
+        dP = d1 + d2 + d3
+        c1, c2, c3 = U2 * dP - s1 * d1, U2 * dP - s2 * d2, U2 * dP - s3 * d3
+        g1x, g1y = c1 * e1x + s1 * p1x, c1 * e1y + s1 * p1y
+        g2x, g2y = c2 * e2x + s2 * p2x, c2 * e2y + s2 * p2y
+        g3x, g3y = c3 * e3x + s3 * p3x, c3 * e3y + s3 * p3y
+        dy[6 * L + k] = 0.0 + (g1x - g3x)
+        dy[7 * L + k] = 0.0 + (g1y - g3y)
+        dy[8 * L + k] = 0.0 + (g2x - g1x)
+        dy[9 * L + k] = 0.0 + (g2y - g1y)
+        dy[10 * L + k] = 0.0 + (g3x - g2x)
+        dy[11 * L + k] = 0.0 + (g3y - g2y)
+
+
+@helper
+def _lanes_areal(Y, dY, L, prof, par, n_tan, W):
+    """forces.areal_forces of bodies (0, 1, 2) in the plane, lane by lane (see
+    _lanes_perimetric): there the area vector and its unit vector have z components only.
+    W rows: Ahat_z, 1/|A|, |A|, U', U''."""
+    _areal_area(Y, L, W)
+    _lanes_profile(prof, par, W, 2, 3, 4, L)
+    _areal_forces(Y, dY, L, W)
+    for t in range(n_tan):
+        _areal_tangent(Y, Y[12 * L * (1 + t):], dY[12 * L * (1 + t):], L, W)
+
+
+@leaf
+def _areal_area(Y, L, W):
+    for k in range(L):
+        ax, ay = Y[2 * L + k] - Y[k], Y[3 * L + k] - Y[L + k]        # v - u
+        bx, by = Y[4 * L + k] - Y[k], Y[5 * L + k] - Y[L + k]        # w - u
+        Az = 0.5 * (ax * by - ay * bx)
+        absA = math.sqrt(Az * Az)
+        inv = 1.0 / absA if absA > 0.0 else 0.0
+        W[k], W[L + k], W[2 * L + k] = Az * inv, inv, absA
+
+
+@leaf
+def _areal_forces(Y, dY, L, W):
+    for k in range(L):
+        hz, f = W[k], -0.5 * W[3 * L + k]
+        svx, svy = Y[2 * L + k] - Y[4 * L + k], Y[3 * L + k] - Y[5 * L + k]   # v - w
+        swx, swy = Y[4 * L + k] - Y[k], Y[5 * L + k] - Y[L + k]               # w - u
+        sux, suy = Y[k] - Y[2 * L + k], Y[L + k] - Y[3 * L + k]               # u - v
+        # (v - w) x Ahat: twice grad_u |A|, and cyclic
+        dY[6 * L + k] = 0.0 + f * (svy * hz)
+        dY[7 * L + k] = 0.0 + f * -(svx * hz)
+        dY[8 * L + k] = 0.0 + f * (swy * hz)
+        dY[9 * L + k] = 0.0 + f * -(swx * hz)
+        dY[10 * L + k] = 0.0 + f * (suy * hz)
+        dY[11 * L + k] = 0.0 + f * -(sux * hz)
+
+
+@leaf
+def _areal_tangent(Y, y, dy, L, W):
+    """One tangent vector's block (y, dy start at it; Y is the orbit)."""
+    for k in range(L):
+        hz, inv = W[k], W[L + k]
+        f, g = -0.5 * W[3 * L + k], -0.5 * W[4 * L + k]
+        svx, svy = Y[2 * L + k] - Y[4 * L + k], Y[3 * L + k] - Y[5 * L + k]
+        swx, swy = Y[4 * L + k] - Y[k], Y[5 * L + k] - Y[L + k]
+        sux, suy = Y[k] - Y[2 * L + k], Y[L + k] - Y[3 * L + k]
+        dux, duy = y[k], y[L + k]
+        dvx, dvy = y[2 * L + k], y[3 * L + k]
+        dwx, dwy = y[4 * L + k], y[5 * L + k]
+        dAz = 0.5 * ((dux * svy - duy * svx) + (dvx * swy - dvy * swx)
+                     + (dwx * suy - dwy * sux))
+        dabs = hz * dAz
+        dhz = (-dabs * inv) * hz + dAz * inv
+        a = g * dabs
+        dy[6 * L + k] = (0.0 + a * (svy * hz)) + f * ((dvy - dwy) * hz + svy * dhz)
+        dy[7 * L + k] = (0.0 + a * -(svx * hz)) + f * (-((dvx - dwx) * hz) + -(svx * dhz))
+        dy[8 * L + k] = (0.0 + a * (swy * hz)) + f * ((dwy - duy) * hz + swy * dhz)
+        dy[9 * L + k] = (0.0 + a * -(swx * hz)) + f * (-((dwx - dux) * hz) + -(swx * dhz))
+        dy[10 * L + k] = (0.0 + a * (suy * hz)) + f * ((duy - dvy) * hz + suy * dhz)
+        dy[11 * L + k] = (0.0 + a * -(sux * hz)) + f * (-((dux - dvx) * hz) + -(sux * dhz))
 
 
 @helper

@@ -1,36 +1,57 @@
-"""The right-hand side that three bodies in the plane run under a perimetric or areal term is
-the general path's arithmetic, bit for bit: random states over twelve decades, unequal
-masses, every profile, up to three tangent vectors, and states with exact zeros (collinear,
-axis-aligned, at rest) where only the signs of zeros could tell them apart."""
+"""The right-hand side of many orbits at once (`rhs_lanes`, variable-major lanes) gives every
+lane the bits of the general one-state path (`rhs`): three bodies in the plane under every
+perimetric and areal profile (the SIMD paths), and other systems (lane by lane); random
+states over twelve decades, unequal masses, up to three tangent vectors, lane counts on
+both sides of the vector width, and states with exact zeros (collinear, axis-aligned, at
+rest) where only the signs of zeros could tell the paths apart."""
 import numpy as np
 import pytest
 
-from survey.physics.system import System, _leading_forces, rhs
+from survey.physics.system import System, rhs, rhs_lanes, workspace_size
 from survey.physics.terms import TERMS, make_potential
 
 PLANAR = [t for t in TERMS if t.kind == "triplet" and t.name.startswith(("perimetric",
                                                                            "areal"))]
+OTHERS = {"four bodies": (4, 2, (make_potential("perimetric_power"),)),
+          "3-D": (3, 3, (make_potential("areal_barrier"),)),
+          "a sum of terms": (3, 2, (make_potential("perimetric_power"),
+                                    make_potential("lennard_jones", {}, "pair")))}
 
 
-def states(rng):
-    for trial in range(400):
-        n_tan = trial % 4
-        y = rng.normal(size=12 * (1 + n_tan)) * 10.0 ** rng.uniform(-6, 6)
-        if trial % 5 == 0:          # exact zeros: axis-aligned, some bodies at rest
-            y[rng.integers(0, y.size, 5)] = 0.0
-        if trial % 7 == 0:          # collinear on the x axis
-            y[[1, 3, 5]] = 0.0
-        yield n_tan, y
+def states(rng, nq, n_tan, count):
+    """count states (count, 2 nq (1 + n_tan)), some with exact zeros."""
+    y = rng.normal(size=(count, 2 * nq * (1 + n_tan))) * 10.0 ** rng.uniform(-6, 6, (count, 1))
+    y[::5, rng.integers(0, nq, 3)] = 0.0          # axis-aligned, some bodies at rest
+    y[::7, 1:nq:2] = 0.0                          # collinear on the x axis
+    return y
+
+
+def check(system, rng, trials=60):
+    masses, d, measure, prof, par = system.kernel_args
+    nq = system.n // 2
+    for trial in range(trials):
+        n_tan, L = trial % 4, (1, 3, 16, 17)[trial % 4 if trial % 8 < 4 else 3 - trial % 4]
+        y = states(rng, nq, n_tan, L)
+        nf = y.shape[1]
+        Y = np.ascontiguousarray(y.T).ravel()
+        dY = np.full(Y.size, np.nan)
+        rhs_lanes(0.0, Y, dY, L, masses, d, measure, prof, par, n_tan,
+                  np.zeros(workspace_size(L, nf)))
+        for k in range(L):
+            one = np.full(nf, np.nan)
+            rhs(0.0, y[k], one, masses, d, measure, prof, par, n_tan)
+            assert dY[k::L].tobytes() == one.tobytes(), (n_tan, L, k, y[k])
 
 
 @pytest.mark.parametrize("term", PLANAR, ids=[t.name for t in PLANAR])
-def test_the_planar_path_is_the_general_path_bit_for_bit(term):
+def test_the_simd_lanes_give_the_general_path_bit_for_bit(term):
     rng = np.random.default_rng(7)
     params = {p.name: 1.1 * p.default + 0.05 for p in term.parameters}
-    system = System(rng.uniform(0.5, 2.0, 3), 2, make_potential(term.name, params))
-    masses, d, measure, prof, par = system.kernel_args
-    for n_tan, y in states(rng):
-        fast, general = np.full(y.size, np.nan), np.full(y.size, np.nan)
-        rhs(0.0, y, fast, masses, d, measure, prof, par, n_tan)
-        _leading_forces(y, general, masses, 3, 2, measure, prof, par, n_tan)
-        assert fast.tobytes() == general.tobytes(), (n_tan, y)
+    check(System(rng.uniform(0.5, 2.0, 3), 2, make_potential(term.name, params)), rng)
+
+
+@pytest.mark.parametrize("case", OTHERS, ids=list(OTHERS))
+def test_other_systems_run_lane_by_lane_with_the_same_bits(case):
+    rng = np.random.default_rng(8)
+    N, d, terms = OTHERS[case]
+    check(System(rng.uniform(0.5, 2.0, N), d, terms), rng, trials=16)

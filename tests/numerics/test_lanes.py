@@ -1,0 +1,95 @@
+"""Orbits integrated as SIMD lanes give, each, the bits of the same orbit integrated alone:
+every field of every Outcome, whatever the lane count (below and above the SIMD width, and
+not a divisor of the job count), whatever the neighbours -- orbits that end early (terminal
+events, a nonfinite start, a step limit) and hand their lane to the next start, orbits that
+record crossings, samples and the torus analysis' fine samples beside orbits that record
+nothing -- for the paper's perimetric and areal systems (SIMD right-hand sides) and for
+other systems (lane by lane)."""
+import numpy as np
+import pytest
+
+from survey.numerics.events import Event, Sides
+from survey.numerics.indicators import deviation_vectors
+from survey.numerics.integrate import EVAL, EVENTS, FINE, integrate_batch
+from survey.numerics.sections import section_event
+from survey.physics.families import initial_state
+from survey.physics.system import System
+from survey.physics.terms import make_potential
+
+
+def same(a, b) -> list[str]:
+    """The Outcome fields in which a and b differ, bit for bit."""
+    differ = []
+    for field in a._fields:
+        x, y = getattr(a, field), getattr(b, field)
+        pairs = zip(x, y) if field == "crossings" else [(x, y)]
+        if not all(np.shape(p) == np.shape(q) and np.asarray(p).tobytes() ==
+                   np.asarray(q).tobytes() for p, q in pairs):
+            differ.append(field)
+    return differ
+
+
+def check(system, starts, tangents, record, t_final, lanes, **options):
+    batch = {L: integrate_batch(system, starts, t_final, tangents=tangents, record=record,
+                                lanes=L, **options) for L in lanes}
+    for j in range(len(starts)):
+        alone = integrate_batch(system, starts[j:j + 1], t_final,
+                                tangents=None if tangents is None else tangents[j:j + 1],
+                                record=record[j], lanes=1, **options)[0]
+        for L, outcomes in batch.items():
+            assert same(outcomes[j], alone) == [], (j, L, same(outcomes[j], alone))
+    return batch[lanes[0]]
+
+
+def test_the_paper_system_in_lanes_with_every_ending_and_record():
+    system = System.create()
+    deltas = np.linspace(0.0, 8.0, 37)
+    starts = np.array([initial_state(system, "equilateral", delta=float(d)) for d in deltas])
+    starts[5, 0] = np.nan                                   # ends at once: nonfinite
+    tangents = np.array([deviation_vectors(system, y if np.isfinite(y).all() else starts[0],
+                                           1, 0, c) for c, y in enumerate(starts)])
+    record = np.zeros(len(starts), dtype=np.int64)
+    record[::4] = EVENTS | EVAL | FINE
+    record[1::7] = EVENTS                                  # terminal events end these early
+    events = [section_event(system), Event(Sides(offset=-11.0), direction=1, terminal=True)]
+    outcomes = check(system, starts, tangents, record, 40.0, (1, 3, 16, 17, 32),
+                     megno=True, events=events, t_eval=np.linspace(1.0, 40.0, 8),
+                     sample_tangents=True, t_fine=(np.arange(399) + 0.5) * 0.1,
+                     max_events=20)
+    statuses = {o.status.name for o in outcomes}
+    assert {"OK", "EVENT", "NONFINITE"} <= statuses, statuses
+
+
+def test_a_step_limit_and_backwards_in_time():
+    system = System.create()
+    starts = np.array([initial_state(system, "sides", delta=float(d))
+                       for d in np.linspace(0.0, 1.0, 18)])
+    outcomes = check(system, starts, None, np.full(18, EVAL), (0.0, -30.0), (1, 17),
+                     max_steps=2000, t_eval=np.linspace(0.0, -30.0, 7))
+    assert {o.status.name for o in outcomes} >= {"STEP_LIMIT"}
+
+
+def test_the_areal_system_in_lanes():
+    system = System.create(potential="areal_barrier")
+    starts = np.array([initial_state(system, "equilateral", side=3 ** 0.5, delta=float(d),
+                                     energy=9.0) for d in np.linspace(0.0, 3.0, 16)])
+    tangents = np.array([deviation_vectors(system, y, 2, 1, c) for c, y in enumerate(starts)])
+    check(system, starts, tangents, np.full(16, EVENTS), 20.0, (1, 16), megno=True,
+          events=[section_event(system)])
+
+
+@pytest.mark.parametrize("case", ["four bodies", "pair and triplet terms"])
+def test_other_systems_in_lanes(case):
+    rng = np.random.default_rng(3)
+    if case == "four bodies":
+        system = System(np.array([1.0, 1.2, 0.8, 1.1]), 2, make_potential("perimetric_power"))
+    else:
+        system = System(np.ones(3), 2, (make_potential("lennard_jones", {}, "pair"),
+                                        make_potential("axilrod_teller", {"strength": 0.3})))
+    N = system.n_bodies
+    base = np.array([[np.cos(a), np.sin(a)] for a in np.linspace(0, 2 * np.pi, N,
+                                                                 endpoint=False)]) * 1.2
+    starts = np.array([system.state(base + 0.05 * rng.normal(size=(N, 2)),
+                                    0.2 * rng.normal(size=(N, 2))) for _ in range(17)])
+    tangents = np.array([deviation_vectors(system, y, 1, 2, c) for c, y in enumerate(starts)])
+    check(system, starts, tangents, np.zeros(17, dtype=np.int64), 5.0, (1, 17), megno=True)
