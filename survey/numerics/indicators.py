@@ -17,7 +17,6 @@ started a tiny distance away.
 """
 from __future__ import annotations
 
-import time
 from typing import NamedTuple, Sequence
 
 import numpy as np
@@ -27,8 +26,8 @@ from ..catalog.indicators import IndicatorOptions
 from ..catalog.status import Status
 from ..catalog.variables import history_times
 from ..physics.system import System, rhs
-from .events import Crossings, Event
-from .integrate import Outcome, integrate
+from .events import Crossings
+from .integrate import EVAL, EVENTS, FINE, Outcome, integrate_batch
 
 
 class ChaosIndicators(NamedTuple):
@@ -115,51 +114,74 @@ def conservation_errors(system: System, y0, states):
             float(np.max(np.linalg.norm(dJ, axis=1)) / max(np.linalg.norm(J0), 1.0)))
 
 
-def chaos_indicators(system: System, y0, t_final: float, options=IndicatorOptions(), *,
-                     cell: int = 0, events: Sequence[Event] = (), rtol=defaults.RTOL,
-                     atol=defaults.ATOL, max_steps=defaults.MAX_STEPS, max_events=100_000,
-                     time_limit=0.0, control_tangents=False, t_fine=None) -> ChaosIndicators:
-    """Integrate y0 to t_final with `options.deviations` tangent vectors (MEGNO of the first,
-    summed by the driver at step ends), plus `options.perturbations` nearby orbits, and
-    return the indicators,
-    their ensemble spread and convergence histories, and any section crossings.
-    time_limit (wall-clock seconds, 0 for none) is the budget of all these integrations
-    together; when it runs out the status is TIME_LIMIT. t_fine: times at which the nominal
-    orbit is sampled for the torus analysis (Outcome.fine)."""
+class Ensemble(NamedTuple):
+    """The orbits a cell's indicators come from, as jobs of one batch (`integrate_batch`):
+    first the nominal orbit -- once per deviation vector, each copy giving the bits the
+    others give, or once with all of them when they take part in the error control --
+    then the orbits started `perturbation_size` away, each with its own vector."""
+
+    starts: np.ndarray        # (J, n)
+    tangents: np.ndarray      # (J, n_tan, n)
+    record: np.ndarray        # (J,) what each records (integrate.EVENTS | EVAL | FINE)
+    nominal: int              # the first `nominal` jobs integrate the nominal orbit
+
+
+def ensemble(system: System, y0, options: IndicatorOptions, cell: int = 0,
+             control_tangents: bool = False) -> Ensemble:
+    """The jobs of a cell: deviation vectors and perturbed starts seeded by (seed, cell),
+    so a cell's jobs are the same whatever the chunk it travels in. The first nominal job
+    records crossings, samples and the fine samples; the other nominal copies samples (the
+    histories of their vectors); the perturbed orbits nothing."""
+    o = options
+    y0 = np.asarray(y0, dtype=float)
+    w0 = deviation_vectors(system, y0, o.deviations, o.seed, cell, o.project_flow)
+    per_job = o.deviations if control_tangents else 1
+    nominal = 1 if control_tangents else o.deviations
+    starts = [y0] * nominal
+    tangents = [w0] if control_tangents else [w[None] for w in w0]
+    record = [EVENTS | EVAL | FINE] + [EVAL] * (nominal - 1)
+    for j in range(o.perturbations):
+        xi = deviation_vectors(system, y0, 1, o.seed, cell, stream=1 + j)[0]
+        yp = y0 + o.perturbation_size * np.linalg.norm(y0) * xi
+        starts.append(yp)
+        tangents.append(deviation_vectors(system, yp, per_job, o.seed, cell, o.project_flow,
+                                          stream=1 + j))
+        record.append(0)
+    return Ensemble(np.array(starts), np.array(tangents), np.array(record, dtype=np.int64),
+                    nominal)
+
+
+def combine(system: System, y0, t_final: float, options: IndicatorOptions, jobs: Ensemble,
+            outcomes: Sequence[Outcome]) -> ChaosIndicators:
+    """A cell's indicators, ensemble spreads and histories from its jobs' outcomes. The
+    perturbed orbits count only if the nominal one finished, and one that ran out of its
+    time budget makes the cell's status TIME_LIMIT."""
     o = options
     y0 = np.asarray(y0, dtype=float)
     n = system.n
     history = history_times(t_final, o.history_points)
-    deadline = time.perf_counter() + time_limit if time_limit > 0 else None
-
-    def left():    # the kernel's time_limit for the next integration: 0 means none
-        return 0.0 if deadline is None else deadline - time.perf_counter()
-
-    run = dict(rtol=rtol, atol=atol, max_steps=max_steps, renorm_interval=o.renorm_interval,
-               control_tangents=control_tangents)
-    kw = dict(megno=True, t_eval=history, sample_tangents=True, **run)
-    w0 = deviation_vectors(system, y0, o.deviations, o.seed, cell, o.project_flow)
-    out = integrate(system, y0, t_final, tangents=w0, events=events, max_events=max_events,
-                    time_limit=left(), t_fine=t_fine, **kw)
+    out = outcomes[0]
+    nominal = outcomes[:jobs.nominal]
     status = out.status
     k = o.deviations
     reached = ~np.isnan(history) & (history <= out.t)
     th = np.where(reached, history, np.nan)
-    tang = out.samples[:, n:n * (1 + k)].reshape(-1, k, n)
+    if jobs.nominal == 1:
+        tang = out.samples[:, n:n * (1 + k)].reshape(-1, k, n)
+        log_growth, tangents = out.log_growth, out.tangents
+        sample_log = out.sample_log_growth
+    else:
+        tang = np.stack([r.samples[:, n:2 * n] for r in nominal], axis=1)
+        log_growth = np.array([r.log_growth[0] for r in nominal])
+        tangents = np.array([r.tangents[0] for r in nominal])
+        sample_log = np.stack([r.sample_log_growth[:, 0] for r in nominal], axis=1)
     z = out.sample_megno
-    ftle_h = out.sample_log_growth / th[:, None]
+    ftle_h = sample_log / th[:, None]
     megno_h = z[:, 1] / th
 
-    ftles = list(out.log_growth / out.t) if out.t > 0 else [np.nan] * k
+    ftles = list(log_growth / out.t) if out.t > 0 else [np.nan] * k
     megnos = [out.megno_sums[1] / out.t if out.t > 0 else np.nan]
-    for j in range(o.perturbations if status.finished else 0):
-        if deadline is not None and left() <= 0:
-            status = Status.TIME_LIMIT
-            break
-        xi = deviation_vectors(system, y0, 1, o.seed, cell, stream=1 + j)[0]
-        yp = y0 + o.perturbation_size * np.linalg.norm(y0) * xi
-        wp = deviation_vectors(system, yp, 1, o.seed, cell, o.project_flow, stream=1 + j)
-        res = integrate(system, yp, t_final, tangents=wp, megno=True, time_limit=left(), **run)
+    for res in outcomes[jobs.nominal:] if status.finished else ():
         if res.status == Status.TIME_LIMIT:
             status = Status.TIME_LIMIT
             break
@@ -170,7 +192,7 @@ def chaos_indicators(system: System, y0, t_final: float, options=IndicatorOption
 
     if k >= 2:
         sali_h, _ = _sali(tang[:, 0], tang[:, 1])
-        sali, gali2 = _sali(out.tangents[0], out.tangents[1])
+        sali, gali2 = _sali(tangents[0], tangents[1])
     else:
         sali_h = np.full(history.size, np.nan)
         sali = gali2 = np.nan
@@ -190,3 +212,30 @@ def chaos_indicators(system: System, y0, t_final: float, options=IndicatorOption
         energy_error=dE, angular_momentum_error=dJ,
         n_steps=out.n_steps, n_rhs=out.n_rhs, crossings=out.crossings,
         n_crossings=out.n_crossings, outcome=out)
+
+
+def batch_options(t_final: float, options: IndicatorOptions, *, events=(), rtol=defaults.RTOL,
+                  atol=defaults.ATOL, max_steps=defaults.MAX_STEPS, max_events=100_000,
+                  time_limit=0.0, control_tangents=False, t_fine=None) -> dict:
+    """integrate_batch's options for the jobs of cells' ensembles."""
+    return dict(megno=True, t_eval=history_times(t_final, options.history_points),
+                sample_tangents=True, events=events, max_events=max_events, t_fine=t_fine,
+                rtol=rtol, atol=atol, max_steps=max_steps,
+                renorm_interval=options.renorm_interval, control_tangents=control_tangents,
+                time_limit=time_limit)
+
+
+def chaos_indicators(system: System, y0, t_final: float, options=IndicatorOptions(), *,
+                     cell: int = 0, lanes=None, **run) -> ChaosIndicators:
+    """Integrate y0 to t_final with `options.deviations` tangent vectors (MEGNO of the first,
+    summed by the driver at step ends), plus `options.perturbations` nearby orbits, as
+    lanes of one batch, and return the indicators, their ensemble spread and convergence
+    histories, and any section crossings. run: batch_options' keywords (events, rtol, atol,
+    max_steps, max_events, control_tangents, t_fine: the times the nominal orbit is sampled
+    at for the torus analysis, Outcome.fine; time_limit: wall-clock seconds per orbit, 0 for
+    none -- one that runs out makes the status TIME_LIMIT)."""
+    jobs = ensemble(system, y0, options, cell, run.get("control_tangents", False))
+    outcomes = integrate_batch(system, jobs.starts, t_final, tangents=jobs.tangents,
+                               record=jobs.record, lanes=lanes,
+                               **batch_options(t_final, options, **run))
+    return combine(system, y0, t_final, options, jobs, outcomes)

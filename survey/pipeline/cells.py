@@ -16,8 +16,8 @@ from ..catalog.errors import ConfigError, Inaccessible
 from ..catalog.status import Status
 from ..catalog.variables import CellResult, history_times
 from ..numerics import torus
-from ..numerics.indicators import chaos_indicators, conservation_errors
-from ..numerics.integrate import integrate
+from ..numerics.indicators import batch_options, combine, conservation_errors, ensemble
+from ..numerics.integrate import integrate_batch
 from ..physics.families import initial_state
 from ..physics.jacobi import reduced
 from . import archive
@@ -85,59 +85,93 @@ class CellTask:
 
 
 def run_cells(task: CellTask, cell_ids, starts) -> dict[str, np.ndarray]:
-    """Integrate a chunk of cells (the unit of work a dask task does): one result row per
-    cell in every array of the task's layout."""
+    """Integrate a chunk of cells (the unit of work a dask task does): the orbits of all its
+    cells -- nominal orbits, their deviation vectors, perturbed starts -- as SIMD lanes of
+    one batch per System (cells differ in System only along interaction-term axes); one
+    result row per cell in every array of the task's layout."""
+    clock = time.perf_counter()
     res = archive.empty_results(task.slots, len(cell_ids))
-    systems = {}
+    groups: dict = {}
     for k, (cell, y0) in enumerate(zip(cell_ids, starts)):
-        at = task.term_values(int(cell))
-        if at not in systems:
-            system = build_system(task.system, dict(at))
-            systems[at] = system, ([section_event_for({"section": task.section}, system)]
-                                   if task.section else [])
-        archive.fill_row(res, k, compute_cell(task, *systems[at], int(cell), y0))
+        groups.setdefault(task.term_values(int(cell)), []).append(k)
+    results = [CellResult(Status.INACCESSIBLE, 0.0)] * len(cell_ids)
+    for at, rows in groups.items():
+        system = build_system(task.system, dict(at))
+        events = [section_event_for({"section": task.section}, system)] if task.section \
+            else []
+        rows = [k for k in rows if not np.isnan(starts[k][0])]
+        for k, result in zip(rows, _compute(task, system, events, [int(cell_ids[k]) for k in
+                                                                   rows],
+                                            [starts[k] for k in rows])):
+            results[k] = result
+    wall = (time.perf_counter() - clock) / max(len(cell_ids), 1)
+    for k, result in enumerate(results):
+        archive.fill_row(res, k, result._replace(wall_time=wall))
     return res
 
 
-def compute_cell(task: CellTask, system, events, cell: int, y0) -> CellResult:
-    """Everything one cell's variables are filled from."""
-    clock = time.perf_counter()
-    if np.isnan(y0[0]):
-        return CellResult(Status.INACCESSIBLE, time.perf_counter() - clock)
+def jobs_per_cell(task: CellTask) -> int:
+    """The orbits a cell integrates (lanes of its chunk's batch)."""
+    ind = task.indicators
+    if not ind["which"]:
+        return 1
+    nominal = 1 if task.integration["control_tangents"] else ind["deviations"]
+    return nominal + ind["perturbations"]
+
+
+def _compute(task: CellTask, system, events, cells, starts) -> list[CellResult]:
+    """The CellResults of cells with a start, one batch for all their orbits."""
+    if not cells:
+        return []
     integ, ind, tor = task.integration, task.indicators, task.tori
-    kw = dict(rtol=integ["rtol"], atol=integ["atol"], max_steps=integ["max_steps"],
-              time_limit=integ["cell_time_limit"])
+    t_final = integ["t_final"]
+    run = dict(rtol=integ["rtol"], atol=integ["atol"], max_steps=integ["max_steps"],
+               time_limit=integ["cell_time_limit"], events=events)
     dt = tor["sample_interval"]
     if tor["analyse"]:    # midpoints of equal intervals: the Birkhoff sums' quadrature
-        kw["t_fine"] = (np.arange(int(integ["t_final"] / dt)) + 0.5) * dt
+        run["t_fine"] = (np.arange(int(t_final / dt)) + 0.5) * dt
     if task.section:
-        kw["max_events"] = task.section["max_crossings"]
-    indicators = None
+        run["max_events"] = task.section["max_crossings"]
     if ind["which"]:
-        indicators = chaos_indicators(system, y0, integ["t_final"], indicator_options(ind),
-                                      cell=cell, events=events,
-                                      control_tangents=integ["control_tangents"], **kw)
-        out, status = indicators.outcome, indicators.status
-        errors = indicators.energy_error, indicators.angular_momentum_error
+        options = indicator_options(ind)
+        jobs = [ensemble(system, y0, options, cell, integ["control_tangents"])
+                for cell, y0 in zip(cells, starts)]
+        outcomes = integrate_batch(
+            system, np.concatenate([j.starts for j in jobs]), t_final,
+            tangents=np.concatenate([j.tangents for j in jobs]),
+            record=np.concatenate([j.record for j in jobs]),
+            **batch_options(t_final, options, control_tangents=integ["control_tangents"],
+                            **run))
+        first = np.cumsum([0] + [len(j.starts) for j in jobs])
+        indicators = [combine(system, y0, t_final, options, j, outcomes[a:b])
+                      for y0, j, a, b in zip(starts, jobs, first[:-1], first[1:])]
+        ends = [(i.outcome, i.status, (i.energy_error, i.angular_momentum_error))
+                for i in indicators]
     else:
-        history = history_times(integ["t_final"], ind["history_points"])
-        out = integrate(system, y0, integ["t_final"], events=events, t_eval=history, **kw)
-        status = out.status
-        done = ~np.isnan(out.samples[:, 0])
-        errors = conservation_errors(system, y0, np.concatenate([out.samples[done], [out.y]]))
+        history = history_times(t_final, ind["history_points"])
+        outcomes = integrate_batch(system, np.array(starts), t_final, t_eval=history, **run)
+        indicators = [None] * len(cells)
+        ends = []
+        for y0, out in zip(starts, outcomes):
+            done = ~np.isnan(out.samples[:, 0])
+            ends.append((out, out.status, conservation_errors(
+                system, y0, np.concatenate([out.samples[done], [out.y]]))))
     planar3 = system.n_bodies == 3 and system.dim == 2
-    evidence = None
-    if tor["analyse"] and status.finished:
-        evidence = torus.analyse(system, out.fine, dt, errors[0], tor["observables"],
-                                tor["lines"], tor["resonance_order"])
-    return CellResult(
-        status=status, wall_time=time.perf_counter() - clock, n_steps=out.n_steps,
-        n_rhs=out.n_rhs, start=y0, t_end=out.t, energy=system.energy(y0),
-        angular_momentum=system.angular_momentum(y0), energy_error=errors[0],
-        angular_momentum_error=errors[1], indicators=indicators, tori=evidence,
-        n_crossings=out.n_crossings,
-        crossing_time=out.crossings.t, crossing_state=out.crossings.y,
-        reduced=reduced(system, out.crossings.y) if planar3 else None)
+    results = []
+    for y0, ind_k, (out, status, errors) in zip(starts, indicators, ends):
+        evidence = None
+        if tor["analyse"] and status.finished:
+            evidence = torus.analyse(system, out.fine, dt, errors[0], tor["observables"],
+                                    tor["lines"], tor["resonance_order"])
+        results.append(CellResult(
+            status=status, wall_time=0.0, n_steps=out.n_steps,
+            n_rhs=out.n_rhs, start=y0, t_end=out.t, energy=system.energy(y0),
+            angular_momentum=system.angular_momentum(y0), energy_error=errors[0],
+            angular_momentum_error=errors[1], indicators=ind_k, tori=evidence,
+            n_crossings=out.n_crossings,
+            crossing_time=out.crossings.t, crossing_state=out.crossings.y,
+            reduced=reduced(system, out.crossings.y) if planar3 else None))
+    return results
 
 
 def warm_up(task: CellTask, first, starts):

@@ -97,9 +97,10 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "atol": Key("float", defaults.ATOL, "absolute tolerance of DOP853", above=0),
         "max_steps": Key("int", defaults.MAX_STEPS, "step attempts per orbit before "
                                                     "step_limit", low=1),
-        "cell_time_limit": Key("float", 0.0, "wall-clock budget of a cell (all its "
-                                             "integrations), 0 for none; cells past it get "
-                                             "status time_limit", "s", low=0),
+        "cell_time_limit": Key("float", 0.0, "wall-clock budget of each orbit of a cell "
+                                             "(they run side by side as lanes), 0 for none; "
+                                             "cells past it get status time_limit", "s",
+                               low=0),
         "control_tangents": Key("bool", False, "include tangent vectors in the error norm"),
     },
     "indicators": {
@@ -151,9 +152,11 @@ SCHEMA: dict[str, dict[str, Key]] = {
                                     "tcp://host:8786 (then workers is ignored)"),
         "connect_timeout": Key("float", 30.0, "seconds to wait for that scheduler to answer",
                                "s", above=0, high=3600),
-        "chunk_size": Key("int", 0, "cells per task; 0 picks about 64 tasks per worker "
-                                    "(at most 256 cells each); chunks interleave the grid so "
-                                    "that every task mixes cheap and costly cells", low=0),
+        "chunk_size": Key("int", 0, "cells per task, whose orbits run as SIMD lanes; 0 "
+                                    "picks 64 orbits, or about 64 tasks per worker "
+                                    "on large grids (at most 256 cells each), and at least "
+                                    "one task per worker; chunks interleave the grid so that "
+                                    "every task mixes cheap and costly cells", low=0),
         "retries": Key("int", 2, "retries of a task whose worker raised", low=0),
     },
 }

@@ -22,7 +22,7 @@ from ..catalog.errors import ArchiveError, ConfigError, SurveyError
 from ..catalog.status import Status
 from ..catalog.variables import V
 from . import archive
-from .cells import CellTask, build_starts, run_cells, warm_up
+from .cells import CellTask, build_starts, jobs_per_cell, run_cells, warm_up
 from .checkpoints import (
     checkpoint_dir,
     chunk_path,
@@ -221,10 +221,19 @@ def _start(stack, config, task, starts, todo, workers, address, clock):
     return client
 
 
+def chunk_size(cells: int, workers: int, per_cell: int) -> int:
+    """Cells per task: orbits for four rounds of SIMD lanes (64), so that a lane whose
+    orbit ends takes another, where the grid allows every worker a task, else what gives
+    every worker one; on large grids about 64 tasks per worker (a finer spread of cheap
+    and costly cells), at most 256 cells."""
+    lanes = -(-64 // per_cell)
+    return max(1, min(256, max(lanes, -(-cells // (64 * workers))), -(-cells // workers)))
+
+
 def _compute(client, task, starts, todo, folder, key, config, bar, round_):
     from dask.distributed import as_completed
-    size = config.tables["dask"]["chunk_size"] or min(
-        256, max(1, -(-todo.size // (64 * len(client.scheduler_info()["workers"])))))
+    size = config.tables["dask"]["chunk_size"] or chunk_size(
+        todo.size, len(client.scheduler_info()["workers"]), jobs_per_cell(task))
     futures = {client.submit(run_cells, task, ids, starts[ids], pure=False,
                              key=f"cells-{key}-{round_}-{int(ids[0])}",
                              retries=config.tables["dask"]["retries"]): ids
