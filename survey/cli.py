@@ -4,9 +4,12 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from pathlib import Path
 
 from .catalog import defaults
 
+# the embedded default survey (`python -m survey run`)
+DEFAULT_CONFIG = Path(__file__).parent / "default.toml"
 BENCH_PARTS = ["scan", "cell", "fixed", "integrator", "step", "indicators", "tori", "terms",
                "survey", "memory"]
 
@@ -80,8 +83,6 @@ def orbit_workflow(path, folder) -> list:
 
 
 def _plot(args):
-    from pathlib import Path
-
     from .pipeline.archive import open_archive
     from .presentation import plots
     with open_archive(args.archive) as ds:
@@ -93,8 +94,6 @@ def _plot(args):
 
 
 def _report(args):
-    from pathlib import Path
-
     from .pipeline.archive import open_archive
     from .presentation import report
     with open_archive(args.archive) as ds:
@@ -104,9 +103,13 @@ def _report(args):
 
 
 def _reproduce(args):
-    """Every workflow in workflows/: surveys to their archives, figures and reports; orbit
-    workflows to their figures -- all of results/."""
-    from pathlib import Path
+    """Every workflow in workflows/ and the embedded default: surveys to their archives,
+    figures and reports; orbit workflows to their figures. Everything is made in
+    results/.staging first; a file replaces its copy in results/ only if its content changed
+    (provenance -- dates, commit, machine -- aside), so an unchanged checkout stays clean.
+    With --check nothing is replaced: the files that differ are named and the exit code
+    is 1."""
+    import shutil
 
     import xarray as xr
 
@@ -114,34 +117,78 @@ def _reproduce(args):
     from .pipeline.config import load_config
     from .pipeline.sweep import run_survey
     from .presentation import report
-    paths = sorted(Path(args.workflows).glob("*.toml")) + [Path(__file__).parent /
-                                                             "default.toml"]
+    results = Path(args.results)
+    staging = results / ".staging"
+    staging.mkdir(parents=True, exist_ok=True)
+    paths = sorted(Path(args.workflows).glob("*.toml")) + [DEFAULT_CONFIG]
     if args.only:
         paths = [p for p in paths if p.stem in args.only]
     for path in paths:
         print(f"== {path}")
         if orbits.is_orbit_workflow(path):
-            for out in orbit_workflow(path, args.results):
-                print(f"wrote {out}")
+            for out in orbit_workflow(path, staging):
+                print(f"made {out}")
             continue
         config = load_config(path)
-        archive = run_survey(config, progress=False if args.no_progress else None,
-                             command=f"python -m survey reproduce ({path})")
-        with xr.open_dataset(archive) as ds:
-            written = report.write(ds, archive.parent, archive.stem)
-        print(f"wrote {archive}, {written} and its figures")
-    return 0
+        config.tables["survey"]["output"] = str(staging / f"{config.name}.nc")
+        made = run_survey(config, progress=False if args.no_progress else None,
+                          command=f"python -m survey reproduce ({path.name})")
+        with xr.open_dataset(made) as ds:
+            report.write(ds, staging, made.stem)
+        print(f"made {made}, its report and figures")
+    changed = []
+    for new in sorted(p for p in staging.iterdir() if p.is_file()):
+        old = results / new.name
+        why = _differs(old, new)
+        if why:
+            changed.append(f"{old}: {why}")
+            if not args.check:
+                os.replace(new, old)
+    if args.check:
+        print("\n".join([f"{len(changed)} file(s) in {results} are not what the current code "
+                         "makes:"] + changed) if changed else
+              f"{results} is what the current code makes")
+    else:
+        print("\n".join([f"updated {len(changed)} file(s):"] + changed) if changed else
+              f"nothing changed in {results}")
+    shutil.rmtree(staging, ignore_errors=True)
+    return 1 if args.check and changed else 0
+
+
+def _differs(old, new) -> str:
+    """Why `new` should replace `old` ('' if only provenance differs): archives by their
+    results (survey.pipeline.sweep.same_results), reports without their provenance line,
+    other files byte for byte; an archive or report made by uncommitted code is replaced
+    by one made by committed code."""
+    from .pipeline.sweep import same_results
+    from .presentation import report
+    if not old.exists():
+        return "new"
+    if new.suffix in (".nc", ".md") and _uncommitted(old) and not _uncommitted(new):
+        return "made by uncommitted code"
+    if new.suffix == ".nc":
+        return "; ".join(same_results(old, new))
+    if new.suffix == ".md":
+        strip = report.without_provenance
+        return "" if strip(old.read_text()) == strip(new.read_text()) else "text differs"
+    return "" if old.read_bytes() == new.read_bytes() else "content differs"
+
+
+def _uncommitted(path) -> bool:
+    """Whether an archive's or report's provenance names a commit with uncommitted changes."""
+    if path.suffix == ".nc":
+        import xarray as xr
+        with xr.open_dataset(path) as ds:
+            return str(ds.attrs.get("git_commit", "")).endswith("-dirty")
+    return "-dirty`" in path.read_text()
 
 
 def _run(args):
-    from pathlib import Path
-
     from .pipeline.config import load_config, parse_config
     from .pipeline.resources import ensure_writable
     from .pipeline.sweep import run_survey
     if args.config is None:
-        text = (Path(__file__).parent / "default.toml").read_text()
-        config = parse_config(text, "embedded default (survey/default.toml)")
+        config = parse_config(DEFAULT_CONFIG.read_text(), "embedded default (survey/default.toml)")
     else:
         config = load_config(args.config)
     if args.output:
@@ -206,7 +253,10 @@ def build_parser():
                                           "embedded default, and write results/: archives, "
                                           "figures, reports")
     rr.add_argument("--workflows", default="workflows")
-    rr.add_argument("--results", default="results", help="folder of the orbit figures")
+    rr.add_argument("--results", default="results", help="the folder to update (default results)")
+    rr.add_argument("--check", action="store_true",
+                    help="change nothing; exit 1 naming the files that are not what the "
+                         "current code makes")
     rr.add_argument("--only", action="append", help="only these workflows (file stem)")
     rr.add_argument("--no-progress", action="store_true")
     rr.set_defaults(func=_reproduce)

@@ -22,8 +22,13 @@ RTOL_MIN = 10.0 * EPS
 # Step control: h_new = h * 0.9 err^-(1/8 - 0.2 BETA) err_old^BETA, factor in [1/3, 6]
 # (Hairer's PI "Lund" stabilisation; DOP853 ships BETA = 0, DOPRI5 0.04). Measured on the
 # paper's orbits at 1e-12: rejected steps fall from 30% to 19% (chaotic) and 15% to 6%
-# (regular), with fewer RHS evaluations and no larger energy error.
-BETA = 0.04
+# (regular), with fewer RHS evaluations and no larger energy error. BETA = 5/128 (not
+# 0.04) makes both exponents multiples of 1/128: err^(-15/128) and err_old^(5/128) come from
+# square roots and products, the same bits on every CPU (libm's pow is not).
+BETA_ROOTS = 5                      # BETA = 5/128: err_old^BETA = (err_old^(1/128))^5
+ERR_FLOOR_ROOT = 1e-4                # err_old's floor, 1e-4, to the power 1/128:
+for _ in range(7):
+    ERR_FLOOR_ROOT = math.sqrt(ERR_FLOOR_ROOT)
 
 
 # ---------------------------------------------------------------- DOP853 tableau

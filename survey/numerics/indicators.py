@@ -17,6 +17,8 @@ started a tiny distance away.
 """
 from __future__ import annotations
 
+import math
+import statistics
 from typing import NamedTuple, Sequence
 
 import numpy as np
@@ -25,6 +27,7 @@ from ..catalog import defaults
 from ..catalog.indicators import IndicatorOptions
 from ..catalog.status import Status
 from ..catalog.variables import history_times
+from ..physics.portable import vdot, vnorm
 from ..physics.system import System, rhs
 from .events import Crossings
 from .integrate import EVAL, EVENTS, FINE, Outcome, integrate_batch
@@ -71,8 +74,22 @@ def _constraints(system: System, y0, project_flow: bool) -> np.ndarray:
         f = np.zeros(n)
         rhs(0.0, np.ascontiguousarray(y0, dtype=float), f, *system.kernel_args, 0)
         rows += [f, np.concatenate([-f[n // 2:], f[:n // 2]])]
-    q, r = np.linalg.qr(np.array(rows).T)
-    return q[:, np.abs(np.diag(r)) > 1e-12 * np.abs(r).max()].T
+    return _orthonormal(np.array(rows))
+
+
+def _orthonormal(rows: np.ndarray) -> np.ndarray:
+    """An orthonormal basis of the rows' span by modified Gram-Schmidt (sums in order, so
+    the same bits on every CPU, unlike LAPACK's QR); a row whose remainder is below 1e-12
+    of the largest row adds nothing."""
+    basis, floor = [], 1e-12 * float(np.max(vnorm(rows)))
+    for v in rows:
+        v = v.copy()
+        for q in basis:
+            v -= float(vdot(v, q)) * q
+        size = float(vnorm(v))
+        if size > floor:
+            basis.append(v / size)
+    return np.array(basis)
 
 
 def deviation_vectors(system: System, y0, count: int, seed: int, cell: int = 0,
@@ -83,18 +100,30 @@ def deviation_vectors(system: System, y0, count: int, seed: int, cell: int = 0,
     rng = np.random.default_rng([seed, cell, stream])
     w = rng.normal(size=(count, system.n))
     C = _constraints(system, y0, project_flow)
-    w -= (w @ C.T) @ C
-    return w / np.linalg.norm(w, axis=1, keepdims=True)
+    coefficients = vdot(w[:, None, :], C[None])         # (count, constraints)
+    for k in range(len(C)):
+        w -= coefficients[:, k:k + 1] * C[k]
+    return w / vnorm(w)[:, None]
 
 
 def _sali(w1, w2):
     """SALI and GALI_2 of two deviation vectors. For unit a, b: |a + b|^2 |a - b|^2 =
     4 (1 - (a.b)^2), so GALI_2 = |a ^ b| = |a + b| |a - b| / 2 -- from the components,
     without the cancellation of sqrt(1 - c^2) that stops GALI_2 near 1e-8."""
-    a = w1 / np.linalg.norm(w1, axis=-1, keepdims=True)
-    b = w2 / np.linalg.norm(w2, axis=-1, keepdims=True)
-    plus, minus = np.linalg.norm(a + b, axis=-1), np.linalg.norm(a - b, axis=-1)
+    a = w1 / vnorm(w1)[..., None]
+    b = w2 / vnorm(w2)[..., None]
+    plus, minus = vnorm(a + b), vnorm(a - b)
     return np.minimum(plus, minus), 0.5 * plus * minus
+
+
+def _spread(values) -> float:
+    """Sample standard deviation with exact sums (statistics: the same on any CPU); 0 for
+    one value, NaN if any is not finite."""
+    if len(values) < 2:
+        return 0.0
+    if not all(map(math.isfinite, values)):
+        return math.nan
+    return statistics.stdev(values)
 
 
 def _ls_slope(t, v):
@@ -102,8 +131,8 @@ def _ls_slope(t, v):
     t, v = t[ok], v[ok]
     if t.size < 2:
         return np.nan
-    t0 = t - t.mean()
-    return float(np.dot(t0, v - v.mean()) / np.dot(t0, t0))
+    t0 = t - math.fsum(t) / t.size
+    return math.fsum(t0 * (v - math.fsum(v) / v.size)) / math.fsum(t0 * t0)
 
 
 def conservation_errors(system: System, y0, states):
@@ -142,7 +171,7 @@ def ensemble(system: System, y0, options: IndicatorOptions, cell: int = 0,
     record = [EVENTS | EVAL | FINE] + [EVAL] * (nominal - 1)
     for j in range(o.perturbations):
         xi = deviation_vectors(system, y0, 1, o.seed, cell, stream=1 + j)[0]
-        yp = y0 + o.perturbation_size * np.linalg.norm(y0) * xi
+        yp = y0 + o.perturbation_size * float(vnorm(y0)) * xi
         starts.append(yp)
         tangents.append(deviation_vectors(system, yp, per_job, o.seed, cell, o.project_flow,
                                           stream=1 + j))
@@ -188,7 +217,6 @@ def combine(system: System, y0, t_final: float, options: IndicatorOptions, jobs:
         if res.ok and res.t > 0:
             ftles.append(res.log_growth[0] / res.t)
             megnos.append(res.megno_sums[1] / res.t)
-    spread = lambda v: float(np.std(v, ddof=1)) if len(v) > 1 else 0.0
 
     if k >= 2:
         sali_h, _ = _sali(tang[:, 0], tang[:, 1])
@@ -203,11 +231,11 @@ def combine(system: System, y0, t_final: float, options: IndicatorOptions, jobs:
     half = history >= 0.5 * t_final
     return ChaosIndicators(
         status=status, t=out.t,
-        ftle=float(np.mean(ftles)), ftle_spread=spread(ftles),
-        megno=float(np.mean(megnos)), megno_spread=spread(megnos),
+        ftle=statistics.fmean(ftles), ftle_spread=_spread(ftles),
+        megno=statistics.fmean(megnos), megno_spread=_spread(megnos),
         megno_slope=_ls_slope(th[half], megno_h[half]),
         fli=float(out.fli[0]), sali=float(sali), gali2=float(gali2), ftle_wba=out.ftle_wba,
-        history_time=history, ftle_history=ftle_h.mean(axis=1),
+        history_time=history, ftle_history=sum(ftle_h.T) / ftle_h.shape[1],
         megno_history=megno_h, fli_history=fli_h, sali_history=sali_h,
         energy_error=dE, angular_momentum_error=dJ,
         n_steps=out.n_steps, n_rhs=out.n_rhs, crossings=out.crossings,

@@ -30,12 +30,29 @@ from numba import objmode
 
 from ..catalog import defaults
 from ..catalog.status import Status
+from ..physics import portable
 from ..physics.jit import helper, kernel, leaf
 from ..physics.system import SIMD_LANES, System, rhs, rhs_lanes, workspace_size
-from .dop853 import (BETA, EPS, RTOL_MIN, dense_eval, dense_prepare, error_norms,
-                     norm_block, stages)
-from .events import (Crossings, Event, encode_events, event_slope, event_value, may_cross,
-                     scan_events)
+from .dop853 import (
+    BETA_ROOTS,
+    EPS,
+    ERR_FLOOR_ROOT,
+    RTOL_MIN,
+    dense_eval,
+    dense_prepare,
+    error_norms,
+    norm_block,
+    stages,
+)
+from .events import (
+    Crossings,
+    Event,
+    encode_events,
+    event_slope,
+    event_value,
+    may_cross,
+    scan_events,
+)
 
 # the kernel returns plain integers (numba freezes module globals as constants)
 OK_, EVENT_, COLLISION_, STEP_LIMIT_, NONFINITE_, TIME_LIMIT_ = (
@@ -92,7 +109,7 @@ class Lanes(NamedTuple):
     t: np.ndarray
     h: np.ndarray
     h_max: np.ndarray
-    err_old: np.ndarray
+    err_old: np.ndarray       # (L,) max(err, 1e-4)^(1/128) of the last accepted step
     flags: np.ndarray         # (L, 4) rejected last, nonfinite last, last step, tried
     i_eval: np.ndarray        # (L,) next t_eval / t_fine sample
     i_fine: np.ndarray
@@ -127,8 +144,8 @@ def _initial_step(masses, d, measure, prof, par, n_tan, nf, n_err, t, y, K, yt, 
     dny = 0.0
     for a in range(n_err):
         sk = atol + rtol * abs(y[a])
-        dnf += (K[0, a] / sk) ** 2
-        dny += (y[a] / sk) ** 2
+        dnf += (K[0, a] / sk) * (K[0, a] / sk)
+        dny += (y[a] / sk) * (y[a] / sk)
     h = 1e-6 if (dnf <= 1e-10 or dny <= 1e-10) else 0.01 * math.sqrt(dny / dnf)
     h = min(h, h_max)
     for a in range(nf):
@@ -137,10 +154,11 @@ def _initial_step(masses, d, measure, prof, par, n_tan, nf, n_err, t, y, K, yt, 
     der2 = 0.0
     for a in range(n_err):
         sk = atol + rtol * abs(y[a])
-        der2 += ((K[1, a] - K[0, a]) / sk) ** 2
+        q = (K[1, a] - K[0, a]) / sk
+        der2 += q * q
     der2 = math.sqrt(der2 / max(n_err, 1)) / h
     der12 = max(abs(der2), math.sqrt(dnf / max(n_err, 1)))
-    h1 = max(1e-6, h * 1e-3) if der12 <= 1e-15 else (0.01 / der12) ** (1.0 / 8.0)
+    h1 = max(1e-6, h * 1e-3) if der12 <= 1e-15 else portable.root8(0.01 / der12)[0]
     return min(100.0 * h, h1, h_max)
 
 
@@ -181,12 +199,12 @@ def _start(k, j, ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_ta
     ln.t_next_renorm[k] = t0 + direction * renorm_dt
     for f in range(4):
         ln.flags[k, f] = 0
-    ln.err_old[k] = 1e-4
+    ln.err_old[k] = ERR_FLOOR_ROOT
     if not _finite(y):
         _finish(k, ln, out, NONFINITE_, rows)
         return False
     for tt in range(n_tan):
-        out.log_growth[j, tt] = -math.log(norm_block(y, n * (1 + tt), n))
+        out.log_growth[j, tt] = -portable.log(norm_block(y, n * (1 + tt), n))
     rhs(t0, y, K[0], masses, d, measure, prof, par, n_tan)
     out.counts[j, 2] += 1
     for i in range(nf):
@@ -322,7 +340,7 @@ def _record(k, ln, out, rows, t0, t1, masses, d, megno, events, max_events, n_su
             out.sample_log[rs, i_eval, tt] = log_growth[tt]
         if megno and n_eval >= 2 * n:
             part = t_eval[i_eval] - t
-            L_at = log_growth[0] + math.log(norm_block(sample, n, n))
+            L_at = log_growth[0] + portable.log(norm_block(sample, n, n))
             elapsed = t_eval[i_eval] - t0
             int_at = int_L + 0.5 * part * (L_prev + L_at)
             Y_at = 2.0 * (elapsed * L_at - int_at) / elapsed if elapsed != 0.0 else 0.0
@@ -371,11 +389,11 @@ def _advance(k, ln, out, t0, t1, n, n_tan, megno, renorm_dt, NW):
         for tt in range(n_tan):
             off = n * (1 + tt)
             wn = NW[tt * L + k]
-            Lw = log_growth[tt] + math.log(wn)
+            Lw = log_growth[tt] + portable.log(wn)
             out.max_log[j, tt] = max(out.max_log[j, tt], Lw)
             if tt == 0:
                 x = (0.5 * (t_old + t) - t0) / (t1 - t0)
-                g = math.exp(-1.0 / (x * (1.0 - x))) if 0.0 < x < 1.0 else 0.0
+                g = portable.exp(-1.0 / (x * (1.0 - x))) if 0.0 < x < 1.0 else 0.0
                 out.wba[j, 0] += g * (Lw - L_prev)
                 out.wba[j, 1] += g * (t - t_old)
                 if megno:
@@ -392,7 +410,7 @@ def _advance(k, ln, out, t0, t1, n, n_tan, megno, renorm_dt, NW):
                 for a in range(off, off + n):
                     y[a] *= inv
                     K0[a] *= inv
-                log_growth[tt] += math.log(wn)
+                log_growth[tt] += portable.log(wn)
     ln.acc[k, 0], ln.acc[k, 1], ln.acc[k, 2] = L_prev, int_L, Y_prev
     return OK_ if last else RUNNING
 
@@ -468,7 +486,7 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
             ln.flags[k, 1] = 0
             if err > 1.0:
                 counts[1] += 1
-                ln.h[k] *= max(1.0 / 3.0, 0.9 * err ** (-1.0 / 8.0))
+                ln.h[k] *= max(1.0 / 3.0, 0.9 / portable.root8(err)[0])
                 ln.flags[k, 0] = 1
                 continue
             ln.flags[k, 3] = 1          # accepted
@@ -495,8 +513,9 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
                 _finish(k, ln, out, OK_, rows)
                 continue
             err = ln.err[k]
-            fac = 0.9 * max(err, 1e-10) ** (-1.0 / 8.0 + 0.2 * BETA) * ln.err_old[k] ** BETA
-            ln.err_old[k] = max(err, 1e-4)
+            r8, r128 = portable.root8(max(err, 1e-10))
+            fac = 0.9 * r128 / r8 * portable.ipow(ln.err_old[k], BETA_ROOTS)
+            ln.err_old[k] = r128 if err >= 1e-4 else ERR_FLOOR_ROOT
             fac = min(6.0, max(1.0 / 3.0, fac))
             if ln.flags[k, 0]:
                 fac = min(fac, 1.0)
@@ -671,9 +690,9 @@ class Outcome(NamedTuple):
     @property
     def deviations(self) -> np.ndarray:
         """Tangent vectors at their true length |w0| e^log_growth (inf past e^709)."""
-        norms = np.linalg.norm(self.tangents, axis=1, keepdims=True)
+        norms = portable.vnorm(self.tangents)[:, None]
         with np.errstate(over="ignore"):
-            scale = self.tangent_norms0 * np.exp(self.log_growth)
+            scale = self.tangent_norms0 * portable.vexp(self.log_growth)
             return self.tangents / norms * scale[:, None]
 
 
@@ -749,7 +768,7 @@ def _outcome(res, j, rows, n, n_tan, tan, megno, max_events, t_eval, n_eval, t_f
              sample_tangents) -> Outcome:
     y = res.y[j]
     tans = y[n:n * (1 + n_tan)].reshape(n_tan, n)
-    norms = np.linalg.norm(tans, axis=1)
+    norms = portable.vnorm(tans)
     re, rs, rf = rows
     if rs >= 0:
         samples, s_log, s_megno = res.samples[rs], res.sample_log[rs], res.sample_megno[rs]
@@ -758,7 +777,7 @@ def _outcome(res, j, rows, n, n_tan, tan, megno, max_events, t_eval, n_eval, t_f
         s_log, s_megno = np.zeros((0, n_tan)), np.zeros((0, 2))
     if n_tan and sample_tangents and rs >= 0:
         w = samples[:, n:n * (1 + n_tan)].reshape(-1, n_tan, n)
-        s_log = s_log + np.log(np.linalg.norm(w, axis=2))
+        s_log = s_log + portable.vlog(portable.vnorm(w))
     else:
         s_log = np.full((samples.shape[0], n_tan), np.nan)
     counts, wba, log_g = res.counts[j], res.wba[j], res.log_growth[j]
@@ -768,9 +787,9 @@ def _outcome(res, j, rows, n, n_tan, tan, megno, max_events, t_eval, n_eval, t_f
         Crossings(np.zeros(0, np.int64), np.zeros(0), np.zeros((0, n)))
     return Outcome(
         status=Status(int(res.status[j])), t=float(res.t[j]), y=y[:n].copy(),
-        tangents=tans.copy(), tangent_norms0=np.linalg.norm(tan, axis=1),
+        tangents=tans.copy(), tangent_norms0=portable.vnorm(tan),
         megno_sums=res.megno_sums[j] if megno else np.zeros(0), sample_megno=s_megno,
-        log_growth=log_g + np.log(norms), fli=np.maximum(res.max_log[j], log_g + np.log(norms)),
+        log_growth=log_g + portable.vlog(norms), fli=np.maximum(res.max_log[j], log_g + portable.vlog(norms)),
         n_steps=int(counts[0]), n_rejected=int(counts[1]), n_rhs=int(counts[2]),
         h_min=float(res.h_range[j, 0]), h_max=float(res.h_range[j, 1]), crossings=crossings,
         n_crossings=int(counts[3]), t_eval=t_eval, samples=samples, sample_log_growth=s_log,

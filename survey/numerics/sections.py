@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 
+from ..physics import portable
 from ..physics.jacobi import jacobi_weights, phase_form, position_form
 from ..physics.system import System
 from .events import Area, Event, Linear, Quadratic, Sides
@@ -35,7 +36,7 @@ def section_event(system: System, coordinate="phi", value=math.pi / 2, direction
     if coordinate in REDUCED_SURFACES:
         S, H, Ps, Ph = jacobi_weights(system)
         if coordinate == "phi":
-            c, s_ = math.cos(value), math.sin(value)
+            c, s_ = portable.cos(value), portable.sin(value)
             g = c * position_form(system, S, H, skew=True) - s_ * position_form(system, S, H)
             guard = c * position_form(system, S, H) + s_ * position_form(system, S, H, True)
             return Event(Quadratic(g), direction, guard=Quadratic(guard), name="phi")

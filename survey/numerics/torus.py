@@ -239,7 +239,9 @@ def frequency_analysis(system, states: np.ndarray, dt: float, lines: int = defau
     if known.sum() >= 2:
         vectors = integer_vectors(int(known.sum()), order)
         dist = np.abs(vectors @ freq[known]) / (np.linalg.norm(vectors, axis=1) * scale)
-        best = int(np.argmin(dist))
+        # the lowest order among the vectors equally near (multiples of one vector, or
+        # vectors on a frequency that is ~0): a tie is not left to rounding
+        best = int(np.flatnonzero(dist <= dist.min() * (1.0 + 1e-9) + 1e-15)[0])
         m[known] = vectors[best]
         order_found, distance = int(np.abs(vectors[best]).sum()), float(dist[best])
     return Frequencies(freq, change, diffusion, m, order_found, distance)

@@ -18,6 +18,7 @@ from typing import Callable
 import numpy as np
 
 from ..catalog.errors import Inaccessible
+from . import portable
 from .equilibria import equilibrium_positions, forces
 from .forces import profile
 from .jacobi import (
@@ -34,7 +35,7 @@ SQ3 = math.sqrt(3.0)
 
 
 def rotation(angle: float) -> np.ndarray:
-    c, s = math.cos(angle), math.sin(angle)
+    c, s = portable.cos(angle), portable.sin(angle)
     return np.array([[c, -s], [s, c]])
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 
+from . import portable
 from .jit import helper, leaf
 from .terms import BARRIER, PERIMETER, POWER, YUKAWA
 
@@ -65,18 +66,20 @@ def profile(code, par, x):
         if k == 2.0:
             return 0.5 * c * x * x, c * x, c
         if k == 0.0:
-            return c * math.log(x), c / x, -c / (x * x)
-        xk2 = x ** (k - 2.0)
+            return c * portable.log(x), c / x, -c / (x * x)
+        xk2 = portable.power(x, k - 2.0)
         return c * xk2 * x * x / k, c * xk2 * x, c * (k - 1.0) * xk2
     if code == YUKAWA:
         c, g = par[0], par[1]
-        e = math.exp(-g * x)
+        e = portable.exp(-g * x)
         return (-c * e / x, c * e * (g * x + 1.0) / (x * x),
                 -c * e * (g * g * x * x + 2.0 * g * x + 2.0) / (x * x * x))
     if code == BARRIER:
         a, b = par[0], par[1]
         return a / x + b * x * x, -a / (x * x) + 2.0 * b * x, 2.0 * a / (x * x * x) + 2.0 * b
-    eps, r6 = par[0], (par[1] / x) ** 6     # LENNARD_JONES
+    r2 = par[1] / x                          # LENNARD_JONES
+    r2 = r2 * r2
+    eps, r6 = par[0], r2 * r2 * r2
     return (4.0 * eps * (r6 * r6 - r6), 24.0 * eps * (r6 - 2.0 * r6 * r6) / x,
             24.0 * eps * (26.0 * r6 * r6 - 7.0 * r6) / (x * x))
 

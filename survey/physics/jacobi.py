@@ -14,6 +14,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from . import portable
 from .forces import profile
 from .geometry import cross
 from .system import System
@@ -98,8 +99,8 @@ def reduced_sides(system: System, sigma, eta, phi):
     a = |h - m1/m12 s|, b = |h + m2/m12 s|."""
     m = JacobiMasses.of(system)
     al, be = m.m1 / m.m12, m.m2 / m.m12
-    a = np.sqrt(eta ** 2 + (al * sigma) ** 2 - 2 * al * sigma * eta * np.cos(phi))
-    b = np.sqrt(eta ** 2 + (be * sigma) ** 2 + 2 * be * sigma * eta * np.cos(phi))
+    a = np.sqrt(eta ** 2 + (al * sigma) ** 2 - 2 * al * sigma * eta * portable.vcos(phi))
+    b = np.sqrt(eta ** 2 + (be * sigma) ** 2 + 2 * be * sigma * eta * portable.vcos(phi))
     return a, b, sigma
 
 
@@ -112,7 +113,7 @@ def reduced_potential(system: System, sigma, eta, phi):
         sigma, eta, phi = np.broadcast_arrays(*(np.asarray(v, dtype=float)
                                                 for v in (sigma, eta, phi)))
         s = np.stack([sigma, np.zeros_like(sigma)], axis=-1)
-        h = np.stack([eta * np.cos(phi), eta * np.sin(phi)], axis=-1)
+        h = np.stack([eta * portable.vcos(phi), eta * portable.vsin(phi)], axis=-1)
         q = np.concatenate([-m.m2 / m.m12 * s - m.m3 / m.mT * h,
                             m.m1 / m.m12 * s - m.m3 / m.mT * h, m.m12 / m.mT * h], axis=-1)
         return system.potential_energy(np.concatenate([q, np.zeros_like(q)], axis=-1))
@@ -120,7 +121,7 @@ def reduced_potential(system: System, sigma, eta, phi):
     if pot.measure == PERIMETER:
         x = sum(reduced_sides(system, sigma, eta, phi))
     else:
-        x = 0.5 * sigma * eta * np.abs(np.sin(phi))
+        x = 0.5 * sigma * eta * np.abs(portable.vsin(phi))
     return np.vectorize(lambda v: profile(pot.profile, pot.par, float(v))[0])(x)
 
 
@@ -148,8 +149,8 @@ def to_cartesian(system: System, r: Reduced, centre=(0.0, 0.0), momentum=(0.0, 0
     a, b = m.mu1 * sig ** 2, m.mu2 * eta ** 2
     phidot = 2.0 * phi_momentum_coefficient(system, sig, eta) * r.p_phi
     thdot = (r.J - b * phidot) / (a + b)
-    es = np.stack([np.cos(th), np.sin(th)], axis=-1)
-    eh = np.stack([np.cos(th + phi), np.sin(th + phi)], axis=-1)
+    es = np.stack([portable.vcos(th), portable.vsin(th)], axis=-1)
+    eh = np.stack([portable.vcos(th + phi), portable.vsin(th + phi)], axis=-1)
     perp = lambda e: np.stack([-e[..., 1], e[..., 0]], axis=-1)
     s, h = sig[..., None] * es, eta[..., None] * eh
     sdot = (r.p_sigma / m.mu1)[..., None] * es + (sig * thdot)[..., None] * perp(es)

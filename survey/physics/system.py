@@ -27,8 +27,17 @@ from .forces import (
 )
 from .geometry import cross
 from .jit import helper, kernel, leaf
-from .terms import (AREA, BARRIER, DISTANCE, NONE, PERIMETER, POWER, TRIANGLE, Potential,
-                    make_potential)
+from .terms import (
+    AREA,
+    BARRIER,
+    DISTANCE,
+    NONE,
+    PERIMETER,
+    POWER,
+    TRIANGLE,
+    Potential,
+    make_potential,
+)
 
 
 @dataclass(frozen=True, eq=False)

@@ -105,6 +105,43 @@ def versions() -> dict[str, str]:
     return out
 
 
+# Settings that make this machine compute like another (each changes which code runs)
+MACHINE_OVERRIDES = ("NUMBA_CPU_NAME", "NUMBA_CPU_FEATURES", "NPY_DISABLE_CPU_FEATURES",
+                     "GLIBC_TUNABLES", "OPENBLAS_CORETYPE")
+
+
+def machine() -> str:
+    """The CPU and the code paths chosen for it: the CPU model, the target numba compiles
+    for, numpy's SIMD dispatch level, the C library, and any setting that overrides them.
+    Two machines with the same string compute the same bits; the integration and the
+    variational indicators agree bit for bit on any x86-64 machine (survey.physics.portable),
+    the torus analysis (numpy's SIMD, BLAS) within rounding."""
+    import platform
+
+    from numba.core import config as numba_config
+    from numpy._core import _multiarray_umath as umath
+    model = ""
+    try:
+        with open("/proc/cpuinfo") as f:
+            model = next((line.split(":", 1)[1].strip() for line in f
+                          if line.startswith("model name")), "")
+    except OSError:
+        pass
+    target = numba_config.CPU_NAME or _host_cpu()
+    dispatched = [k for k in umath.__cpu_dispatch__ if umath.__cpu_features__.get(k)]
+    libc = " ".join(platform.libc_ver()).strip()
+    overrides = [f"{k}={os.environ[k]}" for k in MACHINE_OVERRIDES if os.environ.get(k)]
+    return "; ".join(filter(None, [
+        f"{platform.machine()} {model or platform.processor() or 'unknown CPU'}",
+        f"numba target {target}", f"numpy SIMD {'/'.join(dispatched) or 'baseline'}",
+        libc, ", ".join(overrides)]))
+
+
+def _host_cpu() -> str:
+    from llvmlite import binding
+    return binding.get_host_cpu_name()
+
+
 def git_commit() -> str:
     here = Path(__file__).resolve().parents[1]
     try:
@@ -175,6 +212,7 @@ def attributes(config, command: str) -> dict:
         "result_key": config.result_key(),
         "grid_axes": " ".join(a.name for a in config.axes),
         "git_commit": git_commit(),
+        "machine": machine(),
         **{f"version_{k}": v for k, v in ver.items()},
     }
 

@@ -65,7 +65,7 @@ class Key:
 SCHEMA: dict[str, dict[str, Key]] = {
     "survey": {
         "name": Key("str", "survey", "name of the survey: archive title and default file name"),
-        "output": Key("str", "", "archive path (default results/<name>.nc); its folder is "
+        "output": Key("str", "", "archive path (default runs/<name>.nc, outside version control); its folder is "
                                  "created; checkpoints go to <output>.checkpoints/"),
     },
     "system": {
@@ -209,7 +209,7 @@ class Config:
 
     @property
     def output(self) -> Path:
-        out = self.tables["survey"]["output"] or f"results/{self.name}.nc"
+        out = self.tables["survey"]["output"] or f"runs/{self.name}.nc"
         return Path(out)
 
     @property

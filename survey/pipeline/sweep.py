@@ -20,7 +20,7 @@ import numpy as np
 
 from ..catalog.errors import ArchiveError, ConfigError, SurveyError
 from ..catalog.status import Status
-from ..catalog.variables import V
+from ..catalog.variables import ANALYSIS_ROUNDING, BY_NAME, V
 from . import archive
 from .cells import CellTask, build_starts, jobs_per_cell, run_cells, warm_up
 from .checkpoints import (
@@ -257,10 +257,11 @@ def run(source, **kw):
 def verify(path, cells: int = 8, seed: int = 0, differences: dict | None = None):
     """Check an archive against its stored config -- the config's sha256, the grid
     coordinates, the variables, their dimensions and attributes -- then recompute a sample
-    of cells and compare every variable the schema declares reproducible, bit for bit.
+    of cells and compare every variable the schema declares reproducible: bit for bit, except
+    that on a machine other than the one that wrote the archive the torus analysis's
+    variables may differ by their declared rounding (catalog.variables.Var.rounding).
     Returns (ok, report lines), each mismatch with its largest difference relative to the
-    value (rounding on another machine shows as ~1e-16, a real change as much more);
-    `differences`, if given, receives those per variable. A file that is not a survey
+    value; `differences`, if given, receives those per variable. A file that is not a survey
     archive raises ArchiveError."""
     with archive.open_archive(path) as ds:
         try:
@@ -272,6 +273,7 @@ def verify(path, cells: int = 8, seed: int = 0, differences: dict | None = None)
         if found:
             return False, ["the archive does not match its stored config:"] + \
                 [f"  {p}" for p in found]
+        made_on = ds.attrs.get("machine", "an unrecorded machine")
         n = config.n_cells
         others = np.random.default_rng(seed).permutation(np.arange(1, n - 1))[:max(cells - 2, 0)]
         sample = np.unique(np.concatenate([[0, n - 1], others]))   # first, last, random
@@ -288,33 +290,104 @@ def verify(path, cells: int = 8, seed: int = 0, differences: dict | None = None)
     timed_out = stored[V.status][sample] == Status.TIME_LIMIT
     sample = sample[~timed_out]
     fresh = run_cells(CellTask.of(config), sample, build_starts(config)[sample])
-    lines, ok = [], True
-    for name, values in stored.items():
-        a, b = values[sample], fresh[name].astype(values.dtype)
-        if a.tobytes() != b.tobytes():
-            ok = False
-            worst = _relative_difference(a, b)
-            if differences is not None:
-                differences[name] = worst
-            lines.append(f"{name}: differs in {np.sum(~_equal(a, b))} of {len(sample)} cells; "
-                         f"largest difference {worst:.1e} of the value")
+    here = archive.machine()
+    lines, rounded = compare({k: v[sample] for k, v in stored.items()}, fresh,
+                             made_on != here, differences)
+    ok = not lines
     for name in rederived:
         ok = False
         lines.append(f"{name}: differs from what its evidence in the archive gives "
                      "(survey.analysis.classify)")
-    lines.insert(0, f"recomputed cells {', '.join(map(str, sample))} of {n}: "
-                    + ("all reproducible variables match bit for bit" if ok else "MISMATCH"))
+    verdict = "MISMATCH" if not ok else "all reproducible variables match bit for bit" \
+        if not rounded else ("all reproducible variables match bit for bit, except that "
+                             f"{', '.join(rounded)} agree within rounding on a different "
+                             "machine")
+    lines.insert(0, f"recomputed cells {', '.join(map(str, sample))} of {n}: {verdict}")
+    if made_on != here:
+        lines.append(f"the archive was made on {made_on}; this is {here}")
     if timed_out.any():
         lines.append(f"skipped {timed_out.sum()} sampled cells that hit cell_time_limit (not "
                      "reproducible)")
     return ok, lines
 
 
+def same_results(old, new) -> list[str]:
+    """How archive `new` differs from archive `old` beyond provenance (when and where it was
+    made, the code's commit, the run times): the config, the coordinates and every
+    reproducible variable, compared as verify compares (the torus analysis within rounding
+    if the two were made on different machines). Empty if they agree."""
+    with archive.open_archive(old) as a, archive.open_archive(new) as b:
+        if a.attrs["config"] != b.attrs["config"]:
+            return ["the config differs"]
+        if set(a.variables) != set(b.variables):
+            return ["the variables differ: " + ", ".join(sorted(set(a.variables)
+                                                                ^ set(b.variables)))]
+        names = [k for k in a.variables if k not in BY_NAME or BY_NAME[k].reproducible]
+        stored = {k: a[k].values for k in names}
+        fresh = {k: b[k].values for k in names}
+        lines, _ = compare(stored, fresh, a.attrs.get("machine") != b.attrs.get("machine"))
+        return lines
+
+
+def compare(stored: dict, fresh: dict, other_machine: bool, differences: dict | None = None):
+    """Compare two sets of a survey's variables over the same cells: (lines naming each
+    variable that differs, with its largest difference relative to the value; the names
+    that differ only by the rounding another machine may add, if `other_machine`)."""
+    lines, rounded = [], []
+    for name, values in stored.items():
+        a, b = values, fresh[name].astype(values.dtype)
+        if a.tobytes() == b.tobytes():
+            continue
+        if other_machine and a.shape == b.shape and _within_rounding(name, a, b, stored, fresh):
+            rounded.append(name)
+            continue
+        worst = _relative_difference(a, b) if a.shape == b.shape else np.inf
+        if differences is not None:
+            differences[name] = worst
+        lines.append(f"{name}: differs in {np.sum(~_equal(a, b)) if a.shape == b.shape else 'all'}"
+                     f" of {len(a)} cells; largest difference {worst:.1e} of the value")
+    return lines, rounded
+
+
+def _within_rounding(name, a, b, stored, fresh) -> bool:
+    """Whether a and b (stored and recomputed values of `name`) differ only by the rounding
+    another machine may add, propagated as the variable declares (catalog.variables
+    ROUNDING). The nearest resonance (an integer vector and its order) may change only
+    where the two vectors are equally near the stored frequencies."""
+    kind, eps = BY_NAME[name].rounding, ANALYSIS_ROUNDING
+    if not kind:
+        return False
+    if kind == "tie":
+        nu = stored[V.frequency]
+        m_a, m_b = stored[V.resonance], fresh[V.resonance].astype(np.int64)
+        for k in np.flatnonzero(~_equal(a, b)):
+            known = np.isfinite(nu[k])
+            if not known.any():
+                return False
+            scale = np.max(np.abs(nu[k][known]))
+            d = [abs(float(m[k][known] @ nu[k][known])) / (np.linalg.norm(m[k][known]) * scale)
+                 if np.any(m[k][known]) else np.inf for m in (m_a, m_b)]
+            if not abs(d[0] - d[1]) <= eps:
+                return False
+        return True
+    if a.dtype.kind != "f" or np.any(np.isnan(a) != np.isnan(b)):
+        return False
+    size = np.maximum(np.abs(a), np.abs(b))
+    allowed = {"value": eps * size,
+               "log10": eps * 10.0 ** np.minimum(size, 300.0) / np.log(10.0),
+               "change": eps * np.abs(stored[V.frequency]),
+               "normalised": np.full(a.shape, eps)}[kind]
+    known = ~np.isnan(a)
+    return bool(np.all(np.abs(a - b)[known] <= allowed[known]))
+
+
 def _relative_difference(a, b) -> float:
     """max |a - b| / max(|a|, |b|) over the elements that differ (inf where only one is
     NaN); integers by their absolute difference."""
-    if a.dtype.kind != "f":
+    if a.dtype.kind in "iub":
         return float(np.max(np.abs(a.astype(np.int64) - b.astype(np.int64))))
+    if a.dtype.kind != "f":
+        return np.inf
     nan_a, nan_b = np.isnan(a), np.isnan(b)
     if np.any(nan_a != nan_b):
         return np.inf

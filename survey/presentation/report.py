@@ -29,6 +29,16 @@ def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
     return max(0.0, centre - half), min(1.0, centre + half)
 
 
+PROVENANCE_LINE = "- Code: survey "
+
+
+def without_provenance(text: str) -> str:
+    """A report's text without its provenance line (version, commit, date, command): what
+    `reproduce` compares."""
+    return "\n".join(line for line in text.splitlines()
+                     if not line.startswith(PROVENANCE_LINE))
+
+
 def write(ds, folder, stem: str | None = None, figures: bool = True) -> Path:
     """Write STEM_report.md and its figures into `folder`; returns the report's path."""
     folder = Path(folder)
@@ -79,7 +89,7 @@ def markdown(ds, figure_names=()) -> str:
             f"{integ.get('rtol', defaults.RTOL):g}, atol = {integ.get('atol', defaults.ATOL):g}; "
             f"chaos indicators {', '.join(which)}; torus analysis every "
             f"{tori.get('sample_interval', defaults.SAMPLE_INTERVAL):g} time units.",
-            f"- Code: survey {ds.attrs.get('version_survey', '?')}, commit "
+            f"{PROVENANCE_LINE}{ds.attrs.get('version_survey', '?')}, commit "
             f"`{ds.attrs.get('git_commit', '?')}`; {ds.attrs.get('history', '')}.", ""]
 
     out += ["## Regimes", "", "| regime | cells | share | 95% interval | meaning |",

@@ -1,0 +1,196 @@
+"""Elementary functions that give the same bits on every x86-64 machine.
+
+glibc's exp, log, pow, sin and cos pick an implementation by the CPU's features (FMA, AVX2),
+and numpy's pick SIMD versions (AVX-512 on some machines, none on others): the same orbit
+then rounds differently on another machine, and a chaotic orbit amplifies that into any
+digit. The functions here use only IEEE-754 addition, multiplication, division, square
+root and exact scaling by powers of two -- each correctly rounded, so every CPU and every
+compiler target returns the same bits -- in the classic argument reductions (Cody-Waite,
+as in fdlibm) with series long enough for about one ulp.
+
+Scalar versions inline into kernels; `vexp`, `vlog`, `vsin`, `vcos` are their numpy ufuncs
+for Python code, and `vnorm` and `vdot` the Euclidean norm and the dot product along the last
+axis summed in order (numpy's and BLAS's sums change their order with the CPU).
+"""
+from __future__ import annotations
+
+import math
+
+from numba import guvectorize, vectorize
+
+from .jit import helper
+
+# ln 2 split so that k * LN2_HI is exact for |k| < 2^20 (fdlibm's constants; the test
+# checks them against ln 2 to 50 digits)
+LN2_HI = 0.6931471803691238
+LN2_LO = 1.9082149292705877e-10
+INV_LN2 = 1.4426950408889634
+# pi/2 in three pieces of 33 bits, so that k * PIO2_1 and k * PIO2_2 are exact for |k| < 2^20
+PIO2_1 = 1.5707963267341256
+PIO2_2 = 6.077100506303966e-11
+PIO2_3 = 2.0222662487959506e-21
+TWO_OVER_PI = 0.6366197723675814
+TRIG_MAX = 1.0e5           # |x| beyond this: glibc (reduction by three pieces loses bits)
+SQRT_HALF = 0.7071067811865476
+EXP_MAX = 709.782712893384
+EXP_MIN = -745.1332191019412
+# series coefficients, highest power first (each 1/n! correctly rounded)
+EXP_SERIES = tuple(1.0 / math.factorial(n) for n in range(13, 1, -1))             # r^13..r^2
+LOG_SERIES = tuple(2.0 / n for n in range(23, 1, -2))                          # z^10..z^0 of R/z
+SIN_SERIES = tuple((-1.0) ** (n // 2) / math.factorial(n) for n in range(19, 2, -2))  # z^8..z^1
+COS_SERIES = tuple((-1.0) ** (n // 2) / math.factorial(n) for n in range(18, 3, -2))  # z^7..z^2
+
+
+@helper
+def exp(x):
+    """e^x: x = k ln2 + r, |r| <= ln2/2, e^r by its Taylor series to r^13, times 2^k."""
+    if not x < EXP_MAX:
+        return x if x != x else math.inf
+    if not x > EXP_MIN:
+        return 0.0
+    k = math.floor(x * INV_LN2 + 0.5)
+    r_hi = x - k * LN2_HI
+    r = r_hi - k * LN2_LO
+    p = 0.0
+    for c in EXP_SERIES:
+        p = p * r + c
+    e = 1.0 + (r + r * r * p)
+    ki = int(k)
+    if ki < -1020:              # subnormal result: scale in two exact halves
+        return math.ldexp(math.ldexp(e, ki + 600), -600)
+    return math.ldexp(e, ki)
+
+
+@helper
+def log(x):
+    """ln x: x = 2^k m with m in [sqrt(1/2), sqrt(2)), f = m - 1, s = f / (2 + f),
+    ln m = f - (f^2/2 - s (f^2/2 + R(s^2))) with R the atanh series (fdlibm's form)."""
+    if not x > 0.0:
+        return -math.inf if x == 0.0 else math.nan
+    if x == math.inf:
+        return x
+    m, k = math.frexp(x)
+    if m < SQRT_HALF:
+        m *= 2.0
+        k -= 1
+    f = m - 1.0
+    s = f / (2.0 + f)
+    z = s * s
+    R = 0.0
+    for c in LOG_SERIES:
+        R = R * z + c
+    R = R * z
+    hfsq = 0.5 * f * f
+    dk = float(k)
+    return dk * LN2_HI - ((hfsq - (s * (hfsq + R) + dk * LN2_LO)) - f)
+
+
+@helper
+def _reduce(x):
+    """x = k pi/2 + r, |r| <= pi/4 (about), for |x| <= TRIG_MAX; returns (k mod 4, r)."""
+    k = math.floor(x * TWO_OVER_PI + 0.5)
+    r = ((x - k * PIO2_1) - k * PIO2_2) - k * PIO2_3
+    return int(k) & 3, r
+
+
+@helper
+def _sin_series(r):
+    z = r * r
+    p = 0.0
+    for c in SIN_SERIES:
+        p = p * z + c
+    return r + r * z * p
+
+
+@helper
+def _cos_series(r):
+    z = r * r
+    p = 0.0
+    for c in COS_SERIES:
+        p = p * z + c
+    return 1.0 - (0.5 * z - z * z * p)
+
+
+@helper
+def sin(x):
+    """sin x by reduction to |r| <= pi/4 and Taylor series (to r^19)."""
+    if not abs(x) <= TRIG_MAX:
+        return math.sin(x)
+    q, r = _reduce(x)
+    if q == 0:
+        return _sin_series(r)
+    if q == 1:
+        return _cos_series(r)
+    if q == 2:
+        return -_sin_series(r)
+    return -_cos_series(r)
+
+
+@helper
+def cos(x):
+    """cos x by reduction to |r| <= pi/4 and Taylor series (to r^18)."""
+    if not abs(x) <= TRIG_MAX:
+        return math.cos(x)
+    q, r = _reduce(x)
+    if q == 0:
+        return _cos_series(r)
+    if q == 1:
+        return -_sin_series(r)
+    if q == 2:
+        return -_cos_series(r)
+    return _sin_series(r)
+
+
+@helper
+def root8(x):
+    """(x^(1/8), x^(1/128)) by chained square roots: the step-size control's powers."""
+    s = math.sqrt(math.sqrt(math.sqrt(x)))
+    return s, math.sqrt(math.sqrt(math.sqrt(math.sqrt(s))))
+
+
+@helper
+def ipow(x, n):
+    """x^n for an integer n by binary powering (the same products on every machine)."""
+    result = 1.0
+    base = x
+    e = abs(n)
+    while e > 0:
+        if e & 1:
+            result *= base
+        base *= base
+        e >>= 1
+    return 1.0 / result if n < 0 else result
+
+
+@helper
+def power(x, y):
+    """x^y for x > 0: binary powering for integer y, a square root then powering for
+    half-integer y, else exp(y ln x) (a few ulp)."""
+    if y == math.floor(y) and abs(y) < 1024.0:
+        return ipow(x, int(y))
+    if 2.0 * y == math.floor(2.0 * y) and abs(y) < 1024.0:
+        return ipow(math.sqrt(x), int(2.0 * y))
+    return exp(y * log(x))
+
+
+_UFUNC = dict(cache=True)
+vexp = vectorize(["float64(float64)"], **_UFUNC)(exp.py_func)
+vlog = vectorize(["float64(float64)"], **_UFUNC)(log.py_func)
+vsin = vectorize(["float64(float64)"], **_UFUNC)(sin.py_func)
+vcos = vectorize(["float64(float64)"], **_UFUNC)(cos.py_func)
+
+
+@guvectorize(["void(float64[:], float64[:])"], "(n)->()", cache=True)
+def vnorm(a, out):
+    s = 0.0
+    for i in range(a.size):
+        s += a[i] * a[i]
+    out[0] = math.sqrt(s)
+
+
+@guvectorize(["void(float64[:], float64[:], float64[:])"], "(n),(n)->()", cache=True)
+def vdot(a, b, out):
+    s = 0.0
+    for i in range(a.size):
+        s += a[i] * b[i]
+    out[0] = s

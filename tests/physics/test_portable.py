@@ -1,0 +1,93 @@
+"""The portable elementary functions: accurate to about an ulp against references computed
+in high-precision decimal arithmetic, exact at their special values, their splitting
+constants what they claim. (That they give the same bits on another CPU is tested end to
+end in tests/pipeline/test_portable_archives.py.)"""
+import math
+from decimal import Decimal, getcontext
+from fractions import Fraction
+
+import numpy as np
+import pytest
+
+from survey.physics import portable as P
+
+getcontext().prec = 50
+PI = Decimal("3.14159265358979323846264338327950288419716939937510582097494459")
+
+
+def ulps(value, exact: Decimal) -> float:
+    return float(abs(Decimal(float(value)) - exact) / Decimal(math.ulp(float(exact))))
+
+
+def dsin(x: Decimal) -> Decimal:
+    """sin by its Taylor series after reduction mod 2 pi, in 50 digits."""
+    x = x - 2 * PI * (x / (2 * PI)).to_integral_value()
+    term, total, n = x, x, 1
+    while abs(term) > Decimal(10) ** -45:
+        term *= -x * x / ((n + 1) * (n + 2))
+        total += term
+        n += 2
+    return total
+
+
+def dcos(x: Decimal) -> Decimal:
+    return dsin(x + PI / 2)
+
+
+def test_splitting_constants_sum_to_ln2_and_pi_over_2_and_multiply_exactly():
+    ln2 = Decimal(2).ln()
+    # the sum is ln 2 to within half an ulp of LN2_LO
+    assert abs(Decimal(P.LN2_HI) + Decimal(P.LN2_LO) - ln2) <= Decimal(math.ulp(P.LN2_LO)) / 2
+    assert abs(Decimal(P.PIO2_1) + Decimal(P.PIO2_2) + Decimal(P.PIO2_3) - PI / 2) \
+        < Decimal(10) ** -36
+    for c, bits in ((P.LN2_HI, 32), (P.PIO2_1, 33), (P.PIO2_2, 33)):
+        # at most `bits` significant bits: k * c is exact for |k| < 2^(53 - bits)
+        m = Fraction(c)
+        assert (m * 2 ** (bits - math.frexp(c)[1])).denominator == 1
+
+
+def test_exp_and_log_within_one_ulp_over_their_ranges():
+    rng = np.random.default_rng(3)
+    xs = np.concatenate([rng.uniform(-700, 700, 400), rng.uniform(-1, 1, 400),
+                         rng.uniform(-1e-8, 1e-8, 50), [0.0, 1.0, -1.0, 709.7]])
+    assert max(ulps(P.vexp(x), Decimal(float(x)).exp()) for x in xs) <= 1.0
+    ys = np.concatenate([np.exp(rng.uniform(-700, 700, 400)), rng.uniform(0.5, 2.0, 400),
+                         1.0 + rng.uniform(-1e-9, 1e-9, 50), [2.0, 10.0, 5e-324, 1e308]])
+    ys = ys[ys != 1.0]
+    assert max(ulps(P.vlog(y), Decimal(float(y)).ln()) for y in ys) <= 1.0
+    assert P.vlog(1.0) == 0.0 and P.vexp(0.0) == 1.0
+
+
+def test_sin_and_cos_within_two_ulps():
+    rng = np.random.default_rng(4)
+    xs = np.concatenate([rng.uniform(-7, 7, 300), rng.uniform(-1e5, 1e5, 100),
+                         [1e-300, 0.5, math.pi / 2, math.pi, 2 * math.pi / 3]])
+    for f, ref in ((P.vsin, dsin), (P.vcos, dcos)):
+        worst = max(ulps(f(x), ref(Decimal(float(x)))) for x in xs
+                    if abs(ref(Decimal(float(x)))) > 1e-3)
+        assert worst <= 2.0, (f.__name__, worst)
+    assert P.vsin(0.0) == 0.0 and P.vcos(0.0) == 1.0
+
+
+def test_special_values():
+    inf, nan = math.inf, math.nan
+    assert list(P.vexp(np.array([inf, -inf, 710.0, -746.0]))) == [inf, 0.0, inf, 0.0]
+    assert ulps(P.vexp(-740.0), Decimal(-740).exp()) <= 1.0          # subnormal result
+    assert math.isnan(P.vexp(nan)) and math.isnan(P.vlog(nan)) and math.isnan(P.vlog(-1.0))
+    assert P.vlog(0.0) == -inf and P.vlog(inf) == inf
+
+
+@pytest.mark.parametrize("y", [2.0, 3.0, -4.0, 6.0, 0.5, 2.5, -1.5, 1.0 / 3.0, 0.1])
+def test_power_exact_for_integers_and_accurate_otherwise(y):
+    for x in (0.3, 1.7, 12.5):
+        value = P.power(x, y)
+        exact = Decimal(x) ** int(y) if y == int(y) else (Decimal(x).ln() * Decimal(y)).exp()
+        # integers: binary powering rounds each of its few products; otherwise a few ulp
+        assert ulps(value, exact) <= (2.0 if y == int(y) else 4.0), (x, y)
+
+
+def test_root8_gives_the_eighth_and_128th_roots():
+    for x in (1e-10, 0.37, 1.0, 2.0, 1e5):
+        r8, r128 = P.root8(x)
+        assert r8 == pytest.approx(x ** 0.125, rel=4e-16)
+        assert r128 == pytest.approx(x ** (1 / 128), rel=4e-16)
