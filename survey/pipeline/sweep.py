@@ -66,7 +66,15 @@ def _client(config: Config, workers, address):
                       scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
                       preload=[__name__], silence_logs=logging.ERROR) as cluster, \
             Client(cluster) as client:
-        yield client
+        try:
+            yield client
+        except KeyboardInterrupt:
+            # shut down mid-task, dask and tornado log the cancelled work as errors (at
+            # times a traceback from distributed's own cancel); the user asked for the stop
+            # and the command line says how to resume
+            for name in ("distributed", "tornado"):
+                logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+            raise
 
 
 def dask_setup(worker):
