@@ -92,9 +92,13 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "t_final": Key("float", defaults.T_FINAL, "integration time of every cell", "time",
                        above=0),
         "rtol": Key("float", defaults.RTOL, "relative tolerance of DOP853 (at least 10 eps = "
-                                            "2.2e-15)", low=RTOL_MIN,
-                    hint="double precision cannot honour a smaller relative tolerance"),
-        "atol": Key("float", defaults.ATOL, "absolute tolerance of DOP853", above=0),
+                                            "2.2e-15)", low=RTOL_MIN, high=1e-3,
+                    hint="double precision cannot honour a smaller relative tolerance, and a "
+                         "looser one gives orbits whose indicators mean nothing (1e-8 to "
+                         "1e-13 are usual)"),
+        "atol": Key("float", defaults.ATOL, "absolute tolerance of DOP853", above=0,
+                    high=1e-3, hint="a looser tolerance gives orbits whose indicators mean "
+                                    "nothing; 1e-8 to 1e-13 are usual"),
         "max_steps": Key("int", defaults.MAX_STEPS, "step attempts per orbit before "
                                                     "step_limit", low=1),
         "cell_time_limit": Key("float", 0.0, "wall-clock budget of each orbit of a cell "
@@ -107,7 +111,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "which": Key("strs", list(INDICATORS), "indicators to compute; [] integrates "
                      "the orbit alone", choices=INDICATORS),
         "deviations": Key("int", _IND.deviations, "seeded deviation vectors per orbit (sali "
-                                                  "and gali2 need 2)", low=1),
+                                                  "and gali2 need 2)", low=1, high=64,
+                           hint="each is integrated beside the orbit; more than a handful "
+                                "add nothing to the exponent"),
         "seed": Key("int", _IND.seed, "seed of the deviation vectors (with the cell index)",
                     low=0),
         "renorm_interval": Key("float", _IND.renorm_interval, "time between "
@@ -118,7 +124,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
                                                        "flow and grad H"),
         "perturbations": Key("int", _IND.perturbations, "orbits started perturbation_size "
                                                         "away, for the spread of ftle and "
-                                                        "megno", low=0),
+                                                        "megno", low=0, high=1000,
+                              hint="each is a whole orbit per cell; the spread converges "
+                                   "like 1/sqrt(n)"),
         "perturbation_size": Key("float", _IND.perturbation_size, "relative size of those "
                                                                   "perturbations", above=0),
     },
@@ -147,7 +155,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
                        f.metadata["doc"]) for f in fields(Thresholds)},
     },
     "dask": {
-        "workers": Key("int", 2, "local worker processes (1 thread each)", low=1),
+        "workers": Key("int", 2, "local worker processes (1 thread each)", low=1, high=512,
+                       hint="more workers than cores only queue; for more machines give "
+                            "[dask].scheduler"),
         "scheduler": Key("str", "", "address of an existing dask scheduler, e.g. "
                                     "tcp://host:8786 (then workers is ignored)"),
         "connect_timeout": Key("float", 30.0, "seconds to wait for that scheduler to answer",
@@ -157,7 +167,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
                                     "on large grids (at most 256 cells each), and at least "
                                     "one task per worker; chunks interleave the grid so that "
                                     "every task mixes cheap and costly cells", low=0),
-        "retries": Key("int", 2, "retries of a task whose worker raised", low=0),
+        "retries": Key("int", 2, "retries of a task whose worker raised", low=0, high=100,
+                       hint="a task that fails 100 times will fail again"),
     },
 }
 
@@ -669,6 +680,16 @@ def _validate_cross(tables: dict, system: System):
         need = max(INDICATOR[name].deviations for name in needy)
         raise ConfigError("[indicators].deviations", f"{' and '.join(needy)} need {need} "
                           f"deviation vectors; set deviations = {need} or drop them from which")
+    if ind["deviations"] > system.n:
+        raise ConfigError("[indicators].deviations", f"{ind['deviations']} deviation vectors "
+                          f"in a {system.n}-dimensional phase space cannot be independent; "
+                          f"use at most {system.n}")
+    cores = os.cpu_count() or 1
+    if not tables["dask"]["scheduler"] and tables["dask"]["workers"] > 4 * cores:
+        raise ConfigError("[dask].workers", f"{tables['dask']['workers']} local worker "
+                          f"processes on a machine with {cores} cores would only queue and "
+                          f"use memory; use at most {4 * cores}, or [dask].scheduler for a "
+                          "cluster")
     if ind["renorm_interval"] > integ["t_final"]:
         raise ConfigError("[indicators].renorm_interval", "is longer than t_final")
     if tables["tori"]["analyse"] and not tables["tori"]["observables"]:

@@ -16,6 +16,7 @@ figures to draw:
 from __future__ import annotations
 
 import math
+import sys
 import time
 import tomllib
 from dataclasses import dataclass, field
@@ -32,6 +33,7 @@ from ..numerics.integrate import Outcome, integrate
 from ..physics.families import family_parameters, initial_state
 from ..physics.system import System
 from ..physics.terms import PERIMETER, POWER
+from .progress import COMPILING, notice
 
 
 @dataclass(frozen=True)
@@ -116,7 +118,8 @@ def integrate_orbit(spec: OrbitSpec, params: dict | None = None):
     y0 = initial_state(system, spec.family, **(spec.params if params is None else params))
     w0 = deviation_vectors(system, y0, 1, seed=0)[0]
     t_eval = np.linspace(0.0, spec.t_final, spec.samples)
-    integrate(system, y0, 1e-3, tangents=w0, t_eval=t_eval[:1])     # load the kernels
+    with notice(COMPILING, sys.stderr.isatty()):                      # load the kernels
+        integrate(system, y0, 1e-3, tangents=w0, t_eval=t_eval[:1])
     start = time.perf_counter()
     out = integrate(system, y0, spec.t_final, tangents=w0, t_eval=t_eval, rtol=spec.tol,
                     atol=spec.tol)

@@ -34,6 +34,7 @@ from .checkpoints import (
     write_error,
 )
 from .config import Config, load_config, parse_config
+from .progress import COMPILING, notice
 from .resources import check_address
 
 
@@ -136,8 +137,8 @@ def run_survey(source, *, workers: int | None = None, scheduler: str | None = No
     (first task submitted to last result saved), stopping the cluster and writing the
     archive."""
     clock = {"start": time.perf_counter()}
-    config = source if isinstance(source, Config) else load_config(source)
     workers, scheduler, progress = _api_arguments(workers, scheduler, progress)
+    config = source if isinstance(source, Config) else load_config(source)
     address = scheduler or config.tables["dask"]["scheduler"]
     if address:       # before any work: a wrong address is an input error
         _reach(address, config.tables["dask"]["connect_timeout"])
@@ -171,7 +172,7 @@ def run_survey(source, *, workers: int | None = None, scheduler: str | None = No
                          "them again")
                 if client is None:
                     client = _start(stack, config, task, starts, todo, workers, address,
-                                    clock)
+                                    clock, progress)
                     from tqdm import tqdm
                     bar = stack.enter_context(tqdm(total=config.n_cells, unit="cell",
                                                    disable=not progress, desc=config.name,
@@ -183,7 +184,8 @@ def run_survey(source, *, workers: int | None = None, scheduler: str | None = No
                 clock["computed"] = time.perf_counter()
         clock["archive"] = time.perf_counter()
         try:
-            path = archive.write(config, loader(config, done), command)
+            with notice(f"writing {config.output}", progress):
+                path = archive.write(config, loader(config, done), command)
         except OSError as exc:
             raise write_error(exc, config.output, folder) from None
         shutil.rmtree(folder, ignore_errors=True)
@@ -206,7 +208,11 @@ def _api_arguments(workers, scheduler, progress):
         if isinstance(workers, (bool, np.bool_)) or not isinstance(workers, (int, np.integer)) \
                 or workers < 1:
             raise ConfigError("workers", f"must be an integer >= 1, got {workers!r}")
-        workers = int(workers)
+        workers, cores = int(workers), os.cpu_count() or 1
+        if workers > 4 * cores:
+            raise ConfigError("workers", f"{workers} local worker processes on a machine with "
+                              f"{cores} cores would only queue and use memory; use at most "
+                              f"{4 * cores}, or a dask scheduler for a cluster")
     if scheduler is not None:
         if not isinstance(scheduler, str):
             raise ConfigError("scheduler", f"must be an address string, got {scheduler!r}")
@@ -217,14 +223,18 @@ def _api_arguments(workers, scheduler, progress):
     return workers, scheduler or None, None if progress is None else bool(progress)
 
 
-def _start(stack, config, task, starts, todo, workers, address, clock):
+def _start(stack, config, task, starts, todo, workers, address, clock, progress):
     """Compile (or load from the disk cache) the kernels once, then start the cluster and
     let every worker load them before the first task."""
     first = todo[~np.isnan(starts[todo, 0])][:1]
-    warm_up(task, first, starts[first])
+    with notice(COMPILING, progress):
+        warm_up(task, first, starts[first])
     clock["prepared"] = time.perf_counter()
-    client = stack.enter_context(_client(config, workers, address))
-    client.run(warm_up, task, first, starts[first])
+    cluster = f"connecting to the dask scheduler at {address}" if address else \
+        f"starting {workers or config.tables['dask']['workers']} local dask workers"
+    with notice(cluster, progress):
+        client = stack.enter_context(_client(config, workers, address))
+        client.run(warm_up, task, first, starts[first])
     clock["cluster"] = time.perf_counter()
     return client
 
@@ -297,7 +307,9 @@ def verify(path, cells: int = 8, seed: int = 0, differences: dict | None = None)
                                        "may be truncated") from None
     timed_out = stored[V.status][sample] == Status.TIME_LIMIT
     sample = sample[~timed_out]
-    fresh = run_cells(CellTask.of(config), sample, build_starts(config)[sample])
+    with notice(f"recomputing {len(sample)} cells (compiling the kernels if this kind of "
+                "system has not run here before: about a minute)", sys.stderr.isatty()):
+        fresh = run_cells(CellTask.of(config), sample, build_starts(config)[sample])
     here = archive.machine()
     lines, rounded = compare({k: v[sample] for k, v in stored.items()}, fresh,
                              made_on != here, differences)

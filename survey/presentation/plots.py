@@ -51,9 +51,12 @@ def figures(ds, variables=None) -> dict[str, Figure]:
     if len(axes) == 2:
         if V.regime in ds and (variables is None or V.regime in variables):
             out["map_regime"] = regime_map(ds)
-        for name, style in names:
-            out[f"map_{name}"] = indicator_map(ds, name, style.cmap, style.clip, style.log)
-        if all(f"crossing_{a}" in ds for a in axes) and V.megno in ds:
+        for name, style in names:       # a map with no value would be all mask
+            if np.isfinite(ds[name].values).any():
+                out[f"map_{name}"] = indicator_map(ds, name, style.cmap, style.clip,
+                                                   style.log)
+        if all(f"crossing_{a}" in ds for a in axes) and V.megno in ds \
+                and np.isfinite(ds[V.megno].values).any():
             style = OWNER[V.megno].map
             out["map_megno_section"] = indicator_map(ds, V.megno, style.cmap, style.clip,
                                                      style.log, overlay=True)
@@ -61,7 +64,7 @@ def figures(ds, variables=None) -> dict[str, Figure]:
         out["scan"] = scan(ds, [n for n, _ in names] if variables is None else variables)
     if V.crossing_sigma in ds and int(np.nansum(ds[V.n_crossings].values)) > 0:
         out["section"] = section(ds)
-    if V.megno_history in ds:
+    if V.megno_history in ds and np.isfinite(ds[V.megno_history].values).any():
         out["convergence"] = convergence(ds)
     if V.frequency in ds and V.regime in ds:     # frequencies mean something on regular cells
         regular = np.isin(ds[V.regime].values, REGULAR)
@@ -206,8 +209,11 @@ def scan(ds, names) -> Figure:
                     elinewidth=0.7, capsize=1.5)
         for level, style in _reference_lines(ds, name):
             ax.axhline(level, color="0.3", ls=style, lw=0.8)
-        if name in (V.ftle, V.megno):
+        if name in (V.ftle, V.megno) and _positive(y):
             ax.set_yscale("log")
+        if not np.isfinite(y).any():
+            ax.text(0.5, 0.5, "no value: no cell finished", transform=ax.transAxes,
+                    ha="center", va="center", color="0.3")
         ax.set_ylabel(label(name))
     axes[-1].set_xlabel(label(a))
     if regime is not None:
@@ -233,6 +239,8 @@ def _reference_lines(ds, name):
             if V.t_end not in ds:
                 return []
             T = float(np.nanmax(ds[V.t_end].values))
+            if not T > 0:
+                return []
             lines = [(level * np.log(T) / T, style) for level, style in lines]
         return lines
     return []
@@ -266,6 +274,12 @@ def section(ds, x="sigma", y="p_sigma", colour_by=V.regime) -> Figure:
     return fig
 
 
+def _positive(values) -> bool:
+    """Whether a log axis has anything to show."""
+    values = np.asarray(values, dtype=float)
+    return bool(np.any(np.isfinite(values) & (values > 0)))
+
+
 def convergence(ds, cells=None) -> Figure:
     """Indicator histories of chosen cells (default: one of each regime present): has the
     indicator converged by the end of the run?"""
@@ -287,7 +301,7 @@ def convergence(ds, cells=None) -> Figure:
                     label=coords[c] + (f" ({Regime(regime[c]).name.lower()})"
                                        if regime is not None else ""))
         ax.set_ylabel(label(name.replace("_history", "")))
-        if name in (V.ftle_history, V.sali_history):
+        if name in (V.ftle_history, V.sali_history) and _positive(values[cells]):
             ax.set_yscale("log")
         if name == V.ftle_history:
             ax.plot(t, np.log(t) / t, "k:", lw=1, label=r"$\ln t / t$ (torus)")

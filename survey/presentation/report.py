@@ -92,6 +92,9 @@ def markdown(ds, figure_names=()) -> str:
             f"{PROVENANCE_LINE}{ds.attrs.get('version_survey', '?')}, commit "
             f"`{ds.attrs.get('git_commit', '?')}`; {ds.attrs.get('history', '')}.", ""]
 
+    if not np.any(ds[V.status].values == Status.OK):
+        out += ["**No cell finished** (see the status of each cell): there are no indicator "
+                "values, and the figures show only the regimes.", ""]
     out += ["## Regimes", "", "| regime | cells | share | 95% interval | meaning |",
             "| --- | --- | --- | --- | --- |"]
     for r in Regime:

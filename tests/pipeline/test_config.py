@@ -6,7 +6,8 @@ import sys
 import pytest
 
 from survey.cli import main
-from survey.pipeline.config import load_config
+from survey.catalog.errors import ConfigError
+from survey.pipeline.config import load_config, parse_config
 
 GOOD = """
 [survey]
@@ -53,6 +54,13 @@ BAD = [
     ("[integration]\nrtol = 0.0", "[integration].rtol: must be >= 2.22e-15"),
     ("[integration]\nrtol = -1e-9", "[integration].rtol: must be >= 2.22e-15"),
     ("[integration]\nrtol = 1e-16", "double precision cannot honour"),
+    ("[integration]\nrtol = 1.0", "[integration].rtol: must be <= 0.001, got 1.0"),
+    ("[integration]\natol = 1.0", "[integration].atol: must be <= 0.001, got 1.0; a looser tolerance"),
+    ("[indicators]\nperturbations = 1000000", "[indicators].perturbations: must be <= 1e+03"),
+    ("[indicators]\ndeviations = 1000000", "[indicators].deviations: must be <= 64"),
+    ("[indicators]\ndeviations = 13", "[indicators].deviations: 13 deviation vectors in a 12-dimensional phase space cannot be independent; use at most 12"),
+    ("[dask]\nretries = 1000000000", "[dask].retries: must be <= 100"),
+    ("[dask]\nworkers = 1000", "[dask].workers: must be <= 512, got 1000; more workers than cores only queue"),
     ("[integration]\natol = 'tight'", "[integration].atol: expected a number"),
     ("[integration]\nt_final = 0.0", "[integration].t_final: must be > 0"),
     ("[integration]\nt_final = -5.0", "[integration].t_final: must be > 0"),
@@ -188,3 +196,15 @@ def test_shipped_workflows_and_the_embedded_default_validate():
             assert orbits.load_workflow(path)
         else:
             assert load_config(path).n_cells >= 1
+
+
+def test_more_local_workers_than_the_machine_can_run_are_refused_before_work_starts():
+    import os
+
+    from survey.pipeline.sweep import run_survey
+    too_many = 4 * (os.cpu_count() or 1) + 1
+    text = f'[initial]\nfamily = "equilateral"\ndelta = [1.0]\n[dask]\nworkers = {too_many}\n'
+    with pytest.raises(ConfigError, match=r"\[dask\]\.workers: .* use at most"):
+        parse_config(text, "t")
+    with pytest.raises(ConfigError, match="workers: .* use at most"):
+        run_survey({"initial": {"family": "equilateral", "delta": [1.0]}}, workers=too_many)

@@ -217,3 +217,20 @@ def test_the_accessor_classifies_draws_and_reports(grid1, tmp_path):
     assert (tmp_path / "g1_scan.png") in written
     path = grid1.survey.report(tmp_path)
     assert path == tmp_path / "g1_report.md" and "## Regimes" in path.read_text()
+
+
+@pytest.mark.parametrize("energy", ["", "energy = [84.46, 90.0]\n"], ids=["scan", "map"])
+def test_a_survey_whose_cells_all_fail_still_ends_with_a_report_that_says_so(energy, tmp_path,
+                                                                              capsys):
+    """Every cell stops at once (t_final = 1e-300: the step size collapses): the archive,
+    its report and the figures that have something to show are written, exit 0."""
+    cfg = tmp_path / "fail.toml"
+    cfg.write_text(f'[survey]\nname = "fail"\noutput = "{tmp_path / "fail.nc"}"\n'
+                   f'[initial]\nfamily = "equilateral"\ndelta = [1.0, 2.0]\n{energy}'
+                   '[integration]\nt_final = 1e-300\n[indicators]\nrenorm_interval = 1e-301\n'
+                   '[dask]\nworkers = 1\n')
+    assert main([str(cfg), "--no-progress"]) == 0, capsys.readouterr().err
+    text = (tmp_path / "fail_report.md").read_text()
+    assert "**No cell finished**" in text
+    figures = sorted(p.name for p in tmp_path.glob("fail_*.png"))
+    assert figures == (["fail_map_regime.png"] if energy else ["fail_scan.png"]), figures
