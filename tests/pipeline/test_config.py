@@ -5,8 +5,8 @@ import sys
 
 import pytest
 
-from survey.cli import main
 from survey.catalog.errors import ConfigError
+from survey.cli import main
 from survey.pipeline.config import load_config, parse_config
 
 GOOD = """
