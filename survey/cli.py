@@ -8,6 +8,8 @@ from pathlib import Path
 
 from .catalog import defaults
 
+# commands that run the integrator, so compile its kernels on a machine's first run
+COMPILING_COMMANDS = ("run", "reproduce", "verify", "orbit", "bench")
 # the embedded default survey (`python -m survey run`)
 DEFAULT_CONFIG = Path(__file__).parent / "default.toml"
 BENCH_PARTS = ["scan", "cell", "fixed", "integrator", "step", "indicators", "tori", "terms",
@@ -298,6 +300,11 @@ def main(argv=None):
     if argv and argv[0].endswith(".toml"):
         argv.insert(0, "run")
     args = build_parser().parse_args(argv)
+    if args.command in COMPILING_COMMANDS and sys.stderr.isatty():
+        from .physics.jit import kernels_cached     # before the heavy imports: at once
+        if not kernels_cached():
+            print("survey: first run here: the kernels compile before the work starts "
+                  "(about a minute on 2 cores, once)", file=sys.stderr, flush=True)
     try:
         if getattr(args, "workers", None) is not None and args.workers < 1:
             raise ConfigError("--workers", f"must be >= 1, got {args.workers}")

@@ -229,8 +229,10 @@ def _start(k, j, ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_ta
     if rows[0, j] >= 0:
         for e in range(eoff.size - 1):
             if watch[e]:
-                ln.g_old[k, e] = event_value(ep, eoff[e], y, masses, d)
-                ln.s_old[k, e] = event_slope(ep, eoff[e], y, K[0], n, ln.yd, masses, d, 1.0)
+                # the lane's strided copies, as at every step: one compiled layout
+                ln.g_old[k, e] = event_value(ep, eoff[e], ln.Y[k::L], masses, d)
+                ln.s_old[k, e] = event_slope(ep, eoff[e], ln.Y[k::L], ln.K[0, k::L], n, ln.yd,
+                                             masses, d, 1.0)
     span = abs(t1 - t0)
     if span == 0.0:
         _finish(k, ln, out, OK_, rows)
@@ -286,7 +288,7 @@ def _record(k, ln, out, rows, t0, t1, masses, d, megno, events, max_events, n_su
                 ln.todo[e] = may_cross(ln.g_old[k, e], ln.s_old[k, e], ln.g_new[e],
                                        ln.s_new[e], h)
                 scan = scan or ln.todo[e] > 0
-        n_found = 0
+        n_found = np.int64(0)       # not the literal 0: numba would compile scan_events twice
         if scan:
             counts[2] += 3
             nd_ready = n
@@ -644,7 +646,7 @@ def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol,
     if time_limit > 0.0:
         with objmode(now="f8"):
             now = time.perf_counter()
-    next_job = 0
+    next_job = np.int64(0)      # not the literal 0: numba would compile _run for it too
     # with a time limit, back every 256 rounds to read the clock
     rounds = 256 if time_limit > 0.0 else 1 << 62
     while next_job >= 0:

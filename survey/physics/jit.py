@@ -41,6 +41,12 @@ def refresh_kernel_cache(package: Path = PACKAGE):
         pass
 
 
+def kernels_cached(package: Path = PACKAGE) -> bool:
+    """Whether numba's disk cache holds survey's kernels (else the first survey compiles
+    them, about a minute on 2 cores)."""
+    return any((package / "numerics" / "__pycache__").glob("integrate._run-*.nbi"))
+
+
 refresh_kernel_cache()
 
 # Every compiled function: cached on disk, and IEEE arithmetic (inf/nan, never a Python
