@@ -414,6 +414,12 @@ def _check(table: str, key: str, spec: Key, value):
                                      f"{INT64_MAX:.3g}")
         if isinstance(v, str) and "\0" in v:
             raise ConfigError(where, "contains a NUL character")
+        if isinstance(v, str) and not v.isascii():
+            try:
+                v.encode("utf-8")
+            except UnicodeEncodeError:
+                raise ConfigError(where, f"{v!r} is not text that can be written (a lone "
+                                         "surrogate); use ordinary characters") from None
         if spec.choices is not None and v not in spec.choices:
             raise ConfigError(where, f"{v!r} is not one of {', '.join(map(repr, spec.choices))}"
                               + (_suggest(v, spec.choices) if isinstance(v, str) else ""))

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import atexit
 import contextlib
+import errno
 import logging
 import os
 import shutil
@@ -188,6 +189,9 @@ def run_survey(source, *, workers: int | None = None, scheduler: str | None = No
                 path = archive.write(config, loader(config, done), command)
         except OSError as exc:
             raise write_error(exc, config.output, folder) from None
+        except RuntimeError as exc:     # netCDF4 reports a full disk as an HDF error
+            raise write_error(OSError(errno.EIO, f"{exc}; is the disk full?"), config.output,
+                              folder) from None
         shutil.rmtree(folder, ignore_errors=True)
         with contextlib.suppress(OSError):
             folder.parent.rmdir()

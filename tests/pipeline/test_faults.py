@@ -623,3 +623,25 @@ def test_archives_pass_the_cf_compliance_checker(tmp_path, archive_path):
                   for item in result[f"{level}_priorities"]
                   if item["value"][0] < item["value"][1]]
         assert passed and not trouble and not failed, failed
+
+
+def test_a_full_disk_at_the_archive_write_is_one_line_and_keeps_the_cells(tmp_path, monkeypatch,
+                                                                         capsys):
+    """netCDF4 reports a disk that fills while the archive is written as a RuntimeError
+    ('NetCDF: HDF error'): one line naming the file, the checkpoints kept."""
+    cfg = grid(tmp_path)
+
+    def full(self, *args, **kw):
+        raise RuntimeError("NetCDF: HDF error")
+    monkeypatch.setattr(xr.Dataset, "to_netcdf", full)
+    assert main([str(cfg), "--no-progress"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "cannot write" in err and "is the disk full?" in err, err
+    assert "finished cells are kept" in err
+    assert list(checkpoint_dir(load_config(cfg)).glob("chunk-*.npz"))
+
+
+def test_a_name_that_cannot_be_written_is_a_config_error():
+    with pytest.raises(ConfigError, match=r"\[survey\]\.name: .*lone surrogate"):
+        load_config({"survey": {"name": "bad\udc80"}, "initial": {"family": "equilateral",
+                                                                 "delta": [1.0]}})
