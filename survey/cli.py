@@ -301,7 +301,8 @@ def main(argv=None):
         argv.insert(0, "run")
     args = build_parser().parse_args(argv)
     if args.command in COMPILING_COMMANDS and sys.stderr.isatty():
-        from .physics.jit import kernels_cached     # before the heavy imports: at once
+        # before the heavy imports, so that it shows at once
+        from .physics.jit import kernels_cached
         if not kernels_cached():
             print("survey: first run here: the kernels compile before the work starts "
                   "(about a minute on 2 cores, once)", file=sys.stderr, flush=True)

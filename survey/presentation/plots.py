@@ -364,5 +364,6 @@ def frequency_map(ds, order: int = 5) -> Figure:
         ax.legend(fontsize="small", title="regime (cells)")
     ax.set_xlabel(rf"$\nu_1/\nu_{{{names[ref]}}}$")
     ax.set_ylabel(rf"$\nu_2/\nu_{{{names[ref]}}}$")
-    ax.set_title(f"frequency map with resonances of order <= {order}", fontsize="medium")
+    ax.set_title(f"frequency map; lines: resonances m1 x + m2 y + m3 = 0, |m| <= {order}",
+                 fontsize="medium")
     return fig

@@ -76,7 +76,7 @@ def markdown(ds, figure_names=()) -> str:
             for t in system["interactions"])
     else:
         potential = (f"potential `{system.get('potential', defaults.POTENTIAL)}` "
-                     f"{system.get('params', {}) or '(defaults: U = P^2/2 for perimetric_power)'}")
+                     f"{system.get('params', {}) or '(its default parameters)'}")
     tori = config.get("tori", {})
     which = config.get("indicators", {}).get("which", INDICATORS)
     out += [f"- System: {system.get('bodies', defaults.BODIES)} bodies in "
@@ -84,7 +84,7 @@ def markdown(ds, figure_names=()) -> str:
             f"{potential}.",
             f"- Initial conditions: family `{initial.get('family')}`"
             + "".join(f", {k} = {v}" for k, v in initial.items() if k != "family"
-                      and k not in axes) + f"; grid: {grid}; {n} cells.",
+                      and k not in axes) + f"; grid: {grid}; {n} cell{'s' * (n != 1)}.",
             f"- Integration: DOP853 to t = {integ.get('t_final', defaults.T_FINAL):g}, rtol = "
             f"{integ.get('rtol', defaults.RTOL):g}, atol = {integ.get('atol', defaults.ATOL):g}; "
             f"chaos indicators {', '.join(which)}; torus analysis every "
@@ -170,14 +170,18 @@ def _tori_table(ds, axes, regime, rows: int = 15) -> list[str]:
     pick = cells if cells.size <= rows else cells[np.linspace(0, cells.size - 1, rows).astype(int)]
     out = ["## Tori found", "",
            f"{cells.size} regular cells; {'all' if cells.size <= rows else f'{rows} evenly chosen'} "
-           "shown. Frequencies in cycles per unit time (shape basis, then rotation); the "
-           "nearest resonance m . nu = 0 and its relative distance.", "",
+           "shown. Frequencies in cycles per unit time (shape basis, then rotation), as "
+           "magnitudes (the archive keeps NAFF's sign, which only says which way a signal's "
+           "phase portrait turns); the nearest resonance m . nu = 0 of the signed "
+           "frequencies and its relative distance.", "",
            f"| cell | regime | digits | {' | '.join(names)} | nearest resonance m | distance |",
            "| --- | --- | --- | " + " | ".join("---" for _ in names) + " | --- | --- |"]
     for c in pick:
-        f = " | ".join("—" if not np.isfinite(v) else f"{v:.7f}" for v in freq[c])
+        f = " | ".join("—" if not np.isfinite(v) else f"{abs(v):.7f}" for v in freq[c])
+        near = (f"{tuple(int(v) for v in m[c])} | {dist[c]:.1e}" if np.isfinite(dist[c])
+                else "— (fewer than two frequencies) | —")
         out.append(f"| {coords[c]} | {Regime(regime.ravel()[c]).name.lower()} | "
-                   f"{digits[c]:.1f} | {f} | {tuple(int(v) for v in m[c])} | {dist[c]:.1e} |")
+                   f"{digits[c]:.1f} | {f} | {near} |")
     out.append("")
     return out
 
@@ -231,7 +235,7 @@ def _quality(ds) -> list[str]:
     failed = [(s, k) for s, k in failed if k]
     if failed:
         out.append("")
-        out += [f"- {k} cells {s.name.lower()}: {s.meaning}" for s, k in failed]
+        out += [f"- {k} cell{'s' * (k != 1)} {s.name.lower()}: {s.meaning}" for s, k in failed]
     else:
         out.append("No cell failed.")
     out.append("")
