@@ -43,24 +43,26 @@ def test_each_archive_stores_its_workflow_and_verifies(archive):
 
 
 def test_reproduce_replaces_only_what_changed_and_check_names_it(tmp_path, capsys):
-    """`reproduce --check` on the committed default exits 0; after a report is edited and a
-    figure deleted, `reproduce` restores exactly those two and leaves the archive's file
-    alone (its provenance differs, its results do not)."""
+    """`reproduce` into an empty folder writes everything; `--check` then exits 0; after a
+    report is edited and a figure deleted, `reproduce` restores exactly those two and leaves
+    the archive's file alone (its provenance would differ, its results do not)."""
     from survey.cli import main
     from survey.presentation.report import without_provenance
-    for f in RESULTS.glob("default*"):
-        (tmp_path / f.name).write_bytes(f.read_bytes())
     run = ["reproduce", "--only", "default", "--results", str(tmp_path), "--no-progress"]
+    assert main(run) == 0
+    assert "updated" in capsys.readouterr().out
     assert main(run + ["--check"]) == 0, capsys.readouterr().out
     report, figure = tmp_path / "default_report.md", sorted(tmp_path.glob("default_*.png"))[0]
-    report.write_text(report.read_text() + "\nan edit\n")
+    made = report.read_text()
+    report.write_text(made + "\nan edit\n")
     figure.unlink()
     archive = (tmp_path / "default.nc").read_bytes()
+    assert main(run + ["--check"]) == 1
+    out = capsys.readouterr().out
+    assert report.name in out and figure.name in out, out
     assert main(run) == 0
     out = capsys.readouterr().out
     assert "updated 2 file(s)" in out and report.name in out and figure.name in out, out
-    strip = without_provenance
-    assert strip(report.read_text()) == strip((RESULTS / report.name).read_text())
-    assert figure.exists()
-    assert (tmp_path / "default.nc").read_bytes() == archive
+    assert without_provenance(report.read_text()) == without_provenance(made)
+    assert figure.exists() and (tmp_path / "default.nc").read_bytes() == archive
     assert not (tmp_path / ".staging").exists()
