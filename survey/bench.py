@@ -238,7 +238,7 @@ def interaction_terms(t_final=2000.0, repeats=5, out=print):
         @property
         def kernel_args(self):
             m, d, measure, prof, par = super().kernel_args
-            return m, d, measure, prof, np.concatenate([par, [0.0, 0.0]]).reshape(1, 4)
+            return m, d, measure, prof, np.concatenate([par, [0.0] * 3]).reshape(1, 5)
 
     own = System.create()
     general = GeneralPath(own.masses, own.dim, own.terms)

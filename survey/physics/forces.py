@@ -250,17 +250,18 @@ def atm_forces(y, dy, i, j, k, d, n, n_tan, par):
 
 
 @helper
-def pair_forces(y, dy, i, j, d, n, n_tan, prof, par):
-    """As perimetric_forces, for a pair potential U(r) of bodies i and j: the force on i is
-    U'(r) along the unit vector towards j, its tangent force the variation of that."""
+def pair_forces(y, dy, i, j, d, n, n_tan, prof, par, w):
+    """As perimetric_forces, for a pair potential w U(r) of bodies i and j (w = m_i m_j for
+    a mass-weighted term, else 1): the force on i is w U'(r) along the unit vector towards
+    j, its tangent force the variation of that."""
     nq = n // 2
     e, L = _unit(sub(vec(y, j * d, d), vec(y, i * d, d)))
     _, U1, U2 = profile(prof, par, L)
-    add_to(dy, nq + i * d, d, U1, e)
-    add_to(dy, nq + j * d, d, -U1, e)
+    add_to(dy, nq + i * d, d, w * U1, e)
+    add_to(dy, nq + j * d, d, -(w * U1), e)
     for t in range(n_tan):
         base = n * (1 + t)
         r = sub(vec(y, base + j * d, d), vec(y, base + i * d, d))
         g = _pair_tangent(e, L, r, dot(e, r), U1, U2)
-        add_to(dy, base + nq + i * d, d, 1.0, g)
-        add_to(dy, base + nq + j * d, d, -1.0, g)
+        add_to(dy, base + nq + i * d, d, w, g)
+        add_to(dy, base + nq + j * d, d, -w, g)

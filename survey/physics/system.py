@@ -42,9 +42,10 @@ from .terms import (
 
 @dataclass(frozen=True, eq=False)
 class System:
-    """N >= 3 bodies of positive masses in d = 2 or 3 dimensions, whose potential is a sum
-    of terms (`Potential`s, or one of them): triplet potentials summed over all triangles
-    i < j < k, pair potentials over all pairs i < j."""
+    """N bodies of positive masses in d = 2 or 3 dimensions, whose potential is a sum of
+    terms (`Potential`s, or one of them): triplet potentials summed over all triangles
+    i < j < k, pair potentials over all pairs i < j (weighted by m_i m_j where the term says
+    so). N >= 3, or N >= 2 for pair terms alone (a Kepler problem)."""
 
     masses: np.ndarray
     dim: int = 2
@@ -53,15 +54,18 @@ class System:
 
     def __post_init__(self):
         m = np.ascontiguousarray(self.masses, dtype=np.float64)
-        if m.ndim != 1 or m.size < 3:
-            raise ValueError("a triplet system needs masses for N >= 3 bodies")
+        terms = (self.terms,) if isinstance(self.terms, Potential) else tuple(self.terms)
+        if not terms or not all(isinstance(t, Potential) for t in terms):
+            raise ValueError("a system's terms are one or more Potentials (make_potential)")
+        fewest = 2 if all(t.kind == "pair" for t in terms) else 3
+        if m.ndim != 1 or m.size < fewest:
+            raise ValueError(f"a system {'of pair terms ' if fewest == 2 else 'with a triplet '}"
+                             f"{'' if fewest == 2 else 'term '}needs masses for N >= {fewest} "
+                             "bodies")
         if not np.all(np.isfinite(m)) or np.any(m <= 0):
             raise ValueError("masses must be finite and > 0")
         if self.dim not in (2, 3):
             raise ValueError(f"dim must be 2 or 3, got {self.dim!r}")
-        terms = (self.terms,) if isinstance(self.terms, Potential) else tuple(self.terms)
-        if not terms or not all(isinstance(t, Potential) for t in terms):
-            raise ValueError("a system's terms are one or more Potentials (make_potential)")
         m.setflags(write=False)
         object.__setattr__(self, "masses", m)
         object.__setattr__(self, "terms", terms)
@@ -130,8 +134,7 @@ class System:
         """Sum over triplets of U, for states (..., n)."""
         q, _ = self.split(y)
         flat = np.ascontiguousarray(q.reshape(-1, self.n // 2))
-        _, d, measure, prof, par = self.kernel_args
-        u = _potential_energies(flat, self.n_bodies, d, measure, prof, par)
+        u = _potential_energies(flat, *self.kernel_args)
         return u.reshape(q.shape[:-2])
 
     def kinetic_energy(self, y):
@@ -166,16 +169,18 @@ class System:
 def _encode(terms) -> np.ndarray:
     """The kernels' `par`. A single perimetric or areal term (the paper's systems): its two
     parameters, a 1-D array. Otherwise a 2-D array: row 0 the two parameters of the leading
-    perimetric or areal term (zeros if there is none), then one row (measure, profile, p0,
-    p1) per further term. The kernels are compiled separately for the two array types, so
-    the paper's systems run code in which the further terms do not exist."""
+    perimetric or areal term (zeros if there is none), then one row (measure, profile,
+    weighted, p0, p1) per further term, weighted 1 for a pair term multiplied by m_i m_j.
+    The kernels are compiled separately for the two array types, so the paper's systems run
+    code in which the further terms do not exist."""
     lead = terms[0] if terms[0].measure in (PERIMETER, AREA) else None
     if lead is not None and len(terms) == 1:
         return lead.par
-    rows = [list(lead.par) + [0.0, 0.0] if lead is not None else [0.0] * 4]
+    rows = [list(lead.par) + [0.0] * 3 if lead is not None else [0.0] * 5]
     for term in terms[1:] if lead is not None else terms:
         p = term.par
-        rows.append([term.measure, term.profile, p[0], p[1] if p.size > 1 else 0.0])
+        rows.append([term.measure, term.profile, float(term.mass_weighted), p[0],
+                     p[1] if p.size > 1 else 0.0])
     return np.array(rows, dtype=np.float64)
 
 
@@ -183,11 +188,11 @@ def lead_params(par):
     """The two parameters of the leading perimetric or areal term (see _encode)."""
 
 
-def further_forces(y, dy, N, d, n, n_tan, par):
+def further_forces(y, dy, masses, d, n, n_tan, par):
     """Forces of the terms after the leading one (see _encode)."""
 
 
-def further_energy(q, N, d, par):
+def further_energy(q, masses, d, par):
     """Energy of the terms after the leading one (see _encode)."""
 
 
@@ -203,44 +208,47 @@ def _lead_params(par):
 
 
 @overload(further_forces, jit_options=dict(error_model="numpy"), inline="always")
-def _further_forces(y, dy, N, d, n, n_tan, par):
+def _further_forces(y, dy, masses, d, n, n_tan, par):
     if par.ndim == 1:
-        return lambda y, dy, N, d, n, n_tan, par: None
+        return lambda y, dy, masses, d, n, n_tan, par: None
     return _rows_forces
 
 
 @overload(further_energy, jit_options=dict(error_model="numpy"), inline="always")
-def _further_energy(q, N, d, par):
+def _further_energy(q, masses, d, par):
     if par.ndim == 1:
-        return lambda q, N, d, par: 0.0
+        return lambda q, masses, d, par: 0.0
     return _rows_energy
 
 
 @kernel
-def _potential_energies(qs, N, d, measure, prof, par):
+def _potential_energies(qs, masses, d, measure, prof, par):
     out = np.empty(qs.shape[0])
     for s in range(qs.shape[0]):
-        out[s] = potential_energy(qs[s], N, d, measure, prof, par)
+        out[s] = potential_energy(qs[s], masses, d, measure, prof, par)
     return out
 
 
 @leaf
-def potential_energy(q, N, d, measure, prof, par):
+def potential_energy(q, masses, d, measure, prof, par):
     """Sum over the terms of U summed over triplets i < j < k or pairs i < j."""
-    total = further_energy(q, N, d, par)
+    N = masses.size
+    total = further_energy(q, masses, d, par)
     if measure != NONE:
         total += _triplet_energy(q, N, d, measure, prof, lead_params(par))
     return total
 
 
-def _rows_energy(q, N, d, par):
+def _rows_energy(q, masses, d, par):
+    N = masses.size
     total = 0.0
     for row in range(1, par.shape[0]):
-        kind, code, p = int(par[row, 0]), int(par[row, 1]), par[row, 2:]
+        kind, code, weighted, p = int(par[row, 0]), int(par[row, 1]), par[row, 2], par[row, 3:]
         if kind == DISTANCE:
             for i in range(N - 1):
                 for j in range(i + 1, N):
-                    total += profile(code, p, norm(sub(vec(q, j * d, d), vec(q, i * d, d))))[0]
+                    u = profile(code, p, norm(sub(vec(q, j * d, d), vec(q, i * d, d))))[0]
+                    total += masses[i] * masses[j] * u if weighted != 0.0 else u
         elif kind == TRIANGLE:
             for i in range(N - 2):
                 for j in range(i + 1, N - 1):
@@ -278,7 +286,7 @@ def rhs(t, y, dy, masses, d, measure, prof, par, n_tan):
         _planar_areal(y, dy, masses, prof, lead, n_tan)
     else:
         _leading_forces(y, dy, masses, N, d, measure, prof, lead, n_tan)
-    further_forces(y, dy, N, d, 2 * N * d, n_tan, par)
+    further_forces(y, dy, masses, d, 2 * N * d, n_tan, par)
 
 
 # lanes from which the compiler's SIMD loops run (its vector width, 8 doubles, times its
@@ -623,13 +631,15 @@ def _leading_forces(y, dy, masses, N, d, measure, prof, lead, n_tan):
                     areal_forces(y, dy, i, j, k, d, n, n_tan, prof, lead)
 
 
-def _rows_forces(y, dy, N, d, n, n_tan, par):
+def _rows_forces(y, dy, masses, d, n, n_tan, par):
+    N = masses.size
     for row in range(1, par.shape[0]):
-        kind, code, p = int(par[row, 0]), int(par[row, 1]), par[row, 2:]
+        kind, code, weighted, p = int(par[row, 0]), int(par[row, 1]), par[row, 2], par[row, 3:]
         if kind == DISTANCE:
             for i in range(N - 1):
                 for j in range(i + 1, N):
-                    pair_forces(y, dy, i, j, d, n, n_tan, code, p)
+                    w = masses[i] * masses[j] if weighted != 0.0 else 1.0
+                    pair_forces(y, dy, i, j, d, n, n_tan, code, p, w)
         elif kind == TRIANGLE:
             for i in range(N - 2):
                 for j in range(i + 1, N - 1):

@@ -68,6 +68,7 @@ class Term:
     formula: str
     parameters: tuple[Parameter, ...]
     note: str = ""                  # the paper's case, or what it models
+    weighted: bool = False          # a pair term always weighted by m_i m_j (gravity)
 
     @property
     def defaults(self) -> dict:
@@ -116,6 +117,9 @@ TERMS = [
          "repulsive for coupling > 0: the colloids' pair term"),
     Term("pair", "power", DISTANCE, POWER,
          "coupling r^exponent / exponent (coupling ln r for exponent 0)", _power("r", -1.0)),
+    Term("pair", "gravity", DISTANCE, POWER, "-G m_i m_j / r",
+         (Parameter("G", 1.0, "the gravitational constant", above=0.0),),
+         "Newtonian gravity: always weighted by the masses", weighted=True),
 ]
 BY_KIND = {kind: {t.name: t for t in TERMS if t.kind == kind} for kind in KINDS}
 TRIPLET_NAMES = tuple(BY_KIND["triplet"])
@@ -152,6 +156,7 @@ class Potential:
     profile: int
     params: tuple[float, ...]
     param_names: tuple[str, ...]
+    mass_weighted: bool = False     # a pair term's U(r_ij) multiplied by m_i m_j
 
     @property
     def kind(self) -> str:
@@ -159,22 +164,35 @@ class Potential:
 
     @property
     def par(self) -> np.ndarray:
-        """The parameters as the kernels read them (a pair Yukawa's coupling negated: the
-        kernels' YUKAWA profile is the attractive triplet form)."""
+        """The parameters as the kernels read them: a pair Yukawa's coupling negated (the
+        kernels' YUKAWA profile is the attractive triplet form); gravity as the power
+        profile G r^-1 / -1, whose mass weighting makes it -G m_i m_j / r."""
         p = np.array(self.params, dtype=np.float64)
         if self.kind == "pair" and self.profile == YUKAWA:
             p[0] = -p[0]
+        if self.name == "gravity":
+            p = np.array([p[0], -1.0])
         return p
 
     def describe(self) -> str:
         values = ", ".join(f"{k}={v:g}" for k, v in zip(self.param_names, self.params))
-        return f"{self.name} ({self.kind}): U = {term(self.name, self.kind).formula} with {values}"
+        weighted = ("" if term(self.name, self.kind).weighted or not self.mass_weighted
+                    else ", times m_i m_j")
+        return (f"{self.name} ({self.kind}): U = {term(self.name, self.kind).formula}"
+                f"{weighted} with {values}")
 
 
-def make_potential(name: str, params: dict | None = None, kind: str = "triplet") -> Potential:
+def make_potential(name: str, params: dict | None = None, kind: str = "triplet",
+                   mass_weighted: bool = False) -> Potential:
     """A term of a kind ("triplet" or "pair") with its parameters (the rest take their
-    defaults); anything unknown or outside its declared bounds raises ValueError naming it."""
+    defaults); anything unknown or outside its declared bounds raises ValueError naming it.
+    `mass_weighted`: a pair term's U(r_ij) is multiplied by m_i m_j (gravity always is)."""
     decl = term(name, kind)
+    if not isinstance(mass_weighted, bool):
+        raise ValueError(f"mass_weighted must be true or false, got {mass_weighted!r}")
+    if mass_weighted and kind != "pair":
+        raise ValueError(f"mass_weighted applies to pair terms; {name!r} is a triplet "
+                         "potential, a function of its triangle alone")
     params = dict(params or {})
     unknown = sorted(set(params) - set(decl.defaults))
     if unknown:
@@ -188,7 +206,7 @@ def make_potential(name: str, params: dict | None = None, kind: str = "triplet")
             raise ValueError(f"potential parameter {p.name!r} {problem}")
         values.append(float(value))
     return Potential(name, decl.measure, decl.profile, tuple(values),
-                     tuple(p.name for p in decl.parameters))
+                     tuple(p.name for p in decl.parameters), mass_weighted or decl.weighted)
 
 
 def markdown_table() -> str:

@@ -39,9 +39,11 @@ def build_system(s: dict, at: dict | None = None) -> System:
     are grid axes (by axis name)."""
     masses = s["masses"] if s["masses"] is not None else [1.0] * s["bodies"]
     terms = []
-    for (kind, name, params), axis_names in zip(system_terms(s), term_axis_names(s)):
+    weighted = [t.get("mass_weighted", False) for t in s["interactions"] or [{}]]
+    for (kind, name, params), axis_names, w in zip(system_terms(s), term_axis_names(s),
+                                                   weighted):
         values = {k: (at or {}).get(axis_names[k], v) for k, v in params.items()}
-        terms.append(make_potential(name, values, kind))
+        terms.append(make_potential(name, values, kind, w))
     return System(np.array(masses, dtype=float), s["dim"], tuple(terms))
 
 

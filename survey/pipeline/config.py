@@ -40,6 +40,7 @@ from .build import build_system, section_event_for, term_axis_names
 from .resources import check_address, check_memory, ensure_writable
 
 INT64_MAX = 2 ** 63 - 1
+TERM_KEYS = ("kind", "potential", "params", "mass_weighted")   # an interactions entry
 
 
 # thresholds that only decide the regime when the archive is written, not a cell's result
@@ -80,7 +81,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
                                            "potential/params: [{kind = \"pair\" or "
                                            "\"triplet\", potential = NAME, params = {...}}, "
                                            "...]; every parameter is given, any may be a grid "
-                                           "axis named <potential>_<parameter>"),
+                                           "axis named <potential>_<parameter>; a pair term "
+                                           "with mass_weighted = true is U(r_ij) m_i m_j "
+                                           "(the gravity term always is)"),
     },
     "initial": {
         "family": Key("str", None, "initial-condition family", choices=tuple(FAMILIES)),
@@ -283,12 +286,13 @@ def code_fingerprint(root: Path | None = None) -> str:
     return h.hexdigest()
 
 
-def load_config(source) -> Config:
+def load_config(source, check_output: bool = True) -> Config:
     """A Config from a TOML file path or a dict of tables (Python values: numpy scalars,
-    tuples and 1-D arrays are taken as numbers and lists; None as "not given")."""
+    tuples and 1-D arrays are taken as numbers and lists; None as "not given").
+    check_output: also refuse an output the survey could not write."""
     if isinstance(source, dict):
         tables = _plain(source, "")
-        return validate(tables, _to_toml(tables), "<dict>")
+        return validate(tables, _to_toml(tables), "<dict>", check_output)
     if not isinstance(source, (str, os.PathLike)):
         raise ConfigError("config", f"expected a TOML file path or a dict of tables, got "
                                     f"{type(source).__name__}")
@@ -303,7 +307,7 @@ def load_config(source) -> Config:
         raise ConfigError(str(source), "no such config file") from None
     except OSError as exc:
         raise ConfigError(str(source), f"cannot read it ({exc.strerror or exc})") from None
-    return parse_config(_decode(data, str(source)), str(source))
+    return parse_config(_decode(data, str(source)), str(source), check_output)
 
 
 def _decode(data: bytes, where: str) -> str:
@@ -571,11 +575,11 @@ def _validate_terms(s: dict, given: dict) -> list[Axis]:
             if not isinstance(entry, dict):
                 raise ConfigError(where, f"expected a table {{kind, potential, params}}, got "
                                          f"{entry!r}")
-            extra = sorted(set(entry) - {"kind", "potential", "params"})
+            extra = sorted(set(entry) - set(TERM_KEYS))
             if extra:
                 raise ConfigError(f"{where}.{extra[0]}", "unknown key" + _suggest(
-                    extra[0], ["kind", "potential", "params"]) + "; a term has kind, "
-                    "potential and params")
+                    extra[0], TERM_KEYS) + "; a term has kind, potential, params and "
+                    "(pair terms) mass_weighted")
             for key in ("kind", "potential"):
                 if not isinstance(entry.get(key), str):
                     raise ConfigError(f"{where}.{key}", "is required (a string): "
@@ -587,6 +591,14 @@ def _validate_terms(s: dict, given: dict) -> list[Axis]:
                                   f"{', '.join(map(repr, KINDS))}" + _suggest(kind, KINDS))
             if not isinstance(params, dict):
                 raise ConfigError(f"{where}.params", f"expected a table, got {params!r}")
+            weighted = entry.get("mass_weighted", False)
+            if not isinstance(weighted, bool):
+                raise ConfigError(f"{where}.mass_weighted", f"expected true or false, got "
+                                                            f"{weighted!r}")
+            if weighted and kind != "pair":
+                raise ConfigError(f"{where}.mass_weighted", "applies to pair terms only (a "
+                                  "triplet potential is a function of its triangle alone); "
+                                  "remove it")
             where += ".params"
         label = "[system].potential" if entry is None else f"[system].interactions[{i}].potential"
         if entry is None and name in PAIR_NAMES:

@@ -73,6 +73,7 @@ def markdown(ds, figure_names=()) -> str:
             f"{t.get('kind')} `{t.get('potential')}` "
             + str({k: "(grid axis)" if isinstance(v, (dict, list)) else v
                    for k, v in t.get("params", {}).items()})
+            + (" times m_i m_j" if t.get("mass_weighted") else "")
             for t in system["interactions"])
     else:
         potential = (f"potential `{system.get('potential', defaults.POTENTIAL)}` "
