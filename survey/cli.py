@@ -37,30 +37,42 @@ def _bench(args):
 
 
 def _orbit(args):
-    """One orbit of a paper family (or every orbit of a workflow file): what it conserved,
-    its Lyapunov exponent, and with --plot the paper's single-orbit figures."""
-    import numpy as np
-
+    """One orbit of a family, the orbits of a survey config's cells, or every orbit of an
+    orbit workflow file: what they conserved, their Lyapunov exponent, the ranges of their
+    shape and their closest approaches; with --plot the paper's single-orbit figures."""
     from .catalog.errors import ConfigError
     from .pipeline import orbits
-    if args.workflow:
+    if args.workflow and orbits.is_orbit_workflow(args.workflow):
         if not args.plot:
             raise ConfigError("--plot", "an orbit workflow draws figures: give --plot DIR")
         for path in orbit_workflow(args.workflow, args.plot):
             print(f"wrote {path}")
         return 0
-    params = {}
-    for item in args.param:
-        key, _, value = item.partition("=")
-        try:
-            params[key] = float(value)
-        except ValueError:
-            raise ConfigError(f"--param {item}", "expected KEY=NUMBER") from None
-        if not np.isfinite(params[key]):
-            raise ConfigError(f"--param {item}", "the value must be a finite number")
-    spec = orbits.check(orbits.OrbitSpec(name=args.family, family=args.family, params=params,
-                                         potential=args.potential, t_final=args.t_final,
-                                         tol=args.tol), "orbit", cli=True)
+    if args.workflow:
+        given = [flag for flag, value in (("--family", args.family), ("--param", args.param),
+                                          ("--potential", args.potential),
+                                          ("--potential-param", args.potential_param),
+                                          ("--masses", args.masses), ("--tol", args.tol))
+                 if value not in (None, [])]
+        if given:
+            raise ConfigError(given[0], "comes from the config file's [system], [initial] "
+                                        "and [integration]; edit it there (or drop the file)")
+        spec = orbits.from_survey_config(args.workflow, args.cell, args.t_final,
+                                         args.zoom_until)
+    else:
+        if args.cell:
+            raise ConfigError("--cell", "picks cells of a survey config: give its file")
+        system = {"potential": args.potential or defaults.POTENTIAL,
+                  "params": _numbers(args.potential_param, "--potential-param")}
+        if args.masses:
+            system["masses"] = _numbers([args.masses], "--masses", listed=True)
+            system["bodies"] = len(system["masses"])
+        spec = orbits.check(orbits.OrbitSpec(
+            name=args.family or "sides", family=args.family or "sides",
+            params=_numbers(args.param, "--param"), system=system,
+            t_final=defaults.ORBIT_T_FINAL if args.t_final is None else args.t_final,
+            tol=defaults.RTOL if args.tol is None else args.tol,
+            zoom_until=args.zoom_until), "orbit", cli=True)
     runs = orbits.run_orbits(spec)
     print("\n".join(line for run in runs for line in orbits.describe(spec, run)))
     if args.plot:
@@ -69,6 +81,32 @@ def _orbit(args):
         for path in plots.save(figs, args.plot, spec.name):
             print(f"wrote {path}")
     return 0
+
+
+def _numbers(items, flag, listed=False):
+    """KEY=NUMBER options as a dict (or, listed, one comma-separated list of numbers)."""
+    import math
+
+    from .catalog.errors import ConfigError
+    if listed:
+        try:
+            values = [float(v) for v in items[0].split(",")]
+        except ValueError:
+            raise ConfigError(f"{flag} {items[0]}", "expected numbers separated by commas, "
+                                                    "e.g. 1,0.001,0.0001") from None
+        if not all(math.isfinite(v) for v in values):
+            raise ConfigError(f"{flag} {items[0]}", "the values must be finite numbers")
+        return values
+    out = {}
+    for item in items:
+        key, _, value = item.partition("=")
+        try:
+            out[key] = float(value)
+        except ValueError:
+            raise ConfigError(f"{flag} {item}", "expected KEY=NUMBER") from None
+        if not math.isfinite(out[key]):
+            raise ConfigError(f"{flag} {item}", "the value must be a finite number")
+    return out
 
 
 def orbit_workflow(path, folder) -> list:
@@ -275,18 +313,31 @@ def build_parser():
     b.add_argument("--only", action="append", choices=BENCH_PARTS,
                    help="run only these parts (repeatable)")
     b.set_defaults(func=_bench)
-    o = sub.add_parser("orbit", help="integrate one orbit of a paper family and report "
-                                     "conservation and its Lyapunov exponent; --plot DIR "
-                                     "draws the paper's single-orbit figures")
-    o.add_argument("workflow", nargs="?", help="an orbit workflow file ([[orbit]] tables)")
+    o = sub.add_parser("orbit", help="integrate orbits -- a family member given by flags, "
+                                     "the cells of a survey config, or an orbit workflow -- "
+                                     "and report conservation, the Lyapunov exponent, the "
+                                     "ranges of P, |A|, I and the closest approaches; --plot "
+                                     "DIR draws the paper's single-orbit figures")
+    o.add_argument("workflow", nargs="?", metavar="FILE",
+                   help="an orbit workflow ([[orbit]] tables) or a survey config (its "
+                        "[system], [initial] and tolerance; --cell picks grid cells)")
     o.add_argument("--plot", metavar="DIR", help="write the figures into DIR")
-    o.add_argument("--family", default="sides")
+    o.add_argument("--cell", type=int, action="append", default=[], metavar="K",
+                   help="a survey config's flat cell index (repeatable; default all, at "
+                        "most 8)")
+    o.add_argument("--family", help="initial-condition family (default sides)")
     o.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="family parameter, e.g. --param delta=3 (repeatable)")
-    o.add_argument("--potential", default=defaults.POTENTIAL)
-    o.add_argument("--t-final", type=float, default=defaults.ORBIT_T_FINAL)
-    o.add_argument("--tol", type=float, default=defaults.RTOL,
-                   help=f"rtol = atol (default {defaults.RTOL:g})")
+    o.add_argument("--potential", help=f"triplet potential (default {defaults.POTENTIAL})")
+    o.add_argument("--potential-param", action="append", default=[], metavar="KEY=VALUE",
+                   help="potential parameter, e.g. --potential-param exponent=3")
+    o.add_argument("--masses", metavar="M1,M2,...", help="masses, one per body")
+    o.add_argument("--t-final", type=float, help=f"end time (default "
+                   f"{defaults.ORBIT_T_FINAL:g}, or the config's t_final)")
+    o.add_argument("--tol", type=float, help=f"rtol = atol (default {defaults.RTOL:g})")
+    o.add_argument("--zoom-until", type=float, default=0.0, metavar="T",
+                   help="draw paths and side lengths for t <= T only (P, |A| and "
+                        "inequities: the whole run)")
     o.set_defaults(func=_orbit)
     return parser
 

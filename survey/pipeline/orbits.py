@@ -1,5 +1,6 @@
-"""Single orbits: one family member integrated with a tangent vector and sampled densely, what
-it conserved, and orbit workflow files (their figures: survey.presentation.orbit_plots).
+"""Single orbits: family members integrated with a tangent vector and sampled densely, what
+they conserved, the ranges of their shape and their closest approaches, and orbit workflow
+files (their figures: survey.presentation.orbit_plots).
 
 An orbit workflow is a TOML file of [[orbit]] tables, each naming a family member and the
 figures to draw:
@@ -10,8 +11,13 @@ figures to draw:
     params = {}                 # family parameters; one of them may be a list: a set of orbits
     potential = "perimetric_power"
     potential_params = {}
+    # or, instead of potential/potential_params, any survey [system] table:
+    # system = {masses = [1.0, 0.001, 0.0001], interactions = [...]}
     t_final = 500.0
     zoom_until = 20.0           # paths and side lengths shown for t <= this (P, A: all)
+
+A survey config is an orbit set too: `python -m survey orbit grid.toml --cell K` integrates
+cell K of its grid with its [system] and [initial] (see `from_survey_config`).
 """
 from __future__ import annotations
 
@@ -27,13 +33,16 @@ import numpy as np
 
 from ..catalog import defaults
 from ..catalog.errors import ConfigError
-from ..numerics.dop853 import RTOL_MIN
 from ..numerics.indicators import deviation_vectors
 from ..numerics.integrate import Outcome, integrate
-from ..physics.families import family_parameters, initial_state
+from ..physics.geometry import area, sides
 from ..physics.system import System
 from ..physics.terms import PERIMETER, POWER
+from .cells import build_starts
+from .config import Config, load_config
 from .progress import COMPILING, notice
+
+MAX_ORBITS = 8          # more cells than this in one orbit set: pick one with --cell
 
 
 @dataclass(frozen=True)
@@ -43,18 +52,31 @@ class OrbitSpec:
     params: dict = field(default_factory=dict)
     potential: str = defaults.POTENTIAL
     potential_params: dict = field(default_factory=dict)
+    system: dict | None = None   # a survey [system] table, instead of potential/_params
     t_final: float = defaults.ORBIT_T_FINAL
     tol: float = defaults.RTOL
     zoom_until: float = 0.0      # paths and sides for t <= this (0: the whole run)
     samples: int = 20001
+    cells: tuple = ()            # the cells of the set to integrate (empty: all)
 
-    def system(self) -> System:
-        return System.create(potential=self.potential, **self.potential_params)
+    def tables(self) -> dict:
+        """The spec as the survey config tables that say the same (a list parameter is a
+        grid axis: one orbit per value)."""
+        system = self.system if self.system is not None else \
+            {"potential": self.potential, "params": dict(self.potential_params)}
+        return {"survey": {"name": "orbit"}, "system": system,
+                "initial": {"family": self.family, **self.params},
+                "integration": {"t_final": self.t_final, "rtol": self.tol, "atol": self.tol}}
+
+    def config(self) -> Config:
+        """The validated config of the spec (ConfigError naming the key otherwise)."""
+        return load_config(self.tables(), check_output=False)
 
 
 def check(spec: OrbitSpec, where: str = "orbit", cli: bool = False) -> OrbitSpec:
     """A ConfigError naming the key (the command-line option if cli) for anything that
-    would fail later."""
+    would fail later: the spec's own keys here, the system and the family's parameters by
+    the survey config's checks (their keys renamed to the spec's)."""
     def key_name(key):
         return f"--{key.replace('_', '-')}" if cli else f"{where}.{key}"
     for key in ("t_final", "tol", "zoom_until"):
@@ -63,38 +85,66 @@ def check(spec: OrbitSpec, where: str = "orbit", cli: bool = False) -> OrbitSpec
                 not math.isfinite(value):
             raise ConfigError(key_name(key), f"must be a finite number{' > 0' * (key == 't_final')}"
                                              f", got {value!r}")
-    if spec.t_final <= 0:
-        raise ConfigError(key_name("t_final"), f"must be a finite number > 0, got "
-                                               f"{spec.t_final!r}")
-    if not RTOL_MIN <= spec.tol < 1:
-        raise ConfigError(key_name("tol"), f"must be in [{RTOL_MIN:.2g}, 1) (double "
-                                           f"precision cannot honour less), got {spec.tol!r}")
-    for key, value in spec.params.items():
-        values = value if isinstance(value, list) else [value]
-        if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-                   for v in np.ravel(np.asarray(values, dtype=object))):
-            raise ConfigError(f"{where}.params.{key}", f"must be finite numbers, got {value!r}")
+    if spec.zoom_until < 0:
+        raise ConfigError(key_name("zoom_until"), f"must be >= 0 (0: no zoom), got "
+                                                  f"{spec.zoom_until!r}")
+    if spec.system is not None and (spec.potential != defaults.POTENTIAL
+                                    or spec.potential_params):
+        raise ConfigError(key_name("system"), "give either system or potential/"
+                                              "potential_params, not both")
     try:
-        for params in expand(spec):
-            initial_state(spec.system(), spec.family, **params)
-    except ValueError as exc:
-        raise ConfigError(where, str(exc)) from None
+        config = spec.config()
+        starts = build_starts(config)
+    except ConfigError as exc:
+        raise ConfigError(_spec_key(exc.key, key_name, cli, spec.system is not None),
+                          str(exc).split(": ", 1)[1]) from None
+    cells = spec.cells or tuple(range(config.n_cells))
+    if len(cells) > MAX_ORBITS:
+        raise ConfigError("--cell" if cli else key_name("params"),
+                          f"{config.n_cells} orbits is too many for one orbit set (at most "
+                          f"{MAX_ORBITS}); pick cells with --cell K (0..{config.n_cells - 1})")
+    bad = [c for c in cells if not 0 <= c < config.n_cells]
+    if bad:
+        raise ConfigError("--cell", f"{bad[0]} is not a cell of the grid (0.."
+                                    f"{config.n_cells - 1})")
+    if all(np.isnan(starts[c, 0]) for c in cells):
+        raise ConfigError(key_name("params"), "no start exists there (inaccessible: the "
+                                              "potential energy exceeds the energy)")
     return spec
 
 
-def expand(spec: OrbitSpec) -> list[dict]:
-    """The parameter sets of a spec: one, or one per value of its (single) list parameter
-    (a list of numbers; vector parameters are lists of numbers too, told apart by the
-    family's default)."""
-    defaults = family_parameters(spec.family)
-    lists = [k for k, v in spec.params.items()
-             if isinstance(v, list) and isinstance(defaults.get(k), (int, float))]
-    if not lists:
-        return [dict(spec.params)]
-    if len(lists) > 1:
-        raise ConfigError(f"params.{lists[1]}", "only one parameter may be a list")
-    key = lists[0]
-    return [{**spec.params, key: v} for v in spec.params[key]]
+def _spec_key(key: str, key_name, cli: bool, system_table: bool) -> str:
+    """A survey config's key as the orbit spec (or the command line) spells it."""
+    table, _, rest = key.partition("].")
+    table += "]" if rest else ""
+    if table == "[integration]":
+        return key_name("tol" if rest in ("rtol", "atol") else rest)
+    if cli:
+        flags = {"[initial]": "--family" if rest == "family" else f"--param {rest}",
+                 "[system.params]": f"--potential-param {rest}",
+                 "[system]": "--masses" if rest in ("masses", "bodies") else "--potential"}
+        return flags.get(table, key)
+    if table == "[initial]":
+        return key_name("family" if rest == "family" else f"params.{rest}")
+    if table.startswith("[system"):
+        return key_name(("system." if system_table else "potential_params.") + rest
+                        if rest and (system_table or table == "[system.params]") else
+                        "system" if system_table else "potential")
+    return key
+
+
+def from_survey_config(path, cells=(), t_final=None, zoom_until=0.0) -> OrbitSpec:
+    """The orbits of a survey config's cells (all if `cells` is empty), with its [system],
+    [initial] and tolerance; t_final its own unless given."""
+    config = load_config(path, check_output=False)
+    raw = tomllib.loads(config.text)
+    initial = dict(raw.get("initial", {}))
+    integration = config.tables["integration"]
+    spec = OrbitSpec(name=config.name, family=initial.pop("family"), params=initial,
+                     system=raw.get("system", {}),
+                     t_final=integration["t_final"] if t_final is None else t_final,
+                     tol=integration["rtol"], zoom_until=zoom_until, cells=tuple(cells))
+    return check(spec, "orbit", cli=True)
 
 
 def p_max(system: System, E: float, J: float) -> float | None:
@@ -102,6 +152,8 @@ def p_max(system: System, E: float, J: float) -> float | None:
     U = c P^2/2 with unit masses: E >= J^2/(2I) + c P^2/2 and I <= P^2/6 give
     P^2 <= (E + sqrt(E^2 - 6 c J^2)) / c. (The paper's I >= P^2/9 bounds the wrong way.)
     None for other systems."""
+    if not system.is_paper_kind:
+        return None
     pot = system.potential
     if pot.measure != PERIMETER or pot.profile != POWER or pot.params[1] != 2.0 or \
             not np.all(system.masses == 1.0) or system.n_bodies != 3:
@@ -109,42 +161,6 @@ def p_max(system: System, E: float, J: float) -> float | None:
     c = pot.params[0]
     disc = E * E - 6 * c * J * J
     return math.sqrt((E + math.sqrt(disc)) / c) if disc >= 0 else None
-
-
-def integrate_orbit(spec: OrbitSpec, params: dict | None = None):
-    """(system, y0, outcome, wall seconds) of one orbit with one tangent vector, sampled
-    at `samples` times."""
-    system = spec.system()
-    y0 = initial_state(system, spec.family, **(spec.params if params is None else params))
-    w0 = deviation_vectors(system, y0, 1, seed=0)[0]
-    t_eval = np.linspace(0.0, spec.t_final, spec.samples)
-    with notice(COMPILING, sys.stderr.isatty()):                      # load the kernels
-        integrate(system, y0, 1e-3, tangents=w0, t_eval=t_eval[:1])
-    start = time.perf_counter()
-    out = integrate(system, y0, spec.t_final, tangents=w0, t_eval=t_eval, rtol=spec.tol,
-                    atol=spec.tol)
-    return system, y0, out, time.perf_counter() - start
-
-
-def describe(spec: OrbitSpec, run: "OrbitRun") -> list[str]:
-    """What to print about one orbit: E, J, conservation, steps, its Lyapunov exponent."""
-    system, y0, out, wall = run.system, run.y0, run.outcome, run.wall
-    done = ~np.isnan(out.samples[:, 0])
-    s = out.samples[done]
-    E0, J0 = system.energy(y0), system.angular_momentum(y0)
-    lines = [f"{spec.family} {run.params or ''} with {system.potential.describe()}",
-             f"E = {E0:.10g}, J = {J0:.10g}; integrated to t = {out.t:g}: {out.status.name}, "
-             f"{out.n_steps} steps, {out.n_rhs} RHS evaluations, {wall:.2f} s",
-             f"max |E/E0 - 1| = {np.abs(system.energy(s) / E0 - 1).max():.2e}, "
-             f"max |J - J0| = {np.abs(system.angular_momentum(s) - J0).max():.2e}, "
-             f"max |p_total| = {np.abs(system.momentum(s)).max():.2e}",
-             f"finite-time Lyapunov exponent ln(|w(t)|/|w0|)/t = "
-             f"{out.log_growth[0] / out.t:.5f}"]
-    bound = run.p_max
-    if bound is not None:
-        lines.append(f"P_max = sqrt(E + sqrt(E^2 - 6 J^2)) = {bound:.6g} (Hill-type disk "
-                     f"radius {bound / 3:.6g})")
-    return lines
 
 
 class OrbitRun(NamedTuple):
@@ -165,13 +181,96 @@ class OrbitRun(NamedTuple):
 
 
 def run_orbits(spec: OrbitSpec) -> list[OrbitRun]:
-    """Every orbit of a spec: one, or one per value of its list parameter."""
+    """Every orbit of a spec (one per cell of its set), each with one tangent vector,
+    sampled at `samples` times; a cell without a start is skipped."""
+    config = spec.config()
+    starts = build_starts(config)
+    t_eval = np.linspace(0.0, spec.t_final, spec.samples)
     runs = []
-    for params in expand(spec):
-        system, y0, out, wall = integrate_orbit(spec, params)
-        bound = p_max(system, system.energy(y0), float(system.angular_momentum(y0)))
+    for cell in spec.cells or range(config.n_cells):
+        y0 = starts[cell]
+        if np.isnan(y0[0]):
+            continue
+        system = config.system(cell)
+        w0 = deviation_vectors(system, y0, 1, seed=0)[0]
+        with notice(COMPILING, sys.stderr.isatty()):                  # load the kernels
+            integrate(system, y0, 1e-3, tangents=w0, t_eval=t_eval[:1])
+        start = time.perf_counter()
+        out = integrate(system, y0, spec.t_final, tangents=w0, t_eval=t_eval, rtol=spec.tol,
+                        atol=spec.tol)
+        wall = time.perf_counter() - start
+        params = {**config.cell_parameters(cell), **config.axis_values(cell, terms=True)}
+        params = {k: v for k, v in params.items()          # as given, and the grid's
+                  if k in spec.params or k in {a.name for a in config.axes}}
+        bound = p_max(system, system.energy(y0), float(np.sum(system.angular_momentum(y0))))
         runs.append(OrbitRun(params, system, y0, out, wall, bound))
     return runs
+
+
+def describe(spec: OrbitSpec, run: OrbitRun) -> list[str]:
+    """What to print about one orbit: E, J, conservation, steps, its Lyapunov exponent,
+    the ranges of P, |A| and I, and each pair's closest approach."""
+    system, y0, out, wall = run.system, run.y0, run.outcome, run.wall
+    done = ~np.isnan(out.samples[:, 0])
+    s, t = out.samples[done, :system.n], out.t_eval[done]
+    E0, J0 = system.energy(y0), system.angular_momentum(y0)
+    J_text = (f"{J0:.10g}" if system.dim == 2 else
+              "(" + ", ".join(f"{c:.6g}" for c in J0) + ")")
+    dJ = np.abs(system.angular_momentum(s) - J0).max()
+    lines = [f"{spec.family}{' (' + run.label + ')' if run.label else ''} with "
+             f"{system.describe()}, masses {system.masses.tolist()}",
+             f"E = {E0:.10g}, J = {J_text}; integrated to t = {out.t:g}: {out.status.name}, "
+             f"{out.n_steps} steps, {out.n_rhs} RHS evaluations, {wall:.2f} s",
+             f"max |E/E0 - 1| = {np.abs(system.energy(s) / E0 - 1).max():.2e}, "
+             f"max |J - J0| = {dJ:.2e}, "
+             f"max |p_total| = {np.abs(system.momentum(s)).max():.2e}",
+             f"finite-time Lyapunov exponent ln(|w(t)|/|w0|)/t = "
+             f"{out.log_growth[0] / out.t:.5f}"]
+    lines += shape_ranges(system, t, s)
+    bound = run.p_max
+    if bound is not None:
+        lines.append(f"P_max = sqrt(E + sqrt(E^2 - 6 J^2)) = {bound:.6g} (Hill-type disk "
+                     f"radius {bound / 3:.6g})")
+    return lines
+
+
+def shape_ranges(system: System, t, states) -> list[str]:
+    """The ranges of the perimeter P and area |A| (three bodies) and of the moment of
+    inertia I over the samples, and each pair's closest approach with its time (the
+    smallest sampled distance, refined by a parabola through its neighbours)."""
+    q, _ = system.split(states)
+    out = []
+    if system.n_bodies == 3:
+        u, v, w = q[:, 0], q[:, 1], q[:, 2]
+        P = sides(u, v, w).sum(axis=1)
+        A = np.abs(area(u, v, w)) if system.dim == 2 else np.linalg.norm(area(u, v, w), axis=1)
+        out.append(f"P in [{P.min():.6g}, {P.max():.6g}], |A| in [{A.min():.6g}, "
+                   f"{A.max():.6g}]")
+    inertia = system.moment_of_inertia(states)
+    out.append(f"I in [{inertia.min():.6g}, {inertia.max():.6g}] (about the centre of mass); "
+               f"sampled every {t[1] - t[0]:.3g} time units" if t.size > 1 else "")
+    approaches = []
+    for i in range(system.n_bodies - 1):
+        for j in range(i + 1, system.n_bodies):
+            r = np.linalg.norm(q[:, j] - q[:, i], axis=-1)
+            tk, rk = closest(t, r)
+            approaches.append(f"{i}-{j}: {rk:.4g} at t = {tk:.6g}")
+    out.append("closest approaches: " + "; ".join(approaches))
+    return [line for line in out if line]
+
+
+def closest(t, r) -> tuple[float, float]:
+    """Time and value of the minimum of samples r(t), refined by the parabola through the
+    smallest sample and its neighbours (equally spaced times)."""
+    k = int(np.argmin(r))
+    if 0 < k < r.size - 1:
+        a, b, c = r[k - 1], r[k], r[k + 1]
+        curvature = a - 2 * b + c
+        if curvature > 0:
+            shift = 0.5 * (a - c) / curvature
+            dt = t[k + 1] - t[k]
+            return float(t[k] + shift * dt), float(b - 0.25 * (a - c) * shift)
+    return float(t[k]), float(r[k])
 
 
 KEYS = {f for f in OrbitSpec.__dataclass_fields__}
@@ -195,6 +294,9 @@ def load_workflow(path) -> list[OrbitSpec]:
             raise ConfigError(f"{where}.{extra[0]}", f"unknown key; keys are {', '.join(sorted(KEYS))}")
         if "name" not in table or "family" not in table:
             raise ConfigError(where, "needs a name and a family")
+        if "cells" in table:
+            raise ConfigError(f"{where}.cells", "unknown key; a list parameter makes a set "
+                                                "of orbits")
         specs.append(check(OrbitSpec(**table), where))
     return specs
 

@@ -4,9 +4,13 @@ space on one figure."""
 from __future__ import annotations
 
 import numpy as np
+from matplotlib.collections import LineCollection
+from matplotlib.colors import to_rgb
 from matplotlib.figure import Figure
 
 from ..physics.geometry import area, inequities, sides
+
+DENSE = 4000        # samples beyond which a path fades and a time series becomes a band
 
 
 def orbit_figures(system, t, states, title="", p_max=None, collision_fraction=0.05):
@@ -21,7 +25,7 @@ def orbit_figures(system, t, states, title="", p_max=None, collision_fraction=0.
     ax = fig.add_subplot()
     centre = system.centre_of_mass(states[0])
     for body, colour in zip(range(3), ("tab:red", "tab:green", "tab:blue")):
-        ax.plot(q[:, body, 0], q[:, body, 1], color=colour, lw=0.8, label="uvw"[body])
+        _path(ax, q[:, body, 0], q[:, body, 1], colour, "uvw"[body])
         ax.plot(q[0, body, 0], q[0, body, 1], "o", color=colour, ms=6)
     if p_max is not None:
         from matplotlib.patches import Circle
@@ -31,32 +35,37 @@ def orbit_figures(system, t, states, title="", p_max=None, collision_fraction=0.
     ax.set_xlabel("x")
     ax.set_ylabel("y")
     ax.legend(fontsize="small")
-    ax.set_title(f"{title}: positions up to t = {t[-1]:g}", fontsize="medium")
+    ax.set_title(f"{title}: positions up to t = {t[-1]:g}"
+                 + (" (fading: older is paler)" if t.size > DENSE else ""), fontsize="medium")
     out["paths"] = fig
 
     fig = Figure(figsize=(5.6, 5.4), layout="constrained")
     ax = fig.add_subplot(projection="3d")
     ia = inequities(u, v, w)
-    ax.plot(ia[:, 0], ia[:, 1], ia[:, 2], lw=0.6, color="k")
+    dense = t.size > DENSE
+    ax.plot(ia[:, 0], ia[:, 1], ia[:, 2], lw=0.3 if dense else 0.6, color="k",
+            alpha=max(0.15, DENSE / t.size) if dense else 1.0)
     _inequity_axes(ax)
     ax.set_title(f"{title}: inequities", fontsize="medium")
     out["inequities"] = fig
 
     fig = Figure(figsize=(8.0, 5.0), layout="constrained")
     ax1, ax2 = fig.subplots(2, 1, sharex=True)
-    ax1.plot(t, s.sum(axis=1), lw=0.7, color="k")
+    _series(ax1, t, s.sum(axis=1), "k")
     ax1.set_ylabel("$P$")
-    ax2.plot(t, area(u, v, w) if system.dim == 2 else np.linalg.norm(area(u, v, w), axis=1),
-             lw=0.7, color="k")
+    _series(ax2, t, area(u, v, w) if system.dim == 2 else
+            np.linalg.norm(area(u, v, w), axis=1), "k")
     ax2.set_ylabel("$A$")
     ax2.set_xlabel("t")
-    ax1.set_title(f"{title}: perimeter and area", fontsize="medium")
+    ax1.set_title(f"{title}: perimeter and area" + (
+        f" (band: range over each {(t[-1] - t[0]) / BINS:.3g} time units)"
+        if t.size > DENSE else ""), fontsize="medium")
     out["perimeter_area"] = fig
 
     fig = Figure(figsize=(8.0, 3.6), layout="constrained")
     ax = fig.add_subplot()
     for k, (name, colour) in enumerate(zip("abc", ("tab:red", "tab:green", "tab:blue"))):
-        ax.plot(t, s[:, k], lw=0.8, color=colour, label=name)
+        _series(ax, t, s[:, k], colour, name)
     close = near_collisions(t, s, collision_fraction)
     for tc, side, value in close:
         ax.plot(tc, value, "kv", ms=5)
@@ -67,6 +76,39 @@ def orbit_figures(system, t, states, title="", p_max=None, collision_fraction=0.
     ax.set_title(f"{title}: side lengths", fontsize="medium")
     out["sides"] = fig
     return out
+
+
+BINS = 250          # bands of a dense time series
+
+
+def _series(ax, t, x, colour, label=None):
+    """A time series; a dense one (more than DENSE samples) as the band of its minimum and
+    maximum over BINS equal time bins, which stays readable at any length."""
+    if t.size <= DENSE:
+        ax.plot(t, x, lw=0.7, color=colour, label=label)
+        return
+    edges = np.linspace(0, t.size, BINS + 1).astype(int)
+    lo = np.minimum.reduceat(x, edges[:-1])
+    hi = np.maximum.reduceat(x, edges[:-1])
+    mid = t[(edges[:-1] + edges[1:] - 1) // 2]
+    ax.fill_between(mid, lo, hi, color=colour, alpha=0.3, lw=0.3, label=label)
+
+
+def _path(ax, x, y, colour, label):
+    """A body's path; a dense one fades from pale (early) to solid (late), so the last
+    stretch stays visible over the earlier ones."""
+    if x.size <= DENSE:
+        ax.plot(x, y, color=colour, lw=0.8, label=label)
+        return
+    points = np.stack([x, y], axis=1)
+    segments = np.stack([points[:-1], points[1:]], axis=1)
+    alpha = np.linspace(0.05, 1.0, len(segments)) ** 2
+    rgba = np.zeros((len(segments), 4))
+    rgba[:, :3] = to_rgb(colour)
+    rgba[:, 3] = alpha
+    ax.add_collection(LineCollection(segments, colors=rgba, linewidths=0.5))
+    ax.plot([], [], color=colour, lw=0.8, label=label)
+    ax.autoscale_view()
 
 
 def _inequity_axes(ax):

@@ -10,6 +10,7 @@ import xarray as xr
 from matplotlib.collections import PolyQuadMesh, QuadMesh
 
 from survey.analysis.onset import onset
+from survey.catalog.errors import ConfigError
 from survey.catalog.regimes import Regime
 from survey.cli import main, orbit_workflow
 from survey.pipeline import orbits
@@ -234,3 +235,114 @@ def test_a_survey_whose_cells_all_fail_still_ends_with_a_report_that_says_so(ene
     assert "**No cell finished**" in text
     figures = sorted(p.name for p in tmp_path.glob("fail_*.png"))
     assert figures == (["fail_map_regime.png"] if energy else ["fail_scan.png"]), figures
+
+
+def test_the_orbit_command_takes_a_survey_config_with_its_system(tmp_path, capsys):
+    """`orbit grid.toml --cell K`: the cell's start under the config's [system] (here two
+    terms, masses of 2 weighting the pair term by 4), with E, J, the ranges of P, |A|, I and the closest approaches;
+    the same numbers as the survey's own start and energy."""
+    cfg = tmp_path / "grid.toml"
+    cfg.write_text("""
+[survey]
+name = "mixed"
+output = "%s"
+[system]
+masses = [2.0, 2.0, 2.0]
+interactions = [
+  {kind = "triplet", potential = "perimetric_power", params = {coupling = 1.0, exponent = 2.0}},
+  {kind = "pair", potential = "power", mass_weighted = true, params = {coupling = -1.0, exponent = -1.0}},
+]
+[initial]
+family = "equilateral"
+delta = [1.0, 3.0, 4.0]
+[integration]
+t_final = 30.0
+""" % (tmp_path / "mixed.nc"))
+    assert main(["orbit", str(cfg), "--cell", "1", "--plot", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    from survey.pipeline.cells import build_starts
+    from survey.pipeline.config import load_config
+    config = load_config(cfg)
+    system = config.system(1)
+    y0 = build_starts(config)[1]
+    assert f"E = {system.energy(y0):.10g}" in out and "equilateral (delta = 3)" in out
+    assert "times m_i m_j" in out and "masses [2.0, 2.0, 2.0]" in out
+    assert "P in [" in out and "|A| in [" in out and "I in [" in out
+    assert out.count(" at t = ") == 3                      # three pairs
+    assert (tmp_path / "mixed_paths.png").exists()
+    # all three cells form a set (drawn together in inequity space); a grid too large for
+    # one set names --cell
+    assert main(["orbit", str(cfg)]) == 0
+    assert capsys.readouterr().out.count("E = ") == 3
+    big = tmp_path / "big.toml"
+    big.write_text(cfg.read_text().replace("[1.0, 3.0, 4.0]", "{start = 0, stop = 4, num = 9}"))
+    assert main(["orbit", str(big)]) == 2
+    assert "--cell: 9 orbits is too many" in capsys.readouterr().err
+
+
+def test_closest_approach_and_ranges_match_an_exact_kepler_orbit():
+    """The closest approach of a two-body Kepler orbit is its pericentre a (1 - e), at the
+    times the period says; the parabolic refinement finds it between samples."""
+    import math
+
+    from survey.physics.system import System
+    from survey.physics.terms import make_potential
+    s = System(np.array([1.0, 0.25]), 2, make_potential("gravity", {}, "pair"))
+    a, e, M = 1.0, 0.5, 1.25
+    r = a * (1 + e)                                   # start at apocentre
+    v = math.sqrt(M * (1 - e) / r)
+    mu = 0.25 / M
+    y0 = s.state([[-0.25 / M * r, 0.0], [1 / M * r, 0.0]], [[0.0, -mu * v], [0.0, mu * v]])
+    from survey import integrate
+    period = 2 * math.pi * math.sqrt(a ** 3 / M)
+    t = np.linspace(0.0, 1.3 * period, 1001)
+    out = integrate(s, y0, t[-1], t_eval=t, rtol=1e-12, atol=1e-12)
+    lines = orbits.shape_ranges(s, t, out.samples)
+    tk, rk = orbits.closest(t, np.linalg.norm(np.diff(s.split(out.samples)[0], axis=1)[:, 0],
+                                              axis=-1))
+    assert rk == pytest.approx(a * (1 - e), rel=1e-6)
+    assert tk == pytest.approx(period / 2, rel=1e-4)
+    assert lines[-1] == f"closest approaches: 0-1: {rk:.4g} at t = {tk:.6g}"
+
+
+def test_long_orbits_stay_readable_faded_paths_and_bands():
+    """At T = 2000 (20001 samples) paths fade with time and time series become min-max bands
+    instead of a solid block of lines; zoom_until still draws the paths up to it."""
+    from matplotlib.collections import LineCollection, PolyCollection
+    spec = orbits.OrbitSpec("long", "equilateral", {"delta": 3.0}, t_final=2000.0)
+    figs, _ = orbit_figures(spec)
+    paths = figs["paths"].axes[0]
+    fading = [c for c in paths.collections if isinstance(c, LineCollection)]
+    assert len(fading) == 3 and "fading" in paths.get_title()
+    alphas = fading[0].get_colors()[:, 3]
+    assert alphas[0] < 0.01 < alphas[-1] == 1.0
+    bands = [c for c in figs["perimeter_area"].axes[0].collections
+             if isinstance(c, PolyCollection)]
+    assert len(bands) == 1 and "band" in figs["perimeter_area"].axes[0].get_title()
+    zoomed, _ = orbit_figures(orbits.OrbitSpec("z", "equilateral", {"delta": 3.0},
+                                               t_final=2000.0, zoom_until=20.0))
+    assert "t = 20" in zoomed["paths"].axes[0].get_title()
+    assert not [c for c in zoomed["paths"].axes[0].collections if isinstance(c, LineCollection)]
+
+
+def test_an_orbit_workflow_takes_a_system_table(tmp_path):
+    """[[orbit]] tables take any survey [system] (masses, interactions) instead of
+    potential/potential_params; its mistakes are named by the orbit's keys."""
+    path = tmp_path / "orbits.toml"
+    table = """[[orbit]]
+name = "lagrange"
+family = "explicit"
+params = {positions = [[0.0, 0.5774], [-0.5, -0.2887], [0.5, -0.2887]], velocities = [[-0.5774, 0.0], [0.2887, -0.5], [0.2887, 0.5]]}
+system = {masses = [1.0, 1.0, 1.0], interactions = [{kind = "pair", potential = "gravity", params = {G = 1.0}}]}
+t_final = 1.0
+"""
+    path.write_text(table)
+    spec, = orbits.load_workflow(path)
+    run, = orbits.run_orbits(spec)
+    assert run.system.terms[0].name == "gravity" and run.system.terms[0].mass_weighted
+    path.write_text(table.replace("masses = [1.0, 1.0, 1.0]", "masses = [1.0, 1.0]"))
+    with pytest.raises(ConfigError, match=r"\[\[orbit\]\] 1.system.masses: needs 3 values"):
+        orbits.load_workflow(path)
+    path.write_text(table + 'potential = "areal_power"\n')
+    with pytest.raises(ConfigError, match="either system or potential"):
+        orbits.load_workflow(path)
