@@ -70,7 +70,35 @@ def figures(ds, variables=None) -> dict[str, Figure]:
         regular = np.isin(ds[V.regime].values, REGULAR)
         if np.isfinite(ds[V.frequency].values[regular]).any():
             out["frequency_map"] = frequency_map(ds)
+    title = survey_title(ds)
+    for fig in out.values():
+        fig.suptitle(title, fontsize="small", color="0.25")
     return out
+
+
+def survey_title(ds) -> str:
+    """What every survey figure is of: the survey, its family and potential, T, and what
+    varies over the grid."""
+    import tomllib
+    try:
+        config = tomllib.loads(ds.attrs.get("config", ""))
+    except tomllib.TOMLDecodeError:
+        config = {}
+    name = config.get("survey", {}).get("name", "")
+    family = config.get("initial", {}).get("family", "")
+    system = config.get("system", {})
+    if "interactions" in system:
+        potential = " + ".join(t.get("potential", "?") + (" (m_i m_j)" if t.get(
+            "mass_weighted") else "") for t in system["interactions"])
+    else:
+        potential = system.get("potential", "perimetric_power")
+    T = float(np.nanmax(ds[V.t_end].values)) if V.t_end in ds and \
+        np.isfinite(ds[V.t_end].values).any() else config.get("integration", {}).get("t_final")
+    axes = grid_axes(ds)
+    varies = (f"; {', '.join(axes)} varied over {ds[V.status].size} cells" if axes
+              else "; one cell")
+    return (f"{name}: {family} family under {potential}, T = {T:g}{varies}" if T is not None
+            else f"{name}: {family} family under {potential}{varies}")
 
 
 def save(figs: dict[str, Figure], folder, stem: str) -> list[Path]:
@@ -134,7 +162,7 @@ def regime_map(ds) -> Figure:
               color=[REGIME_COLOURS[r] for r, n in counts if n])
     hist.set_xlabel("cells")
     hist.yaxis.tick_right()
-    fig.suptitle(f"regime of each cell ({ds.attrs.get('title', '')})", fontsize="medium")
+    ax.set_title("regime of each cell", fontsize="medium")
     return fig
 
 
@@ -207,10 +235,14 @@ def scan(ds, names) -> Figure:
         yerr = None if spread is None else np.where(np.isfinite(y), spread.values, np.nan)
         ax.errorbar(x, y, yerr=yerr, fmt="o-", ms=2.5, lw=0.8, color="k", ecolor="0.4",
                     elinewidth=0.7, capsize=1.5)
-        for level, style in _reference_lines(ds, name):
-            ax.axhline(level, color="0.3", ls=style, lw=0.8)
+        for level, style, text in _reference_lines(ds, name):
+            ax.axhline(level, color="0.3", ls=style, lw=0.8, label=text)
         if name in (V.ftle, V.megno) and _positive(y):
             ax.set_yscale("log")
+            _below_log_axis(ax, x, y)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize="x-small", loc="upper left", bbox_to_anchor=(1.0, 1.0),
+                      frameon=False)
         if not np.isfinite(y).any():
             ax.text(0.5, 0.5, "no value: no cell finished", transform=ax.transAxes,
                     ha="center", va="center", color="0.3")
@@ -218,6 +250,9 @@ def scan(ds, names) -> Figure:
     axes[-1].set_xlabel(label(a))
     if regime is not None:
         present = [r for r in Regime if np.any(regime == r)]
+        lines = axes[0].get_legend()          # kept beside the regimes' legend
+        if lines is not None:
+            axes[0].add_artist(lines)
         axes[0].legend(handles=[Patch(color=REGIME_COLOURS[r], alpha=0.4,
                                       label=f"{r.name.lower()} ({int(np.sum(regime == r))})")
                                 for r in present], loc="lower left", fontsize="small",
@@ -227,23 +262,37 @@ def scan(ds, names) -> Figure:
 
 
 def _reference_lines(ds, name):
-    """Where the indicator's votes change (dashed: regular side, dotted: chaotic side)."""
+    """Where the indicator's votes change (dashed: regular side, dotted: chaotic side):
+    (level, line style, legend text)."""
     th = Thresholds.from_table(stored_table(ds))
     for indicator in REGISTRY:
         vote = indicator.vote
         if vote is None or vote.variable != name:
             continue
-        lines = [(getattr(th, f"{vote.thresholds}_{side}"), style)
-                 for side, style in (("regular", "--"), ("chaotic", ":"))]
+        levels = [getattr(th, f"{vote.thresholds}_{side}") for side in ("regular", "chaotic")]
+        unit = ""
         if vote.per_torus_rate:
             if V.t_end not in ds:
                 return []
             T = float(np.nanmax(ds[V.t_end].values))
             if not T > 0:
                 return []
-            lines = [(level * np.log(T) / T, style) for level, style in lines]
-        return lines
+            unit = [f" ({level:g} ln T / T)" for level in levels]
+            levels = [level * np.log(T) / T for level in levels]
+        return [(level, style, f"{side} vote {level:.3g}{unit[k] if unit else ''}")
+                for k, (level, style, side) in enumerate(zip(levels, ("--", ":"),
+                                                              ("regular", "chaotic")))]
     return []
+
+
+def _below_log_axis(ax, x, y):
+    """Values a log axis cannot show (<= 0, e.g. a FTLE that shrank) marked at its bottom
+    edge, counted in the legend, instead of silently falling off."""
+    off = np.isfinite(y) & (y <= 0)
+    if off.any():
+        ax.plot(x[off], np.full(off.sum(), 0.0), "v", color="tab:purple", ms=4,
+                transform=ax.get_xaxis_transform(), clip_on=False,
+                label=f"<= 0, off the log axis ({int(off.sum())})")
 
 
 def section(ds, x="sigma", y="p_sigma", colour_by=V.regime) -> Figure:
@@ -301,8 +350,12 @@ def convergence(ds, cells=None) -> Figure:
                     label=coords[c] + (f" ({Regime(regime[c]).name.lower()})"
                                        if regime is not None else ""))
         ax.set_ylabel(label(name.replace("_history", "")))
-        if name in (V.ftle_history, V.sali_history) and _positive(values[cells]):
+        if name == V.sali_history and _positive(values[cells]):
             ax.set_yscale("log")
+        if name == V.ftle_history and _positive(values[cells]):
+            # a FTLE history crosses zero early on: logarithmic above ln(T)/T, linear
+            # below it, so no stretch of it falls off the axis
+            ax.set_yscale("symlog", linthresh=float(np.log(t[-1]) / t[-1]))
         if name == V.ftle_history:
             ax.plot(t, np.log(t) / t, "k:", lw=1, label=r"$\ln t / t$ (torus)")
     axes[0].legend(fontsize="x-small", ncol=2)

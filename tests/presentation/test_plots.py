@@ -346,3 +346,24 @@ t_final = 1.0
     path.write_text(table + 'potential = "areal_power"\n')
     with pytest.raises(ConfigError, match="either system or potential"):
         orbits.load_workflow(path)
+
+
+def test_every_survey_figure_says_what_it_is_of_and_labels_its_lines(grid1):
+    """Titles name the family, the potential, T and what varies; threshold lines say which
+    vote they bound and where; a value a log axis cannot show is marked at its edge."""
+    figs = plots.figures(grid1)
+    for name, fig in figs.items():
+        title = fig._suptitle.get_text()
+        assert "g1: equilateral family under perimetric_power, T = 300" in title, name
+        assert "delta varied over 9 cells" in title, name
+    megno = figs["scan"].axes[1]
+    labels = [ln.get_label() for ln in megno.get_lines()]
+    assert "regular vote 2.25" in labels and any(t.startswith("chaotic vote") for t in labels)
+    ftle = figs["scan"].axes[0]
+    assert any("ln T / T" in ln.get_label() for ln in ftle.get_lines())
+    shrunk = grid1.copy(deep=True)
+    shrunk["ftle"].values[2] = -0.01
+    ftle = plots.figures(shrunk)["scan"].axes[0]
+    assert ftle.get_yscale() == "log"
+    assert any(ln.get_label() == "<= 0, off the log axis (1)" for ln in ftle.get_lines())
+    assert figs["convergence"].axes[0].get_yscale() == "symlog"
