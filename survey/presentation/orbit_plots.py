@@ -133,13 +133,18 @@ def inequity_set(system, orbits: dict) -> Figure:
     """Several orbits in inequity space on one figure (the paper's EquilateralSet)."""
     fig = Figure(figsize=(6.0, 5.6), layout="constrained")
     ax = fig.add_subplot(projection="3d")
-    colours = ["k", "tab:red", "tab:blue", "0.5", "tab:green", "tab:purple"]
+    colours = ["k", "tab:red", "tab:blue", "tab:orange", "tab:green", "tab:purple"]
+    curves = []
     for (name, states), colour in zip(orbits.items(), colours):
         q, _ = system.split(states)
-        ia = inequities(q[:, 0], q[:, 1], q[:, 2])
-        ax.plot(ia[:, 0], ia[:, 1], ia[:, 2], lw=0.7, color=colour, label=name)
+        curves.append((name, colour, inequities(q[:, 0], q[:, 1], q[:, 2])))
+    # the widest first, so that the orbits nested inside it are drawn over it
+    for name, colour, ia in sorted(curves, key=lambda c: -np.ptp(c[2], axis=0).sum()):
+        ax.plot(ia[:, 0], ia[:, 1], ia[:, 2], lw=0.9, color=colour, label=name, alpha=0.85)
     _inequity_axes(ax)
-    ax.legend(fontsize="small")
+    handles, labels = ax.get_legend_handles_labels()
+    order = [labels.index(name) for name in orbits]        # the legend in the given order
+    ax.legend([handles[k] for k in order], [labels[k] for k in order], fontsize="small")
     return fig
 
 

@@ -117,8 +117,40 @@ def markdown(ds, figure_names=()) -> str:
     return "\n".join(out)
 
 
+# axes along which "where chaos sets in" means nothing: coordinates of a start on the
+# section (neighbouring cells are different orbits of one shell, not a family parameter
+# growing) and seeds
+COORDINATES = {"sigma", "p_sigma", "eta", "p_eta", "phi", "theta", "seed", "direction"}
+
+
+def _why_no_onset(ds, axis) -> str:
+    """Why an onset along `axis` would mean nothing ("" if it means something)."""
+    if axis in COORDINATES:
+        return (f"{axis} is a coordinate of the starts on one energy shell, not a parameter "
+                "of a family of orbits: regular and chaotic cells interleave there")
+    if "term" in ds[axis].attrs.get("long_name", ""):
+        return (f"{axis} is a parameter of the potential: each value is another system, "
+                "compared at one start each")
+    return ""
+
+
 def _onsets(ds, axes, regime) -> list[str]:
     out = []
+    meaningful = [a for a in axes if not _why_no_onset(ds, a)]
+    skipped = [f"No onset is given along {a}: {_why_no_onset(ds, a)}." for a in axes
+               if a not in meaningful]
+    if len(axes) == 2 and meaningful and meaningful[0] != axes[0]:
+        axes, regime = axes[::-1], regime.T          # the onset along the meaningful axis
+    if len(axes) == 1 and not meaningful:
+        x = ds[axes[0]].values
+        return [f"## Regimes along {axes[0]}", ""] + [
+            f"- {axes[0]} = {x[i]:g}" + (f" to {x[j]:g}" if j > i else "") +
+            f": {Regime(regime[i]).name.lower()} ({j - i + 1} cell{'s' * (j > i)})"
+            for i, j in runs(regime)] + ["", *skipped, ""]
+    if len(axes) == 2 and not meaningful:
+        return ["## Where chaos sets in", "", *skipped, ""]
+    if skipped:
+        out += ["## Axes without an onset", "", *skipped, ""]
     if len(axes) == 1:
         x = ds[axes[0]].values
         out += [f"## Regimes along {axes[0]}", ""] + [

@@ -367,3 +367,30 @@ def test_every_survey_figure_says_what_it_is_of_and_labels_its_lines(grid1):
     assert ftle.get_yscale() == "log"
     assert any(ln.get_label() == "<= 0, off the log axis (1)" for ln in ftle.get_lines())
     assert figs["convergence"].axes[0].get_yscale() == "symlog"
+
+
+def test_onsets_only_along_axes_where_they_mean_something():
+    """An onset along a section coordinate or a potential's parameter means nothing (the
+    cells are other orbits of one shell, or other systems): the report says why instead;
+    a map with one meaningful axis gives its onset along that axis."""
+    x = np.linspace(0.0, 1.0, 5)
+    line = np.array([0, 0, 4, 4, 4])
+
+    def axis(name, long_name):
+        return xr.Dataset(coords={name: (name, x, {"long_name": long_name})})
+    text = "\n".join(report._onsets(axis("sigma", "initial-condition parameter sigma"),
+                                    ["sigma"], line))
+    assert "Where chaos sets in" not in text and "coordinate of the starts" in text
+    text = "\n".join(report._onsets(axis("delta", "initial-condition parameter delta"),
+                                    ["delta"], line))
+    assert "onset delta = 0.375 +- 0.12" in text
+    energy = np.array([1.0, 2.0, 3.0])
+    ds = xr.Dataset(coords={
+        "axilrod_teller_strength": ("axilrod_teller_strength", x, {
+            "long_name": "parameter strength of the triplet term axilrod_teller"}),
+        "energy": ("energy", energy, {"long_name": "initial-condition parameter energy"})})
+    grid = np.tile([0, 0, 4], (5, 1))                    # chaos sets in along the energy
+    text = "\n".join(report._onsets(ds, ["axilrod_teller_strength", "energy"], grid))
+    assert "along energy, for each axilrod_teller_strength" in text
+    assert "No onset is given along axilrod_teller_strength: " in text
+    assert text.count("| 2.5 +- 0.5 |") == 5
