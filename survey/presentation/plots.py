@@ -216,7 +216,12 @@ def scan(ds, names) -> Figure:
     """Indicators along a one-axis grid with their ensemble spread as error bars and the
     regime shaded behind (the paper's LyapunovSides and LyapunovScanEquil)."""
     a = grid_axes(ds)[0]
-    x = ds[a].values
+    values = ds[a].values
+    steps = np.diff(values)
+    # a grid that crowds somewhere (steps differing by more than 10x) is drawn cell by
+    # cell, its values as tick labels, so that no stretch of it packs into a few pixels
+    uneven = values.size > 2 and bool(np.all(steps > 0)) and steps.max() > 10 * steps.min()
+    x = np.arange(values.size, dtype=float) if uneven else values
     names = [n for n in names if n in ds]
     fig = Figure(figsize=(8.0, 2.3 * max(len(names), 1) + 0.6), layout="constrained")
     axes = fig.subplots(max(len(names), 1), 1, sharex=True, squeeze=False)[:, 0]
@@ -247,7 +252,11 @@ def scan(ds, names) -> Figure:
             ax.text(0.5, 0.5, "no value: no cell finished", transform=ax.transAxes,
                     ha="center", va="center", color="0.3")
         ax.set_ylabel(label(name))
-    axes[-1].set_xlabel(label(a))
+    axes[-1].set_xlabel(label(a) + (" (one cell per step: the grid is unevenly spaced)"
+                                    if uneven else ""))
+    if uneven:
+        every = max(1, values.size // 8)
+        axes[-1].set_xticks(x[::every], [f"{v:g}" for v in values[::every]])
     if regime is not None:
         present = [r for r in Regime if np.any(regime == r)]
         lines = axes[0].get_legend()          # kept beside the regimes' legend

@@ -394,3 +394,15 @@ def test_onsets_only_along_axes_where_they_mean_something():
     assert "along energy, for each axilrod_teller_strength" in text
     assert "No onset is given along axilrod_teller_strength: " in text
     assert text.count("| 2.5 +- 0.5 |") == 5
+
+
+def test_an_unevenly_spaced_scan_is_drawn_cell_by_cell(grid1):
+    """Energies crowding towards a minimum (steps differing by more than 10x) are drawn one
+    cell per step with their values as tick labels, not packed on a linear axis."""
+    crowded = grid1.assign_coords(delta=3.0 + np.array([0, 1, 2, 4, 8, 16, 32, 64, 128]) / 64)
+    ax = plots.scan(crowded, ["ftle"]).axes[-1]
+    assert "unevenly spaced" in ax.get_xlabel()
+    assert list(ax.get_xticks()) == [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0]
+    assert ax.get_xticklabels()[-1].get_text() == "5"
+    even = plots.scan(grid1, ["ftle"]).axes[-1]
+    assert "unevenly" not in even.get_xlabel()
