@@ -26,8 +26,6 @@ import time
 from typing import NamedTuple, Sequence
 
 import numpy as np
-from numba import objmode
-
 from ..catalog import defaults
 from ..catalog.status import Status
 from ..physics import portable
@@ -590,7 +588,6 @@ def _needs_dense(k, ln, rows, t1, direction, events, t_eval, t_fine):
     return rows[2, j] >= 0 and i < t_fine.size and direction * (t_fine[i] - t_new) <= 0.0
 
 
-@kernel
 def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol,
            n_err, max_steps, h0, h_max, h_min, events, max_events, n_sub, t_eval, n_eval,
            renorm_dt, time_limit, t_fine, L):
@@ -615,6 +612,11 @@ def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol,
     close approach spikes within a single step (the Hessian grows like a power of 1/r) and
     wrecks any quadrature of it. int L and int Y are trapezoid sums over the steps (and at
     output times, over the part of the step before them, with L from the dense output).
+
+    The state lives in arrays allocated here and the stepping in the compiled `_run`,
+    called from Python: a compiled wrapper would cost the cold start seconds of
+    compilation (numba re-optimises and re-generates a caller's whole call tree) for a
+    loop that turns once, or once per 256 rounds with a time limit.
     """
     M, nf = y0s.shape
     n = 2 * masses.size * d
@@ -642,21 +644,15 @@ def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol,
         np.zeros(max(m, 1)), np.zeros(max(m, 1)), np.zeros(max(m, 1), dtype=np.int64),
         np.zeros(max(1, m * n_sub)), np.zeros(max(1, m * n_sub), dtype=np.int64),
         np.zeros(nf), np.zeros(nf), np.zeros((2, nf)))
-    now = 0.0
-    if time_limit > 0.0:
-        with objmode(now="f8"):
-            now = time.perf_counter()
-    next_job = np.int64(0)      # not the literal 0: numba would compile _run for it too
     # with a time limit, back every 256 rounds to read the clock
     rounds = 256 if time_limit > 0.0 else 1 << 62
+    next_job = 0
     while next_job >= 0:
+        now = time.perf_counter() if time_limit > 0.0 else 0.0
         next_job = _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan,
                         megno, rtol, atol, n_err, max_steps, h0, h_max, h_min, events,
                         max_events, n_sub, t_eval, n_eval, renorm_dt, time_limit, t_fine,
                         next_job, rounds, now)
-        if time_limit > 0.0:
-            with objmode(now="f8"):
-                now = time.perf_counter()
     return out
 
 

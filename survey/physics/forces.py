@@ -116,7 +116,7 @@ def _add_cyclic(dy, off, i, j, k, d, s, g1, g2, g3):
     add_to(dy, off + k * d, d, s, sub(g3, g2))
 
 
-@helper
+@leaf
 def perimetric_forces(y, dy, i, j, k, d, n, n_tan, prof, par):
     """Add the forces of triplet (i, j, k) under U(P) to dy's momentum rates, and for each
     tangent vector t (stored at y[n*(1+t):]) its tangent force -Hess U . dq to dy at the
@@ -141,7 +141,7 @@ def perimetric_forces(y, dy, i, j, k, d, n, n_tan, prof, par):
         _add_cyclic(dy, base + nq, i, j, k, d, 1.0, g1, g2, g3)
 
 
-@helper
+@leaf
 def areal_forces(y, dy, i, j, k, d, n, n_tan, prof, par):
     """As perimetric_forces, for U(|A|)."""
     nq = n // 2

@@ -60,5 +60,7 @@ kernel = njit(cache=True, error_model="numpy")
 # (`_nrt` is numba's own switch for it, used by its test suite.)
 leaf = njit(cache=True, error_model="numpy", _nrt=False)
 # small helpers are inlined at numba-IR level: calls between separately compiled functions
-# otherwise cost more than the arithmetic (3x on the right-hand side).
+# otherwise cost more than the arithmetic (3x on the right-hand side). Large bodies called
+# once per triplet or evaluation stay `leaf`s: inlining them buys nothing measurable and
+# the compile time grows faster than the code (cold start, python -m survey run).
 helper = njit(cache=True, error_model="numpy", inline="always")

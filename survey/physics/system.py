@@ -69,7 +69,7 @@ class System:
         m.setflags(write=False)
         object.__setattr__(self, "masses", m)
         object.__setattr__(self, "terms", terms)
-        object.__setattr__(self, "_par", _encode(terms))
+        object.__setattr__(self, "_par", _encode(terms, m.size, self.dim))
 
     @classmethod
     def create(cls, masses=(1.0, 1.0, 1.0), dim=defaults.DIM, potential=defaults.POTENTIAL,
@@ -166,15 +166,16 @@ class System:
         return tuple(q[..., b, :] for b in triplet)
 
 
-def _encode(terms) -> np.ndarray:
-    """The kernels' `par`. A single perimetric or areal term (the paper's systems): its two
-    parameters, a 1-D array. Otherwise a 2-D array: row 0 the two parameters of the leading
-    perimetric or areal term (zeros if there is none), then one row (measure, profile,
-    weighted, p0, p1) per further term, weighted 1 for a pair term multiplied by m_i m_j.
-    The kernels are compiled separately for the two array types, so the paper's systems run
-    code in which the further terms do not exist."""
+def _encode(terms, N: int, d: int) -> np.ndarray:
+    """The kernels' `par`. Three bodies in the plane under a single perimetric or areal
+    term (the paper's systems): its two parameters, a 1-D array. Otherwise a 2-D array: row
+    0 the two parameters of the leading perimetric or areal term (zeros if there is none),
+    then one row (measure, profile, weighted, p0, p1) per further term, weighted 1 for a
+    pair term multiplied by m_i m_j. The kernels are compiled separately for the two array
+    types, so the paper's systems run -- and a first run compiles -- code in which neither
+    the general N-body path nor the further terms exist (a cold start 10 s shorter)."""
     lead = terms[0] if terms[0].measure in (PERIMETER, AREA) else None
-    if lead is not None and len(terms) == 1:
+    if lead is not None and len(terms) == 1 and N == 3 and d == 2:
         return lead.par
     rows = [list(lead.par) + [0.0] * 3 if lead is not None else [0.0] * 5]
     for term in terms[1:] if lead is not None else terms:
@@ -188,6 +189,10 @@ def lead_params(par):
     """The two parameters of the leading perimetric or areal term (see _encode)."""
 
 
+def general_forces(y, dy, masses, N, d, measure, prof, par, n_tan):
+    """Velocities and the leading term's forces on the general path (see _encode)."""
+
+
 def further_forces(y, dy, masses, d, n, n_tan, par):
     """Forces of the terms after the leading one (see _encode)."""
 
@@ -196,8 +201,9 @@ def further_energy(q, masses, d, par):
     """Energy of the terms after the leading one (see _encode)."""
 
 
-# typed at compile time on par's dimension: for a 1-D par the further terms compile to
-# nothing (a call to a kernel that is never taken still cost the paper's systems 8%)
+# typed at compile time on par's dimension: for a 1-D par the general path and the further
+# terms compile to nothing (a call to a kernel that is never taken still cost the paper's
+# systems 8%)
 @overload(lead_params, jit_options=dict(error_model="numpy"), inline="always")
 def _lead_params(par):
     # a pair of floats, not a view: a kernel without reference counting (jit.leaf) may
@@ -205,6 +211,14 @@ def _lead_params(par):
     if par.ndim == 1:
         return lambda par: (par[0], par[1])
     return lambda par: (par[0, 0], par[0, 1])
+
+
+@overload(general_forces, jit_options=dict(error_model="numpy"), inline="always")
+def _general_forces(y, dy, masses, N, d, measure, prof, par, n_tan):
+    if par.ndim == 1:       # three bodies in the plane: `rhs` never takes this path
+        return lambda y, dy, masses, N, d, measure, prof, par, n_tan: None
+    return lambda y, dy, masses, N, d, measure, prof, par, n_tan: _leading_forces(
+        y, dy, masses, N, d, measure, prof, lead_params(par), n_tan)
 
 
 @overload(further_forces, jit_options=dict(error_model="numpy"), inline="always")
@@ -285,7 +299,7 @@ def rhs(t, y, dy, masses, d, measure, prof, par, n_tan):
     elif N == 3 and d == 2 and measure == AREA:
         _planar_areal(y, dy, masses, prof, lead, n_tan)
     else:
-        _leading_forces(y, dy, masses, N, d, measure, prof, lead, n_tan)
+        general_forces(y, dy, masses, N, d, measure, prof, par, n_tan)
     further_forces(y, dy, masses, d, 2 * N * d, n_tan, par)
 
 
@@ -447,22 +461,25 @@ def _lanes_velocities(Y, dY, L, masses, n_tan):
 
 
 @leaf
-def _lanes_profile(prof, par, W, x, u1, u2, L):
-    """U'(x) into W[u1 * L + k] and U''(x) into W[u2 * L + k] from x at W[x * L + k], lane by
+def _lanes_profile(prof, par, W, x, L):
+    """U'(v) into W[x + L + k] and U''(v) into W[x + 2 L + k] from v = W[x + k], lane by
     lane: the paper's P^2/2 and barrier in loops the compiler vectorises (a branch on the
-    profile inside the lanes' loop costs 4x), any other profile through `profile`."""
+    profile inside the lanes' loop costs 4x), any other profile through `profile`. (x is
+    an offset computed at run time: a literal row number would compile it once per
+    caller.)"""
+    u1, u2 = x + L, x + 2 * L
     if prof == POWER and par[1] == 2.0:
         for k in range(L):
-            W[u1 * L + k], W[u2 * L + k] = par[0] * W[x * L + k], par[0]
+            W[u1 + k], W[u2 + k] = par[0] * W[x + k], par[0]
     elif prof == BARRIER:
         a, b = par[0], par[1]
         for k in range(L):
-            v = W[x * L + k]
-            W[u1 * L + k] = -a / (v * v) + 2.0 * b * v
-            W[u2 * L + k] = 2.0 * a / (v * v * v) + 2.0 * b
+            v = W[x + k]
+            W[u1 + k] = -a / (v * v) + 2.0 * b * v
+            W[u2 + k] = 2.0 * a / (v * v * v) + 2.0 * b
     else:
         for k in range(L):
-            _, W[u1 * L + k], W[u2 * L + k] = profile(prof, par, W[x * L + k])
+            _, W[u1 + k], W[u2 + k] = profile(prof, par, W[x + k])
 
 
 @helper
@@ -474,7 +491,7 @@ def _lanes_perimetric(Y, dY, L, prof, par, n_tan, W):
     (it adds into zeros). W rows: e1x e1y e2x e2y e3x e3y L1 L2 L3 P U' U'' U'/L1 U'/L2
     U'/L3."""
     _perimetric_sides(Y, L, W)
-    _lanes_profile(prof, par, W, 9, 10, 11, L)
+    _lanes_profile(prof, par, W, 9 * L, L)
     _perimetric_forces(dY, L, W)
     for t in range(n_tan):
         _perimetric_tangent(Y[12 * L * (1 + t):], dY[12 * L * (1 + t):], L, W)
@@ -546,7 +563,7 @@ def _lanes_areal(Y, dY, L, prof, par, n_tan, W):
     _lanes_perimetric): there the area vector and its unit vector have z components only.
     W rows: Ahat_z, 1/|A|, |A|, U', U''."""
     _areal_area(Y, L, W)
-    _lanes_profile(prof, par, W, 2, 3, 4, L)
+    _lanes_profile(prof, par, W, 2 * L, L)
     _areal_forces(Y, dY, L, W)
     for t in range(n_tan):
         _areal_tangent(Y, Y[12 * L * (1 + t):], dY[12 * L * (1 + t):], L, W)
@@ -604,11 +621,13 @@ def _areal_tangent(Y, y, dy, L, W):
         dy[11 * L + k] = (0.0 + a * -(sux * hz)) + f * (-((dux - dvx) * hz) + -(sux * dhz))
 
 
-@helper
+@leaf
 def _leading_forces(y, dy, masses, N, d, measure, prof, lead, n_tan):
     """Velocities, and the forces of the leading perimetric or areal term. The measure is
     chosen outside the triplet loop: one branch per call, not per triplet, keeps the loop
-    body small enough for the compiler (2.6x faster)."""
+    body small enough for the compiler (2.6x faster). Compiled on its own, not inlined
+    into `rhs`: one call per evaluation costs nothing measurable, and `rhs` with it inlined
+    took 26 s to compile instead of 11."""
     nq = N * d
     n = 2 * nq
     for t_ in range(1 + n_tan):
