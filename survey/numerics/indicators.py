@@ -27,7 +27,7 @@ from ..catalog import defaults
 from ..catalog.indicators import IndicatorOptions
 from ..catalog.status import Status
 from ..catalog.variables import history_times
-from ..physics.portable import vdot, vnorm
+from ..physics.portable import orthonormal, vdot, vnorm
 from ..physics.system import System, rhs
 from .events import Crossings
 from .integrate import EVAL, EVENTS, FINE, Outcome, integrate_batch
@@ -74,22 +74,7 @@ def _constraints(system: System, y0, project_flow: bool) -> np.ndarray:
         f = np.zeros(n)
         rhs(0.0, np.ascontiguousarray(y0, dtype=float), f, *system.kernel_args, 0)
         rows += [f, np.concatenate([-f[n // 2:], f[:n // 2]])]
-    return _orthonormal(np.array(rows))
-
-
-def _orthonormal(rows: np.ndarray) -> np.ndarray:
-    """An orthonormal basis of the rows' span by modified Gram-Schmidt (sums in order, so
-    the same bits on every CPU, unlike LAPACK's QR); a row whose remainder is below 1e-12
-    of the largest row adds nothing."""
-    basis, floor = [], 1e-12 * float(np.max(vnorm(rows)))
-    for v in rows:
-        v = v.copy()
-        for q in basis:
-            v -= float(vdot(v, q)) * q
-        size = float(vnorm(v))
-        if size > floor:
-            basis.append(v / size)
-    return np.array(basis)
+    return orthonormal(np.array(rows))
 
 
 def deviation_vectors(system: System, y0, count: int, seed: int, cell: int = 0,
@@ -140,7 +125,7 @@ def conservation_errors(system: System, y0, states):
     E0, J0 = system.energy(y0), system.angular_momentum(y0)
     dJ = np.reshape(system.angular_momentum(states) - J0, (len(states), -1))
     return (float(np.max(np.abs(system.energy(states) / E0 - 1))),
-            float(np.max(np.linalg.norm(dJ, axis=1)) / max(np.linalg.norm(J0), 1.0)))
+            float(np.max(vnorm(dJ)) / max(float(vnorm(np.reshape(J0, -1))), 1.0)))
 
 
 class Ensemble(NamedTuple):

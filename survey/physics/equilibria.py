@@ -1,10 +1,17 @@
 """Equilibria of a system: forces and the Hessian of U from the right-hand side's exact
-tangent forces, and the equilibrium reached by descending the potential."""
+tangent forces, and the equilibrium reached by descending the potential.
+
+The descent's linear algebra is compiled here in a fixed order of IEEE operations
+(portable.symmetric_eigen instead of LAPACK): a chaotic orbit started at an equilibrium
+amplifies a difference in its last bit, so the start must be the same bits on every
+machine."""
 from __future__ import annotations
 
 import numpy as np
 
-from .system import System, rhs
+from .jit import kernel
+from .portable import orthonormal, symmetric_eigen
+from .system import System, centre_of_mass, rhs
 
 
 def forces(system: System, q: np.ndarray, hessian: bool = False):
@@ -29,8 +36,48 @@ def _rigid_motions(q: np.ndarray) -> np.ndarray:
     rows = [np.tile(np.eye(d)[k], N) for k in range(d)]
     for axis in ([2] if d == 2 else [0, 1, 2]):
         rows.append(np.cross(np.eye(3)[axis], r)[:, :d].ravel())
-    u, sv, _ = np.linalg.svd(np.array(rows).T, full_matrices=False)
-    return u[:, sv > 1e-10 * sv.max()].T
+    return orthonormal(np.array(rows))
+
+
+@kernel
+def _newton_step(hess, force, R):
+    """The Newton step on |Hessian| in the space orthogonal to the orthonormal rows R:
+    with P = 1 - R^T R and P H P = V diag(w) V^T, the step V |w|^-1 V^T P f over the
+    eigenvalues above 1e-10 of the largest (a descent direction even at a saddle)."""
+    n = force.size
+    P = np.eye(n)
+    for a in range(n):
+        for b in range(n):
+            for j in range(R.shape[0]):
+                P[a, b] -= R[j, a] * R[j, b]
+    HP = np.zeros((n, n))
+    for a in range(n):
+        for b in range(n):
+            for c in range(n):
+                HP[a, b] += hess[a, c] * P[c, b]
+    M = np.zeros((n, n))
+    for a in range(n):
+        for b in range(n):
+            for c in range(n):
+                M[a, b] += P[a, c] * HP[c, b]
+    w, V = symmetric_eigen(M)
+    g = np.zeros(n)
+    for a in range(n):
+        for c in range(n):
+            g[a] += P[a, c] * force[c]
+    top = 0.0
+    for i in range(n):
+        top = max(top, abs(w[i]))
+    step = np.zeros(n)
+    for i in range(n):
+        if abs(w[i]) > 1e-10 * top:
+            c = 0.0
+            for a in range(n):
+                c += V[a, i] * g[a]
+            c /= abs(w[i])
+            for a in range(n):
+                step[a] += V[a, i] * c
+    return step
 
 
 def equilibrium_positions(system: System, start, max_iter: int = 100) -> np.ndarray:
@@ -48,10 +95,7 @@ def equilibrium_positions(system: System, start, max_iter: int = 100) -> np.ndar
             raise ValueError("the potential is not finite along the descent from positions")
         force, hess = forces(system, q, hessian=True)
         R = _rigid_motions(q)
-        P = np.eye(q.size) - R.T @ R
-        w, V = np.linalg.eigh(P @ hess @ P)
-        keep = np.abs(w) > 1e-10 * np.abs(w).max()
-        step = (V[:, keep] @ ((V[:, keep].T @ (P @ force)) / np.abs(w[keep]))).reshape(q.shape)
+        step = _newton_step(hess, force, R).reshape(q.shape)
         extent = np.abs(q - q.mean(axis=0)).max()
         if np.abs(step).max() <= 1e-13 * extent:
             break
@@ -67,4 +111,5 @@ def equilibrium_positions(system: System, start, max_iter: int = 100) -> np.ndar
         q, u = trial, ut
     else:
         raise ValueError(f"no equilibrium within {max_iter} Newton steps from positions")
-    return q - (system.masses @ q) / system.masses.sum()
+    return q - centre_of_mass(system.masses, q)
+

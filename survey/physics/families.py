@@ -28,7 +28,7 @@ from .jacobi import (
     reduced_potential,
     to_cartesian,
 )
-from .system import System
+from .system import System, centre_of_mass
 from .terms import AREA, PERIMETER
 
 SQ3 = math.sqrt(3.0)
@@ -48,8 +48,7 @@ def triangle_from_sides(a: float, b: float, c: float, masses=(1.0, 1.0, 1.0)) ->
                          "of the other two")
     x = (b * b + c * c - a * a) / (2.0 * c)
     q = np.array([[0.0, 0.0], [c, 0.0], [x, math.sqrt(b * b - x * x)]])
-    m = np.asarray(masses, dtype=float)
-    return q - (m @ q) / m.sum()
+    return q - centre_of_mass(np.asarray(masses, dtype=float), q)
 
 
 def _central_pull(system: System, q: np.ndarray) -> float:
@@ -57,14 +56,14 @@ def _central_pull(system: System, q: np.ndarray) -> float:
     positions q (3, 2): the centripetal force of a uniformly rotating special solution,
     for any sum of terms."""
     force = forces(system, np.pad(q, ((0, 0), (0, system.dim - 2))))
-    return -float(np.dot(force[:2], q[0])) / float(np.linalg.norm(q[0]))
+    return -float(portable.vdot(force[:2], q[0])) / float(portable.vnorm(q[0]))
 
 
 def _dU(system: System, q: np.ndarray) -> float:
     """U'(x) of the (single) triplet at positions q (3, 2)."""
     u, v, w = q
     if system.potential.measure == PERIMETER:
-        x = np.linalg.norm(v - u) + np.linalg.norm(w - v) + np.linalg.norm(u - w)
+        x = float(portable.vnorm(v - u) + portable.vnorm(w - v) + portable.vnorm(u - w))
     else:
         x = 0.5 * abs((v - u)[0] * (w - u)[1] - (v - u)[1] * (w - u)[0])
     return profile(system.potential.profile, system.potential.par, x)[1]
@@ -217,27 +216,32 @@ def _explicit(system, positions, velocities):
 def _random_motion(system: System, q: np.ndarray, rng, angular_momentum: float):
     """Seeded Gaussian velocities with zero total momentum and zero angular momentum about
     the centre of mass, and the rigid rotation that carries `angular_momentum` (about z):
-    (internal, rotation) velocities."""
+    (internal, rotation) velocities. Sums body by body and the inertia tensor inverted
+    through portable.symmetric_eigen: the same bits on every machine."""
     m = system.masses[:, None]
-    r = q - (system.masses @ q) / system.masses.sum()
+    r = q - centre_of_mass(system.masses, q)
     v = rng.normal(size=q.shape)
-    v -= (system.masses @ v) / system.masses.sum()
+    v -= centre_of_mass(system.masses, v)
     # remove the rigid rotations: L = I omega, with the inertia tensor of the body
     r3 = np.pad(r, ((0, 0), (0, 3 - system.dim)))
     v3 = np.pad(v, ((0, 0), (0, 3 - system.dim)))
-    inertia = np.einsum("i,ij,ik->jk", system.masses, r3, r3)
-    inertia = np.trace(inertia) * np.eye(3) - inertia
+    inertia = (m[:, :, None] * r3[:, :, None] * r3[:, None, :]).sum(axis=0)
+    inertia = (inertia[0, 0] + inertia[1, 1] + inertia[2, 2]) * np.eye(3) - inertia
     L = np.sum(m * np.cross(r3, v3), axis=0)
     axes = [2] if system.dim == 2 else [0, 1, 2]
-    omega = np.zeros(3)
-    omega[axes] = np.linalg.lstsq(inertia[np.ix_(axes, axes)], L[axes], rcond=1e-12)[0]
+    w, V = portable.symmetric_eigen(np.ascontiguousarray(inertia[np.ix_(axes, axes)]))
+    # the least-squares omega: eigenvalues below 1e-12 of the largest (a line's own axis)
+    # carry none of it
+    rank = w > 1e-12 * w.max()
+    omega, spin = np.zeros(3), np.zeros(3)
+    omega[axes] = (V[:, rank] * (np.sum(V[:, rank] * L[axes][:, None], axis=0)
+                                 / w[rank])).sum(axis=1)
     v = v - np.cross(omega, r3)[:, :system.dim]
-    spin = np.zeros(3)
     if angular_momentum:     # the rigid rotation omega with I omega = (0, 0, J)
-        sub = inertia[np.ix_(axes, axes)]
-        if not np.linalg.matrix_rank(sub) == len(axes):
+        if not rank.all():
             raise ValueError("a collinear configuration cannot carry this angular momentum")
-        spin[axes] = np.linalg.solve(sub, np.array([0.0, 0.0, angular_momentum])[axes])
+        J = np.array([0.0, 0.0, angular_momentum])[axes]
+        spin[axes] = (V * (np.sum(V * J[:, None], axis=0) / w)).sum(axis=1)
     return v, np.cross(spin, r3)[:, :system.dim]
 
 
@@ -367,7 +371,7 @@ def with_energy(system: System, y, energy: float) -> np.ndarray:
     v_cm = p.sum(axis=0) / system.masses.sum()
     rel = p / m - v_cm
     k_rel = 0.5 * np.sum(m * rel ** 2)
-    k_cm = 0.5 * system.masses.sum() * np.dot(v_cm, v_cm)
+    k_cm = 0.5 * system.masses.sum() * np.sum(v_cm * v_cm)
     u = system.potential_energy(y)
     room = energy - u - k_cm
     if not room >= 0:

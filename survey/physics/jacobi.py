@@ -72,8 +72,8 @@ def jacobi(system: System, y):
     """(s, h, p_s, p_h), each (..., 2), from Cartesian states (..., n)."""
     q, p = system.split(y)
     S, H, Ps, Ph = jacobi_weights(system)
-    return (np.einsum("i,...id->...d", S, q), np.einsum("i,...id->...d", H, q),
-            np.einsum("i,...id->...d", Ps, p), np.einsum("i,...id->...d", Ph, p))
+    # summed body by body, not by einsum (whose SIMD loops fuse multiply-adds on some CPUs)
+    return tuple((w[:, None] * x).sum(axis=-2) for w, x in ((S, q), (H, q), (Ps, p), (Ph, p)))
 
 
 def reduced(system: System, y) -> Reduced:
@@ -86,8 +86,8 @@ def reduced(system: System, y) -> Reduced:
     a, b = m.mu1 * sigma ** 2, m.mu2 * eta ** 2
     return Reduced(
         sigma=sigma, eta=eta,
-        phi=np.arctan2(cross(s, h), np.sum(s * h, axis=-1)),
-        theta=np.arctan2(s[..., 1], s[..., 0]),
+        phi=portable.vatan2(cross(s, h), np.sum(s * h, axis=-1)),
+        theta=portable.vatan2(s[..., 1], s[..., 0]),
         p_sigma=np.sum(ps * s, axis=-1) / sigma,
         p_eta=np.sum(ph * h, axis=-1) / eta,
         p_phi=(a * Lh - b * Ls) / (a + b),

@@ -8,17 +8,20 @@ root and exact scaling by powers of two -- each correctly rounded, so every CPU 
 compiler target returns the same bits -- in the classic argument reductions (Cody-Waite,
 as in fdlibm) with series long enough for about one ulp.
 
-Scalar versions inline into kernels; `vexp`, `vlog`, `vsin`, `vcos` are their numpy ufuncs
-for Python code, and `vnorm` and `vdot` the Euclidean norm and the dot product along the last
-axis summed in order (numpy's and BLAS's sums change their order with the CPU).
+Scalar versions inline into kernels; `vexp`, `vlog`, `vsin`, `vcos`, `vatan2` are their
+numpy ufuncs for Python code, and `vnorm` and `vdot` the Euclidean norm and the dot product
+along the last axis summed in order (numpy's and BLAS's sums change their order with the
+CPU). `symmetric_eigen` and `orthonormal` replace LAPACK's eigh and QR, whose blocked
+kernels round by the CPU.
 """
 from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import guvectorize, vectorize
 
-from .jit import helper
+from .jit import helper, kernel
 
 # ln 2 split so that k * LN2_HI is exact for |k| < 2^20 (fdlibm's constants; the test
 # checks them against ln 2 to 50 digits)
@@ -39,6 +42,14 @@ EXP_SERIES = tuple(1.0 / math.factorial(n) for n in range(13, 1, -1))           
 LOG_SERIES = tuple(2.0 / n for n in range(23, 1, -2))                          # z^10..z^0 of R/z
 SIN_SERIES = tuple((-1.0) ** (n // 2) / math.factorial(n) for n in range(19, 2, -2))  # z^8..z^1
 COS_SERIES = tuple((-1.0) ** (n // 2) / math.factorial(n) for n in range(18, 3, -2))  # z^7..z^2
+# atan's reduction points 1/2, 1, 3/2 and infinity: atan of each split in two (hi exact to
+# double, hi + lo to about 1e-33), and the Taylor series of 1 - atan(z)/z in z^2 for
+# |z| <= 7/16, to z^50 (the next term is below 2^-60 of the sum)
+ATAN_HI = (0.4636476090008061, 0.7853981633974483, 0.982793723247329, 1.5707963267948966)
+ATAN_LO = (2.2698777452961687e-17, 3.061616997868383e-17, 1.3903311031230998e-17,
+           6.123233995736766e-17)
+ATAN_SERIES = tuple((-1.0) ** (n + 1) / (2 * n + 1) for n in range(25, 0, -1))  # z^50..z^2
+PI_HI, PI_LO = 3.141592653589793, 1.2246467991473532e-16
 
 
 @helper
@@ -142,6 +153,98 @@ def cos(x):
 
 
 @helper
+def _atan_series(z):
+    w = z * z
+    p = 0.0
+    for c in ATAN_SERIES:
+        p = p * w + c
+    return z * (w * p)      # z - atan(z)
+
+
+@helper
+def atan(x):
+    """atan x: |x| reduced to |z| <= 7/16 by atan x = atan c + atan((x - c)/(1 + c x)) with
+    c in (1/2, 1, 3/2, infinity), as in fdlibm; then the Taylor series."""
+    if x != x:
+        return x
+    a = abs(x)
+    if a < 0.4375:
+        r = a - _atan_series(a)
+    else:
+        if a < 0.6875:
+            i, z = 0, (2.0 * a - 1.0) / (2.0 + a)
+        elif a < 1.1875:
+            i, z = 1, (a - 1.0) / (a + 1.0)
+        elif a < 2.4375:
+            i, z = 2, (a - 1.5) / (1.0 + 1.5 * a)
+        else:
+            i, z = 3, -1.0 / a
+        r = ATAN_HI[i] - ((_atan_series(z) - ATAN_LO[i]) - z)
+    return -r if x < 0.0 else r
+
+
+@helper
+def atan2(y, x):
+    """The angle of (x, y) in [-pi, pi], from atan(|y| / |x|) by quadrant; zeros and
+    infinities as IEEE's atan2 (glibc's exact special values)."""
+    if y != y or x != x:
+        return x + y
+    if x == 0.0 or y == 0.0 or abs(x) == math.inf or abs(y) == math.inf:
+        return math.atan2(y, x)
+    z = atan(abs(y) / abs(x))
+    if x < 0.0:
+        z = PI_HI - (z - PI_LO)
+    return -z if y < 0.0 else z
+
+
+@kernel
+def symmetric_eigen(A):
+    """Eigenvalues (ascending) and orthonormal eigenvectors (columns) of a symmetric
+    matrix by cyclic Jacobi rotations (Golub & Van Loan, Alg. 8.5.3): a fixed sequence of
+    IEEE operations, so every machine gets the same bits -- LAPACK's eigh does not."""
+    n = A.shape[0]
+    a = A.copy()
+    V = np.eye(n)
+    for _ in range(100):
+        off, total = 0.0, 0.0
+        for p in range(n):
+            for q in range(n):
+                total += a[p, q] * a[p, q]
+                if p != q:
+                    off += a[p, q] * a[p, q]
+        if not off > 1e-32 * total:
+            break
+        for p in range(n - 1):
+            for q in range(p + 1, n):
+                apq = a[p, q]
+                if apq == 0.0:
+                    continue
+                theta = (a[q, q] - a[p, p]) / (2.0 * apq)
+                if abs(theta) > 1e150:
+                    t = 0.5 / theta
+                else:
+                    t = 1.0 / (abs(theta) + math.sqrt(theta * theta + 1.0))
+                    t = -t if theta < 0.0 else t
+                c = 1.0 / math.sqrt(t * t + 1.0)
+                s = t * c
+                for k in range(n):
+                    akp, akq = a[k, p], a[k, q]
+                    a[k, p], a[k, q] = c * akp - s * akq, s * akp + c * akq
+                for k in range(n):
+                    apk, aqk = a[p, k], a[q, k]
+                    a[p, k], a[q, k] = c * apk - s * aqk, s * apk + c * aqk
+                a[p, q] = a[q, p] = 0.0
+                for k in range(n):
+                    vkp, vkq = V[k, p], V[k, q]
+                    V[k, p], V[k, q] = c * vkp - s * vkq, s * vkp + c * vkq
+    w = np.empty(n)
+    for i in range(n):
+        w[i] = a[i, i]
+    order = np.argsort(w, kind="mergesort")
+    return w[order], V[:, order]
+
+
+@helper
 def root8(x):
     """(x^(1/8), x^(1/128)) by chained square roots: the step-size control's powers."""
     s = math.sqrt(math.sqrt(math.sqrt(x)))
@@ -178,6 +281,7 @@ vexp = vectorize(["float64(float64)"], **_UFUNC)(exp.py_func)
 vlog = vectorize(["float64(float64)"], **_UFUNC)(log.py_func)
 vsin = vectorize(["float64(float64)"], **_UFUNC)(sin.py_func)
 vcos = vectorize(["float64(float64)"], **_UFUNC)(cos.py_func)
+vatan2 = vectorize(["float64(float64, float64)"], **_UFUNC)(atan2.py_func)
 
 
 @guvectorize(["void(float64[:], float64[:])"], "(n)->()", cache=True)
@@ -194,3 +298,18 @@ def vdot(a, b, out):
     for i in range(a.size):
         s += a[i] * b[i]
     out[0] = s
+
+
+def orthonormal(rows: np.ndarray) -> np.ndarray:
+    """An orthonormal basis of the rows' span by modified Gram-Schmidt (sums in order, so
+    the same bits on every CPU, unlike LAPACK's QR); a row whose remainder is below 1e-12
+    of the largest row adds nothing."""
+    basis, floor = [], 1e-12 * float(np.max(vnorm(rows)))
+    for v in rows:
+        v = v.copy()
+        for q in basis:
+            v -= float(vdot(v, q)) * q
+        size = float(vnorm(v))
+        if size > floor:
+            basis.append(v / size)
+    return np.array(basis)

@@ -151,19 +151,25 @@ class System:
         return cross(q, p).sum(axis=-1 if self.dim == 2 else -2)
 
     def centre_of_mass(self, y):
-        q, _ = self.split(y)
-        return np.einsum("...id,i->...d", q, self.masses) / self.masses.sum()
+        return centre_of_mass(self.masses, self.split(y)[0])
 
     def moment_of_inertia(self, y):
         """Moment of inertia about the centre of mass, sum m_i |r_i - R|^2."""
         q, _ = self.split(y)
         r = q - self.centre_of_mass(y)[..., None, :]
-        return np.einsum("...id,...id,i->...", r, r, self.masses)
+        return (np.sum(r * r, axis=-1) * self.masses).sum(axis=-1)
 
     def triangle(self, y, triplet=(0, 1, 2)):
         """Positions (u, v, w) of one triplet, each of shape (..., d)."""
         q, _ = self.split(y)
         return tuple(q[..., b, :] for b in triplet)
+
+
+def centre_of_mass(masses: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """sum m_i q_i / sum m_i of positions (..., N, d), summed body by body: a matrix
+    product or einsum would sum in the order, and with the fused multiply-adds, that the
+    CPU's BLAS or SIMD loops choose, and a chaotic orbit amplifies the last bit."""
+    return (masses[:, None] * q).sum(axis=-2) / masses.sum()
 
 
 def _encode(terms, N: int, d: int) -> np.ndarray:
@@ -189,12 +195,8 @@ def lead_params(par):
     """The two parameters of the leading perimetric or areal term (see _encode)."""
 
 
-def general_forces(y, dy, masses, N, d, measure, prof, par, n_tan):
-    """Velocities and the leading term's forces on the general path (see _encode)."""
-
-
-def further_forces(y, dy, masses, d, n, n_tan, par):
-    """Forces of the terms after the leading one (see _encode)."""
+def velocities_and_forces(y, dy, masses, d, measure, prof, par, n_tan):
+    """dq/dt, dp/dt and the tangent blocks of `rhs` (see _encode)."""
 
 
 def further_energy(q, masses, d, par):
@@ -203,7 +205,7 @@ def further_energy(q, masses, d, par):
 
 # typed at compile time on par's dimension: for a 1-D par the general path and the further
 # terms compile to nothing (a call to a kernel that is never taken still cost the paper's
-# systems 8%)
+# systems 8%), and for a 2-D par the code written for the paper's systems
 @overload(lead_params, jit_options=dict(error_model="numpy"), inline="always")
 def _lead_params(par):
     # a pair of floats, not a view: a kernel without reference counting (jit.leaf) may
@@ -213,19 +215,13 @@ def _lead_params(par):
     return lambda par: (par[0, 0], par[0, 1])
 
 
-@overload(general_forces, jit_options=dict(error_model="numpy"), inline="always")
-def _general_forces(y, dy, masses, N, d, measure, prof, par, n_tan):
-    if par.ndim == 1:       # three bodies in the plane: `rhs` never takes this path
-        return lambda y, dy, masses, N, d, measure, prof, par, n_tan: None
-    return lambda y, dy, masses, N, d, measure, prof, par, n_tan: _leading_forces(
-        y, dy, masses, N, d, measure, prof, lead_params(par), n_tan)
-
-
-@overload(further_forces, jit_options=dict(error_model="numpy"), inline="always")
-def _further_forces(y, dy, masses, d, n, n_tan, par):
+@overload(velocities_and_forces, jit_options=dict(error_model="numpy"), inline="always")
+def _velocities_and_forces(y, dy, masses, d, measure, prof, par, n_tan):
     if par.ndim == 1:
-        return lambda y, dy, masses, d, n, n_tan, par: None
-    return _rows_forces
+        return lambda y, dy, masses, d, measure, prof, par, n_tan: _planar_forces(
+            y, dy, masses, d, measure, prof, par, n_tan)
+    return lambda y, dy, masses, d, measure, prof, par, n_tan: _general_forces(
+        y, dy, masses, d, measure, prof, par, n_tan)
 
 
 @overload(further_energy, jit_options=dict(error_model="numpy"), inline="always")
@@ -251,6 +247,26 @@ def potential_energy(q, masses, d, measure, prof, par):
     if measure != NONE:
         total += _triplet_energy(q, N, d, measure, prof, lead_params(par))
     return total
+
+
+@leaf
+def _planar_forces(y, dy, masses, d, measure, prof, par, n_tan):
+    """Three bodies in the plane under one perimetric or areal term (every workflow, most
+    of the paper) run code written for them: the general path's operations on the same
+    values in the same order, without its loops, zero z components and accumulations (bit
+    for bit the same, 1.8x faster; tests/physics/test_system.py)."""
+    if measure == PERIMETER:
+        _planar_perimetric(y, dy, masses, prof, (par[0], par[1]), n_tan)
+    else:
+        _planar_areal(y, dy, masses, prof, (par[0], par[1]), n_tan)
+
+
+@leaf
+def _general_forces(y, dy, masses, d, measure, prof, par, n_tan):
+    """Any other system: the leading perimetric or areal term, then the further terms."""
+    N = masses.size
+    _leading_forces(y, dy, masses, N, d, measure, prof, (par[0, 0], par[0, 1]), n_tan)
+    _rows_forces(y, dy, masses, d, 2 * N * d, n_tan, par)
 
 
 def _rows_energy(q, masses, d, par):
@@ -288,19 +304,7 @@ def _triplet_energy(q, N, d, measure, prof, par):
 def rhs(t, y, dy, masses, d, measure, prof, par, n_tan):
     """Hamilton's equations and the variational equations of n_tan tangent vectors
     (d dq/dt = M^-1 dp, d dp/dt = -Hess U dq) at one state y."""
-    N = masses.size
-    lead = lead_params(par)
-    # three bodies in the plane (every workflow, most of the paper) under a perimetric or
-    # areal term run code written for them: the general path's operations on the same
-    # values in the same order, without its loops, zero z components and accumulations
-    # (bit for bit the same, 1.8x faster; tests/physics/test_system.py)
-    if N == 3 and d == 2 and measure == PERIMETER:
-        _planar_perimetric(y, dy, masses, prof, lead, n_tan)
-    elif N == 3 and d == 2 and measure == AREA:
-        _planar_areal(y, dy, masses, prof, lead, n_tan)
-    else:
-        general_forces(y, dy, masses, N, d, measure, prof, par, n_tan)
-    further_forces(y, dy, masses, d, 2 * N * d, n_tan, par)
+    velocities_and_forces(y, dy, masses, d, measure, prof, par, n_tan)
 
 
 # lanes from which the compiler's SIMD loops run (its vector width, 8 doubles, times its
@@ -650,7 +654,9 @@ def _leading_forces(y, dy, masses, N, d, measure, prof, lead, n_tan):
                     areal_forces(y, dy, i, j, k, d, n, n_tan, prof, lead)
 
 
+@leaf
 def _rows_forces(y, dy, masses, d, n, n_tan, par):
+    """Add the forces of the terms after the leading one (par's rows 1, ...)."""
     N = masses.size
     for row in range(1, par.shape[0]):
         kind, code, weighted, p = int(par[row, 0]), int(par[row, 1]), par[row, 2], par[row, 3:]

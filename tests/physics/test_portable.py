@@ -91,3 +91,57 @@ def test_root8_gives_the_eighth_and_128th_roots():
         r8, r128 = P.root8(x)
         assert r8 == pytest.approx(x ** 0.125, rel=4e-16)
         assert r128 == pytest.approx(x ** (1 / 128), rel=4e-16)
+
+
+def datan(x: Decimal) -> Decimal:
+    """atan by halving the argument (atan x = 2 atan(x / (1 + sqrt(1 + x^2)))) to below
+    1e-2, then its Taylor series, in 50 digits."""
+    halvings = 0
+    while abs(x) > Decimal("0.01"):
+        x = x / (1 + (1 + x * x).sqrt())
+        halvings += 1
+    term, total, n = x, x, 1
+    while abs(term) > Decimal(10) ** -48:
+        term *= -x * x
+        n += 2
+        total += term / n
+    return total * 2 ** halvings
+
+
+def test_atan2_within_one_ulp_in_every_quadrant_and_exact_at_its_special_values():
+    rng = np.random.default_rng(5)
+    ys = rng.normal(size=600) * 10.0 ** rng.uniform(-8, 8, 600)
+    xs = rng.normal(size=600) * 10.0 ** rng.uniform(-8, 8, 600)
+    # and each reduction interval's edges: |y/x| near 7/16, 11/16, 19/16, 39/16
+    edges = np.array([0.4375, 0.6875, 1.1875, 2.4375])
+    ys = np.concatenate([ys, np.repeat(edges, 3) * np.tile([1 - 1e-15, 1.0, 1 + 1e-15], 4)])
+    xs = np.concatenate([xs, np.ones(12)])
+    for y, x in zip(ys, xs):
+        t = datan(Decimal(float(abs(y))) / Decimal(float(abs(x))))
+        exact = t if x > 0 else PI - t
+        exact = -exact if y < 0 else exact
+        assert ulps(P.vatan2(y, x), exact) <= 1.0, (y, x)
+    inf = math.inf
+    for y, x, value in ((0.0, 1.0, 0.0), (0.0, -1.0, math.pi), (1.0, 0.0, math.pi / 2),
+                        (-1.0, 0.0, -math.pi / 2), (inf, 1.0, math.pi / 2),
+                        (1.0, -inf, math.pi), (-0.0, 1.0, -0.0)):
+        assert P.vatan2(y, x) == value and math.copysign(1, P.vatan2(y, x)) == \
+            math.copysign(1, value)
+    assert math.isnan(P.vatan2(math.nan, 1.0))
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 14, 30])
+def test_symmetric_eigen_gives_the_closed_form_spectrum_and_an_orthonormal_basis(n):
+    """The second-difference matrix (2 on the diagonal, -1 beside it) has eigenvalues
+    2 - 2 cos(k pi / (n + 1)); conjugated by a random orthogonal matrix it is a full
+    symmetric matrix with the same spectrum. Its eigenvectors are orthonormal and rebuild
+    it."""
+    T = 2 * np.eye(n) - np.eye(n, k=1) - np.eye(n, k=-1)
+    Q = np.linalg.qr(np.random.default_rng(n).normal(size=(n, n)))[0]
+    A = Q @ T @ Q.T
+    A = 0.5 * (A + A.T)
+    w, V = P.symmetric_eigen(A)
+    exact = 2 - 2 * np.cos(np.arange(1, n + 1) * np.pi / (n + 1))
+    np.testing.assert_allclose(w, exact, rtol=0, atol=1e-13 * n)
+    np.testing.assert_allclose(V.T @ V, np.eye(n), atol=1e-14 * n)
+    np.testing.assert_allclose(V @ np.diag(w) @ V.T, A, atol=1e-14 * n)

@@ -2,7 +2,10 @@
 made here by switching the code paths a CPU selects: numba compiling for the generic x86-64
 target, numpy without its AVX2/AVX-512 loops, glibc without its FMA/AVX2 libm, OpenBLAS's
 oldest kernels. The orbit, the variational indicators and the sections must come out the
-same bits; the torus analysis within its declared rounding."""
+same bits; the torus analysis within its declared rounding. So must every start a family
+builds -- the N-body families descend to an equilibrium and remove rigid motions with
+linear algebra that LAPACK and BLAS would round by the CPU -- and the reduced coordinates
+of section crossings (an arctan2)."""
 import os
 import subprocess
 import sys
@@ -36,6 +39,49 @@ max_crossings = 20
 [dask]
 workers = 1
 """
+
+
+# starts whose every bit a chaotic orbit amplifies: the LJAT trimer and 2-D LJ7 from their
+# equilibria (seeded velocities, a displacement), a 3-D microcanonical start carrying
+# angular momentum, unequal masses; and the reduced coordinates of random states
+STARTS = """
+import sys
+import numpy as np
+from survey.physics.families import initial_state
+from survey.physics.jacobi import reduced
+from survey.physics.system import System
+from survey.physics.terms import make_potential
+LJ = make_potential("lennard_jones", {}, "pair")
+ATM = make_potential("axilrod_teller", dict(strength=0.2))
+hexagon = [[0.0, 0.0], [1.12, 0.0], [0.56, 0.97], [-0.56, 0.97], [-1.12, 0.0],
+           [-0.56, -0.97], [0.56, -0.97]]
+ring = [[1.15, 0.0, 0.02], [0.36, 1.09, 0.0], [-0.93, 0.68, -0.03], [-0.93, -0.68, 0.0],
+        [0.36, -1.09, 0.01]]
+trimer = System(np.ones(3), 2, (LJ, ATM))
+out = dict(
+    trimer=initial_state(trimer, "equilibrium", positions=[[0, 0], [1.12, 0], [0.56, 0.97]],
+                         displacement=0.01, seed=3, energy=-2.5),
+    lj7=initial_state(System(np.ones(7), 2, (LJ, ATM)), "equilibrium", positions=hexagon,
+                      seed=1, energy=-11.9),
+    micro=initial_state(System(np.linspace(0.7, 1.6, 5), 3, (LJ, ATM)), "microcanonical",
+                        positions=ring, energy=-1.0, angular_momentum=0.3, seed=4),
+    sides=initial_state(System(np.array([1.0, 0.3, 0.07]), 2, (ATM,)), "sides"),
+    reduced=np.array(reduced(System(np.array([1.0, 0.3, 0.07])),
+                             np.random.default_rng(5).normal(size=(200, 12)))))
+np.savez(sys.argv[1], **out)
+"""
+
+
+def test_family_starts_and_reduced_coordinates_are_the_same_bits_on_another_cpu(tmp_path):
+    here, there = tmp_path / "here.npz", tmp_path / "there.npz"
+    for path, env in ((here, {}), (there, {**FOREIGN, "NUMBA_CACHE_DIR": str(tmp_path)})):
+        proc = subprocess.run([sys.executable, "-c", STARTS, str(path)], capture_output=True,
+                              text=True, timeout=1200, env={**os.environ, **env})
+        assert proc.returncode == 0, proc.stderr
+    with np.load(here) as a, np.load(there) as b:
+        for name in a.files:
+            assert np.isfinite(a[name]).all() and a[name].tobytes() == b[name].tobytes(), \
+                (name, np.max(np.abs(a[name] - b[name])))
 
 
 @pytest.fixture(scope="module")
