@@ -10,6 +10,7 @@ writes them.
 from __future__ import annotations
 
 import itertools
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -72,7 +73,10 @@ def figures(ds, variables=None) -> dict[str, Figure]:
             out["frequency_map"] = frequency_map(ds)
     title = survey_title(ds)
     for fig in out.values():
-        fig.suptitle(title, fontsize="small", color="0.25")
+        # wrapped to the figure's width (about 15 characters of small text an inch): a
+        # title wider than its figure is cut off at both ends
+        fig.suptitle(textwrap.fill(title, int(15 * fig.get_figwidth())), fontsize="small",
+                     color="0.25")
     return out
 
 

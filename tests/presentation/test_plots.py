@@ -349,11 +349,14 @@ t_final = 1.0
 
 
 def test_every_survey_figure_says_what_it_is_of_and_labels_its_lines(grid1):
-    """Titles name the family, the potential, T and what varies; threshold lines say which
-    vote they bound and where; a value a log axis cannot show is marked at its edge."""
+    """Titles name the family, the potential, T and what varies, wrapped to the figure's
+    width; threshold lines say which vote they bound and where; a value a log axis cannot
+    show is marked at its edge."""
     figs = plots.figures(grid1)
     for name, fig in figs.items():
-        title = fig._suptitle.get_text()
+        lines = fig._suptitle.get_text().split("\n")
+        assert max(map(len, lines)) <= 15 * fig.get_figwidth(), name     # never cut off
+        title = " ".join(lines)
         assert "g1: equilateral family under perimetric_power, T = 300" in title, name
         assert "delta varied over 9 cells" in title, name
     megno = figs["scan"].axes[1]
