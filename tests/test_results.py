@@ -33,8 +33,8 @@ def test_every_survey_workflow_has_its_archive_report_and_figures():
 @pytest.mark.parametrize("archive", ARCHIVES, ids=[a.stem for a in ARCHIVES])
 def test_each_archive_stores_its_workflow_and_verifies(archive):
     """The stored config is the workflow file's text, and two recomputed cells (the first
-    and the last) agree with the archive -- bit for bit, on another machine the torus
-    analysis within its declared rounding (tests/pipeline/test_portable_archives.py)."""
+    and the last) agree with the archive bit for bit, on any machine
+    (tests/pipeline/test_portable_archives.py)."""
     with xr.open_dataset(archive) as ds:
         assert ds.attrs["config"] == workflow_of(archive).read_text()
         assert not ds.attrs["git_commit"].endswith("-dirty")

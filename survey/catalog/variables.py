@@ -16,7 +16,7 @@ from typing import Any, Callable, NamedTuple
 
 import numpy as np
 
-from .indicators import OWNER, TORUS
+from .indicators import OWNER
 from .regimes import Regime
 from .status import Status
 
@@ -55,9 +55,6 @@ class Var:
     extra: tuple[str, ...] = ()            # own dimensions after the grid's
     units: str = "1"
     reproducible: bool = True              # part of the bit-for-bit contract
-    # "": the same bits on any x86-64 machine; else how rounding on another CPU (numpy's
-    # SIMD and BLAS sum in another order) propagates into it, which verify allows (ROUNDING)
-    rounding: str = ""
     when: Callable = lambda config: True   # whether a config's archive holds it
     flags: Any = None                      # an IntEnum: a CF flag variable
     derived: bool = False                  # computed from the other variables (classify)
@@ -99,24 +96,7 @@ def _measured(name, long_name, value=None, dtype="f8", extra=(), symbol=""):
     the same name."""
     value = value or (lambda r: getattr(r.indicators, name))
     return Var(name, long_name, value, FINISHED, dtype, extra, when=OWNER[name].computed_in,
-               symbol=symbol, rounding=ROUNDING.get(name, "value") if OWNER[name].source == TORUS
-               else "")
-
-
-# The torus analysis runs in numpy (FFT, matrix products, SIMD exp and cos): on another CPU
-# its sums round differently, by at most ANALYSIS_ROUNDING of the sizes involved (a few
-# thousand ulps: its inputs are the same bits). How that reaches each variable:
-#   value       relative to the value (frequencies)
-#   log10       x = log10 of a relative difference r: r's rounding over r ln 10 (the Birkhoff
-#               digits and the diffusion of a good torus are ill-conditioned: 1e-12 10^|x|)
-#   change      a difference of two frequencies: relative to the frequency
-#   normalised  |m . nu| / (|m| max |nu|): absolute
-#   tie         an integer choice: may differ only where both candidates are equally near
-ANALYSIS_ROUNDING = 1e-12
-ROUNDING = {"birkhoff_digits": "log10", "birkhoff_digits_half": "log10",
-            "birkhoff_digits_observable": "log10", "birkhoff_digits_observable_half": "log10",
-            "frequency_diffusion": "log10", "frequency_change": "change",
-            "resonance_distance": "normalised", "resonance": "tie", "resonance_order": "tie"}
+               symbol=symbol)
 
 
 def _history(name, of):

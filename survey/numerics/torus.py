@@ -23,6 +23,12 @@ indicators:
 
 `survey.analysis.classify` then decides each cell's regime from all the evidence an archive
 stores.
+
+Like the integrator, the analysis gives the same bits on every machine: its sums run in
+compiled loops in a fixed order, its exponentials and trigonometric functions are
+survey.physics.portable's (numpy's SIMD versions, BLAS's products and libm's complex
+exponential round by the CPU). Only the FFT that seeds each NAFF line comes from numpy
+(pocketfft, compiled for the baseline CPU), and only the index of its largest bin is used.
 """
 from __future__ import annotations
 
@@ -36,16 +42,25 @@ import numpy as np
 from ..catalog import defaults
 from ..catalog.regimes import Thresholds
 from ..catalog.variables import OBSERVABLES, fundamental_names, shape_dof
+from ..physics import portable
 from ..physics.jacobi import reduced
+from ..physics.jit import kernel
+
+TWO_PI = 2.0 * math.pi
 
 
-def birkhoff_average(h: np.ndarray) -> np.ndarray:
-    """Weighted Birkhoff average along the last axis of samples taken at equal intervals,
-    midpoint rule with g(s) = exp(-1/(s(1-s))) (its integral is then spectrally accurate)."""
-    n = h.shape[-1]
-    s = (np.arange(n) + 0.5) / n
-    g = np.exp(-1.0 / (s * (1.0 - s)))
-    return h @ (g / g.sum())
+@kernel
+def birkhoff_average(h):
+    """Weighted Birkhoff average of samples h taken at equal intervals, midpoint rule with
+    g(s) = exp(-1/(s(1-s))) (its integral is then spectrally accurate)."""
+    n = h.size
+    total, weight = 0.0, 0.0
+    for i in range(n):
+        s = (i + 0.5) / n
+        g = portable.exp(-1.0 / (s * (1.0 - s)))
+        total += h[i] * g
+        weight += g
+    return total / weight
 
 
 def birkhoff_digits(h: np.ndarray, cap: float) -> float:
@@ -58,7 +73,12 @@ def birkhoff_digits(h: np.ndarray, cap: float) -> float:
     diff = abs(birkhoff_average(h[:half]) - birkhoff_average(h[half:2 * half]))
     if scale == 0 or diff == 0:
         return cap
-    return min(-math.log10(diff / scale), cap)
+    return min(-log10(diff / scale), cap)
+
+
+def log10(x: float) -> float:
+    """log10 from the portable natural logarithm (libm's log10 differs by the CPU)."""
+    return portable.log(x) / math.log(10.0)
 
 
 def observable(name: str, system, states: np.ndarray) -> np.ndarray:
@@ -76,13 +96,24 @@ def _rms(x):
     return float(np.sqrt(np.mean(x * x)))
 
 
+def _complex(re, im):
+    z = np.empty(np.shape(re), dtype=complex)
+    z.real, z.imag = re, im
+    return z
+
+
+def _unit(angle):
+    """exp(i angle) from the portable cosine and sine."""
+    return _complex(portable.vcos(angle), portable.vsin(angle))
+
+
 def _centred(x, p):
     """x - <x> + i c p with c making the phase portrait round (NAFF then sees one line per
     oscillation, not a +- pair); None if x does not move (a stationary shape)."""
     dx, dp = x - x.mean(), p - p.mean()
     if _rms(dx) <= 1e-9 * max(_rms(x), 1e-300):
         return None
-    return dx + 1j * (_rms(dx) / _rms(dp)) * dp if _rms(dp) > 0 else dx + 0j
+    return _complex(dx, (_rms(dx) / _rms(dp)) * dp if _rms(dp) > 0 else 0.0)
 
 
 def signals(system, states: np.ndarray):
@@ -91,8 +122,8 @@ def signals(system, states: np.ndarray):
         r = reduced(system, states)
         phi = np.unwrap(r.phi)
         shape = [_centred(r.sigma, r.p_sigma), _centred(r.eta, r.p_eta),
-                 _centred(phi, r.p_phi) if np.ptp(phi) < 2 * np.pi else np.exp(1j * phi)]
-        return [z for z in shape if z is not None], np.exp(1j * r.theta)
+                 _centred(phi, r.p_phi) if np.ptp(phi) < 2 * np.pi else _unit(phi)]
+        return [z for z in shape if z is not None], _unit(r.theta)
     shape = [_centred(observable(name, system, states), np.gradient(
         observable(name, system, states))) for name in OBSERVABLES]
     return [z for z in shape if z is not None], None
@@ -106,48 +137,89 @@ def naff(z: np.ndarray, count: int):
 
     Written here rather than taken from nafflib: nafflib compiles its numba kernels in every
     process with no disk cache (about 1 s per dask worker and survey, more than the whole
-    analysis of a short survey); the tests check this one against it."""
+    analysis of a short survey), and its sums round by the CPU; the tests check this one
+    against it."""
     z = np.array(z, dtype=complex)
     N = z.size
-    n = np.arange(N, dtype=float)
-    w = (1.0 - np.cos(2.0 * np.pi * (n + 0.5) / N)) ** 2
-    wsum = w.sum()
+    w = _window(N)
     freqs, amps = np.zeros(count), np.zeros(count, dtype=complex)
     for line in range(count):
-        zw = z * w
-        moments = np.stack([zw, zw * n, zw * n * n])
-        k = int(np.argmax(np.abs(np.fft.fft(zw))))
+        k = int(np.argmax(np.abs(np.fft.fft(z * w))))
         f = k / N if k <= N // 2 else k / N - 1.0
-        for _ in range(30):
-            F, F1, F2 = moments @ _phasors(-f, N)
-            F1, F2 = -2j * np.pi * F1, -4 * np.pi ** 2 * F2
-            grad = 2.0 * (np.conj(F) * F1).real            # d|F|^2/df
-            curv = 2.0 * (abs(F1) ** 2 + (np.conj(F) * F2).real)
-            step = -grad / curv if curv < 0 else 0.25 * np.sign(grad) / N
-            step = float(np.clip(step, -0.5 / N, 0.5 / N))
-            f += step
-            if abs(step) < 1e-15:
-                break
-        e = _phasors(f, N)
-        amp = (zw @ np.conj(e)) / wsum
-        freqs[line], amps[line] = f, amp
-        z -= amp * e
+        freqs[line], amps[line] = _line(z, w, f)
     return freqs, amps
 
 
-def _phasors(f: float, N: int) -> np.ndarray:
-    """exp(2 pi i f n), n = 0..N-1, as powers of exp(2 pi i f): a fifth of the cost of N
-    complex exponentials; the phase drifts by ~N eps, far below the window's resolution."""
-    r = np.full(N, np.exp(2j * np.pi * f))
-    r[0] = 1.0
-    return np.cumprod(r)
+@kernel
+def _window(N):
+    """(1 - cos(2 pi (n + 1/2) / N))^2, n = 0..N-1: the Hann window squared."""
+    w = np.empty(N)
+    for n in range(N):
+        c = 1.0 - portable.cos(TWO_PI * (n + 0.5) / N)
+        w[n] = c * c
+    return w
+
+
+@kernel
+def _sums(z, w, f):
+    """sum_n z_n w_n e_n n^j, j = 0, 1, 2, with e_n = exp(-2 pi i f n) by repeated
+    multiplication (a fifth of the cost of N complex exponentials; the phase drifts by ~N
+    eps, far below the window's resolution): the window-weighted transform at f and its
+    first two derivatives' sums, each (re, im)."""
+    c, s = portable.cos(TWO_PI * f), -portable.sin(TWO_PI * f)
+    er, ei = 1.0, 0.0
+    s0r = s0i = s1r = s1i = s2r = s2i = 0.0
+    for n in range(z.size):
+        ar, ai = z[n].real * w[n], z[n].imag * w[n]
+        tr, ti = ar * er - ai * ei, ar * ei + ai * er
+        s0r += tr
+        s0i += ti
+        s1r += tr * n
+        s1i += ti * n
+        s2r += tr * n * n
+        s2i += ti * n * n
+        er, ei = er * c - ei * s, er * s + ei * c
+    return s0r, s0i, s1r, s1i, s2r, s2i
+
+
+@kernel
+def _line(z, w, f):
+    """Refine the line near frequency f (cycles per sample) to the maximum of |F(f)|^2 by
+    Newton steps, then subtract it from z (in place): (f, its amplitude)."""
+    N = z.size
+    for _ in range(30):
+        F0r, F0i, S1r, S1i, S2r, S2i = _sums(z, w, f)
+        # F1 = -2 pi i S1, F2 = -4 pi^2 S2
+        F1r, F1i = TWO_PI * S1i, -TWO_PI * S1r
+        F2r, F2i = -TWO_PI * TWO_PI * S2r, -TWO_PI * TWO_PI * S2i
+        grad = 2.0 * (F0r * F1r + F0i * F1i)                 # d|F|^2/df
+        curv = 2.0 * ((F1r * F1r + F1i * F1i) + (F0r * F2r + F0i * F2i))
+        if curv < 0.0:
+            step = -grad / curv
+        else:
+            step = 0.25 / N if grad > 0.0 else (-0.25 / N if grad < 0.0 else 0.0)
+        step = min(max(step, -0.5 / N), 0.5 / N)
+        f += step
+        if abs(step) < 1e-15:
+            break
+    F0r, F0i, _, _, _, _ = _sums(z, w, f)
+    wsum = 0.0
+    for n in range(N):
+        wsum += w[n]
+    ar, ai = F0r / wsum, F0i / wsum
+    c, s = portable.cos(TWO_PI * f), portable.sin(TWO_PI * f)
+    er, ei = 1.0, 0.0
+    for n in range(N):      # z -= amplitude * exp(2 pi i f n)
+        z[n] -= complex(ar * er - ai * ei, ar * ei + ai * er)
+        er, ei = er * c - ei * s, er * s + ei * c
+    return f, complex(ar, ai)
 
 
 def spectral_lines(z: np.ndarray, dt: float, count: int):
     """The `count` strongest lines of z sampled every dt: frequencies in cycles per unit
     time and amplitudes relative to the strongest."""
     freq, amp = naff(z, count)
-    amp = np.abs(amp)
+    amp = np.sqrt(amp.real * amp.real + amp.imag * amp.imag)
     return freq / dt, amp / amp.max() if amp.max() > 0 else amp
 
 
@@ -176,13 +248,19 @@ def frequency_basis(lines, max_dim: int, order: int, tol: float,
             continue
         taken.append(f)
         if basis:
-            combos = integer_vectors(len(basis), order) @ np.array(basis)
+            combos = _combinations(integer_vectors(len(basis), order), np.array(basis))
             if np.min(np.abs(np.concatenate([combos, -combos]) - f)) <= tol * scale:
                 continue
         basis.append(f)
         if len(basis) == max_dim:
             break
     return basis
+
+
+def _combinations(vectors: np.ndarray, nu: np.ndarray) -> np.ndarray:
+    """m . nu for each row m of `vectors`, summed in order (a matrix product would sum as
+    the CPU's BLAS does)."""
+    return (vectors * nu).sum(axis=1)
 
 
 class Frequencies(NamedTuple):
@@ -234,11 +312,12 @@ def frequency_analysis(system, states: np.ndarray, dt: float, lines: int = defau
     if not known.any():
         return nan
     scale = np.max(np.abs(freq[known]))
-    diffusion = math.log10(max(float(np.max(np.abs(change[known]))) / scale, 1e-16))
+    diffusion = log10(max(float(np.max(np.abs(change[known]))) / scale, 1e-16))
     m, order_found, distance = np.zeros(k, np.int64), -1, np.nan
     if known.sum() >= 2:
         vectors = integer_vectors(int(known.sum()), order)
-        dist = np.abs(vectors @ freq[known]) / (np.linalg.norm(vectors, axis=1) * scale)
+        dist = np.abs(_combinations(vectors, freq[known])) / (
+            np.sqrt(np.sum(vectors * vectors, axis=1)) * scale)
         # the lowest order among the vectors equally near (multiples of one vector, or
         # vectors on a frequency that is ~0): a tie is not left to rounding
         best = int(np.flatnonzero(dist <= dist.min() * (1.0 + 1e-9) + 1e-15)[0])
@@ -260,7 +339,7 @@ def analyse(system, fine: np.ndarray, dt: float, energy_error: float, observable
     """The torus evidence of one orbit sampled every dt (fine: states (k, n), NaN past the
     end reached)."""
     done = fine[~np.isnan(fine[:, 0])]
-    cap = -math.log10(max(energy_error, 16 * np.finfo(float).eps)) \
+    cap = -log10(max(energy_error, 16 * np.finfo(float).eps)) \
         if np.isfinite(energy_error) else np.nan
     values = [observable(o, system, done) for o in observables]
     at_t = np.array([birkhoff_digits(h, cap) for h in values])

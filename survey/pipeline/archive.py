@@ -113,9 +113,8 @@ MACHINE_OVERRIDES = ("NUMBA_CPU_NAME", "NUMBA_CPU_FEATURES", "NPY_DISABLE_CPU_FE
 def machine() -> str:
     """The CPU and the code paths chosen for it: the CPU model, the target numba compiles
     for, numpy's SIMD dispatch level, the C library, and any setting that overrides them.
-    Two machines with the same string compute the same bits; the integration and the
-    variational indicators agree bit for bit on any x86-64 machine (survey.physics.portable),
-    the torus analysis (numpy's SIMD, BLAS) within rounding."""
+    Provenance only: every x86-64 machine computes the same bits (survey.physics.portable),
+    which verify, run on another machine, shows."""
     import platform
 
     from numba.core import config as numba_config

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..catalog.errors import ArchiveError, ConfigError, SurveyError
 from ..catalog.status import Status
-from ..catalog.variables import ANALYSIS_ROUNDING, BY_NAME, V
+from ..catalog.variables import BY_NAME, V
 from . import archive
 from .cells import CellTask, build_starts, jobs_per_cell, run_cells, warm_up
 from .checkpoints import (
@@ -279,10 +279,8 @@ def run(source, **kw):
 def verify(path, cells: int = 8, seed: int = 0, differences: dict | None = None):
     """Check an archive against its stored config -- the config's sha256, the grid
     coordinates, the variables, their dimensions and attributes -- then recompute a sample
-    of cells and compare every variable the schema declares reproducible: bit for bit, except
-    that on a machine other than the one that wrote the archive the torus analysis's
-    variables may differ by their declared rounding (catalog.variables.Var.rounding).
-    Returns (ok, report lines), each mismatch with its largest difference relative to the
+    of cells and compare every variable the schema declares reproducible, bit for bit: on
+    any x86-64 machine the cells compute the same bits (survey.physics.portable). Returns (ok, report lines), each mismatch with its largest difference relative to the
     value; `differences`, if given, receives those per variable. A file that is not a survey
     archive raises ArchiveError."""
     with archive.open_archive(path) as ds:
@@ -315,17 +313,13 @@ def verify(path, cells: int = 8, seed: int = 0, differences: dict | None = None)
                 "system has not run here before: about a minute)", sys.stderr.isatty()):
         fresh = run_cells(CellTask.of(config), sample, build_starts(config)[sample])
     here = archive.machine()
-    lines, rounded = compare({k: v[sample] for k, v in stored.items()}, fresh,
-                             made_on != here, differences)
+    lines = compare({k: v[sample] for k, v in stored.items()}, fresh, differences)
     ok = not lines
     for name in rederived:
         ok = False
         lines.append(f"{name}: differs from what its evidence in the archive gives "
                      "(survey.analysis.classify)")
-    verdict = "MISMATCH" if not ok else "all reproducible variables match bit for bit" \
-        if not rounded else ("all reproducible variables match bit for bit, except that "
-                             f"{', '.join(rounded)} agree within rounding on a different "
-                             "machine")
+    verdict = "all reproducible variables match bit for bit" if ok else "MISMATCH"
     lines.insert(0, f"recomputed cells {', '.join(map(str, sample))} of {n}: {verdict}")
     if made_on != here:
         lines.append(f"the archive was made on {made_on}; this is {here}")
@@ -338,8 +332,7 @@ def verify(path, cells: int = 8, seed: int = 0, differences: dict | None = None)
 def same_results(old, new) -> list[str]:
     """How archive `new` differs from archive `old` beyond provenance (when and where it was
     made, the code's commit, the run times): the config, the coordinates and every
-    reproducible variable, compared as verify compares (the torus analysis within rounding
-    if the two were made on different machines). Empty if they agree."""
+    reproducible variable, bit for bit. Empty if they agree."""
     with archive.open_archive(old) as a, archive.open_archive(new) as b:
         if a.attrs["config"] != b.attrs["config"]:
             return ["the config differs"]
@@ -349,60 +342,24 @@ def same_results(old, new) -> list[str]:
         names = [k for k in a.variables if k not in BY_NAME or BY_NAME[k].reproducible]
         stored = {k: a[k].values for k in names}
         fresh = {k: b[k].values for k in names}
-        lines, _ = compare(stored, fresh, a.attrs.get("machine") != b.attrs.get("machine"))
-        return lines
+        return compare(stored, fresh)
 
 
-def compare(stored: dict, fresh: dict, other_machine: bool, differences: dict | None = None):
-    """Compare two sets of a survey's variables over the same cells: (lines naming each
-    variable that differs, with its largest difference relative to the value; the names
-    that differ only by the rounding another machine may add, if `other_machine`)."""
-    lines, rounded = [], []
+def compare(stored: dict, fresh: dict, differences: dict | None = None) -> list[str]:
+    """Compare two sets of a survey's variables over the same cells, bit for bit: a line
+    naming each variable that differs, with its largest difference relative to the value
+    (also into `differences`, if given)."""
+    lines = []
     for name, values in stored.items():
         a, b = values, fresh[name].astype(values.dtype)
         if a.tobytes() == b.tobytes():
-            continue
-        if other_machine and a.shape == b.shape and _within_rounding(name, a, b, stored, fresh):
-            rounded.append(name)
             continue
         worst = _relative_difference(a, b) if a.shape == b.shape else np.inf
         if differences is not None:
             differences[name] = worst
         lines.append(f"{name}: differs in {np.sum(~_equal(a, b)) if a.shape == b.shape else 'all'}"
                      f" of {len(a)} cells; largest difference {worst:.1e} of the value")
-    return lines, rounded
-
-
-def _within_rounding(name, a, b, stored, fresh) -> bool:
-    """Whether a and b (stored and recomputed values of `name`) differ only by the rounding
-    another machine may add, propagated as the variable declares (catalog.variables
-    ROUNDING). The nearest resonance (an integer vector and its order) may change only
-    where the two vectors are equally near the stored frequencies."""
-    kind, eps = BY_NAME[name].rounding, ANALYSIS_ROUNDING
-    if not kind:
-        return False
-    if kind == "tie":
-        nu = stored[V.frequency]
-        m_a, m_b = stored[V.resonance], fresh[V.resonance].astype(np.int64)
-        for k in np.flatnonzero(~_equal(a, b)):
-            known = np.isfinite(nu[k])
-            if not known.any():
-                return False
-            scale = np.max(np.abs(nu[k][known]))
-            d = [abs(float(m[k][known] @ nu[k][known])) / (np.linalg.norm(m[k][known]) * scale)
-                 if np.any(m[k][known]) else np.inf for m in (m_a, m_b)]
-            if not abs(d[0] - d[1]) <= eps:
-                return False
-        return True
-    if a.dtype.kind != "f" or np.any(np.isnan(a) != np.isnan(b)):
-        return False
-    size = np.maximum(np.abs(a), np.abs(b))
-    allowed = {"value": eps * size,
-               "log10": eps * 10.0 ** np.minimum(size, 300.0) / np.log(10.0),
-               "change": eps * np.abs(stored[V.frequency]),
-               "normalised": np.full(a.shape, eps)}[kind]
-    known = ~np.isnan(a)
-    return bool(np.all(np.abs(a - b)[known] <= allowed[known]))
+    return lines
 
 
 def _relative_difference(a, b) -> float:
