@@ -260,17 +260,16 @@ def scan(ds, names) -> Figure:
                                     if uneven else ""))
     if uneven:
         every = max(1, values.size // 8)
-        axes[-1].set_xticks(x[::every], [f"{v:g}" for v in values[::every]])
+        axes[-1].set_xticks(x[::every], [f"{v:g}" for v in values[::every]], rotation=35,
+                            ha="right", rotation_mode="anchor")
     if regime is not None:
         present = [r for r in Regime if np.any(regime == r)]
-        lines = axes[0].get_legend()          # kept beside the regimes' legend
-        if lines is not None:
-            axes[0].add_artist(lines)
-        axes[0].legend(handles=[Patch(color=REGIME_COLOURS[r], alpha=0.4,
-                                      label=f"{r.name.lower()} ({int(np.sum(regime == r))})")
-                                for r in present], loc="lower left", fontsize="small",
-                       bbox_to_anchor=(0.0, 1.02), ncol=min(len(present), 4),
-                       title="regime (cells)", frameon=False)
+        # the figure's legend, below the panels: the layout makes room for it and for
+        # each panel's legend of lines beside it
+        fig.legend(handles=[Patch(color=REGIME_COLOURS[r], alpha=0.4,
+                                  label=f"{r.name.lower()} ({int(np.sum(regime == r))})")
+                            for r in present], loc="outside lower center", fontsize="small",
+                   ncol=min(len(present), 4), title="regime (cells)", frameon=False)
     return fig
 
 
