@@ -718,10 +718,39 @@ def step_costs(t_final=2000.0, repeats=5, lanes=(1, 32), out=print):
     return rows
 
 
+def _timed_command(args, env=None):
+    """(seconds to the first output on stderr, seconds to the end) of a command whose
+    stderr is a terminal (the command line speaks to terminals only)."""
+    import os
+    import pty
+    import subprocess
+    master, slave = pty.openpty()
+    start = time.perf_counter()
+    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=slave, env=env)
+    os.close(slave)
+    first = math.nan
+    while True:
+        try:
+            chunk = os.read(master, 4096)
+        except OSError:         # the command closed its end
+            break
+        if not chunk:
+            break
+        if math.isnan(first):
+            first = time.perf_counter() - start
+    proc.wait()
+    total = time.perf_counter() - start
+    os.close(master)
+    if proc.returncode:
+        raise RuntimeError(f"{' '.join(args)} exited with {proc.returncode}")
+    return first, total
+
+
 def fixed_costs(folder="results/bench", repeats=3, out=print):
     """What a survey costs beside its cells: a 1-cell survey ('sides', default settings
     otherwise, t = 10) end to end with numba's disk cache warm, by phase, best of
-    `repeats`."""
+    `repeats`; and the command line cold, compiling every kernel into an empty cache (what
+    a new machine's first run costs), with the time to its first word."""
     from .pipeline.sweep import run_survey
     cfg = {"survey": {"name": "bench-1cell", "output": f"{folder}/bench-1cell.nc"},
            "initial": {"family": "sides"}, "integration": {"t_final": 10.0}}
@@ -737,17 +766,22 @@ def fixed_costs(folder="results/bench", repeats=3, out=print):
     toml = Path(folder) / "bench-1cell.toml"
     toml.write_text(f'[survey]\nname = "bench-1cell"\noutput = "{toml.with_suffix(".nc")}"\n'
                     '[initial]\nfamily = "sides"\n[integration]\nt_final = 10.0\n')
+    run = [sys.executable, "-m", "survey", "run", str(toml), "--no-report", "--no-progress"]
     command = math.inf
     for _ in range(repeats):
         t = time.perf_counter()
-        subprocess.run([sys.executable, "-m", "survey", "run", str(toml), "--no-report",
-                        "--no-progress"], check=True, capture_output=True)
+        subprocess.run(run, check=True, capture_output=True)
         command = min(command, time.perf_counter() - t)
+    import os
+    import tempfile
+    with tempfile.TemporaryDirectory() as cache:
+        first, cold = _timed_command(run, {**os.environ, "NUMBA_CACHE_DIR": cache})
     out("")
     out(f"Fixed costs: a 1-cell survey ('sides', t = 10, warm cache, best of {repeats}), "
         "seconds")
     out("in process: " + "  ".join(f"{k} {v:.2f}" for k, v in best.items()))
     out(f"python -m survey run (interpreter, imports and regime summary included): "
-        f"{command:.2f}")
-    best["command"] = command
+        f"warm {command:.2f}; cold (every kernel compiled into an empty cache) {cold:.1f}, "
+        f"its first word on the terminal after {first:.2f}")
+    best.update(command=command, cold=cold, first_word=first)
     return best

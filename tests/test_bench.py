@@ -23,3 +23,4 @@ def test_bench_parts_run_and_print_their_ratios(tmp_path):
     assert text.count("x\n") >= 1 and "Default survey cell" in text
     assert "Where a step goes" in text and "stages+norm" in text
     assert "general/own" in text and "Fixed costs" in text and "shutdown" in text and "python -m survey run" in text
+    assert "cold (every kernel compiled into an empty cache)" in text and "first word" in text

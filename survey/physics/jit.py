@@ -10,14 +10,26 @@ survey's cached kernels whenever the kernel modules' sources have changed.
 from __future__ import annotations
 
 import hashlib
+import os
 from pathlib import Path
 
 from numba import njit
 
 PACKAGE = Path(__file__).parents[1]
-# the modules whose source compiled code depends on, and the folders their caches live in
+# the modules whose source compiled code depends on, and the folders that hold kernels
 SOURCES = ("catalog/status.py", "physics/*.py", "numerics/*.py", "bench.py")
-CACHES = ("__pycache__", "physics/__pycache__", "numerics/__pycache__")
+KERNEL_FOLDERS = (".", "physics", "numerics")
+
+
+def cache_folder(source_folder: Path) -> Path:
+    """Where numba caches the kernels of a source folder: its __pycache__, or with
+    NUMBA_CACHE_DIR set, <that>/<folder name>_<sha1 of its absolute path> (numba's
+    _UserProvidedCacheLocator)."""
+    root = os.environ.get("NUMBA_CACHE_DIR")
+    if not root:
+        return source_folder / "__pycache__"
+    path = os.path.abspath(source_folder)
+    return Path(root) / f"{os.path.basename(path)}_{hashlib.sha1(path.encode()).hexdigest()}"
 
 
 def refresh_kernel_cache(package: Path = PACKAGE):
@@ -25,17 +37,17 @@ def refresh_kernel_cache(package: Path = PACKAGE):
     recorded beside them (then record it)."""
     files = sorted(f for pattern in SOURCES for f in package.glob(pattern))
     digest = hashlib.sha256(b"".join(f.read_bytes() for f in files)).hexdigest()
-    stamp = package / "__pycache__" / "kernels.sha256"
+    stamp = cache_folder(package) / "kernels.sha256"
     try:
         if stamp.read_text() == digest:
             return
     except OSError:
         pass
     try:
-        for folder in CACHES:
-            for f in (package / folder).glob("*.nb[ic]"):
+        for folder in KERNEL_FOLDERS:
+            for f in cache_folder(package / folder).glob("*.nb[ic]"):
                 f.unlink(missing_ok=True)
-        stamp.parent.mkdir(exist_ok=True)
+        stamp.parent.mkdir(parents=True, exist_ok=True)
         stamp.write_text(digest)
     except OSError:   # a read-only install: numba then compiles in memory
         pass
@@ -43,8 +55,8 @@ def refresh_kernel_cache(package: Path = PACKAGE):
 
 def kernels_cached(package: Path = PACKAGE) -> bool:
     """Whether numba's disk cache holds survey's kernels (else the first survey compiles
-    them, about a minute on 2 cores)."""
-    return any((package / "numerics" / "__pycache__").glob("integrate._run-*.nbi"))
+    them, about half a minute on 2 cores)."""
+    return any(cache_folder(package / "numerics").glob("integrate._run-*.nbi"))
 
 
 refresh_kernel_cache()

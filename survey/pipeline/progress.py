@@ -10,7 +10,7 @@ import threading
 import time
 
 COMPILING = ("compiling survey's kernels for this kind of system (the first run only: about "
-             "a minute on 2 cores; later runs load them from numba's disk cache)")
+             "half a minute on 2 cores; later runs load them from numba's disk cache)")
 
 
 @contextlib.contextmanager

@@ -32,3 +32,25 @@ def test_a_cold_kernel_cache_is_recognised(tmp_path):
     assert not kernels_cached(tmp_path)
     (cache / "integrate._run-400.py311.nbi").write_bytes(b"")
     assert kernels_cached(tmp_path)
+
+
+def test_kernel_caches_elsewhere_are_found_and_refreshed(tmp_path, monkeypatch):
+    """With NUMBA_CACHE_DIR, numba keeps a folder's kernels in <dir>/<name>_<sha1 of its
+    path>: the first-run notice looks there, and a change of the kernel sources deletes
+    the stale kernels there."""
+    from survey.physics.jit import cache_folder, kernels_cached, refresh_kernel_cache
+    package = tmp_path / "survey"
+    (package / "numerics").mkdir(parents=True)
+    (package / "numerics" / "integrate.py").write_text("# a kernel source\n")
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "cache"))
+    refresh_kernel_cache(package)
+    folder = cache_folder(package / "numerics")
+    assert folder.parent == tmp_path / "cache" and folder.name.startswith("numerics_")
+    folder.mkdir()
+    (folder / "integrate._run-400.py311.nbi").write_bytes(b"")
+    assert kernels_cached(package)
+    refresh_kernel_cache(package)                   # sources unchanged: kept
+    assert kernels_cached(package)
+    (package / "numerics" / "integrate.py").write_text("# edited\n")
+    refresh_kernel_cache(package)
+    assert not kernels_cached(package)
