@@ -17,7 +17,7 @@ import numpy as np
 from . import portable
 from .forces import profile
 from .geometry import cross
-from .system import System
+from .system import System, weighted_sum
 from .terms import PERIMETER
 
 
@@ -72,8 +72,7 @@ def jacobi(system: System, y):
     """(s, h, p_s, p_h), each (..., 2), from Cartesian states (..., n)."""
     q, p = system.split(y)
     S, H, Ps, Ph = jacobi_weights(system)
-    # summed body by body, not by einsum (whose SIMD loops fuse multiply-adds on some CPUs)
-    return tuple((w[:, None] * x).sum(axis=-2) for w, x in ((S, q), (H, q), (Ps, p), (Ph, p)))
+    return tuple(weighted_sum(w, x) for w, x in ((S, q), (H, q), (Ps, p), (Ph, p)))
 
 
 def reduced(system: System, y) -> Reduced:
