@@ -552,9 +552,9 @@ def _heyoka_scan(cells, t_final, tols, dE_max):
     n = system.n
     seed = IndicatorOptions().seed
     starts, E0 = [], []
-    for cell, delta in enumerate(np.linspace(0.0, 10.0, cells)):
+    for delta in np.linspace(0.0, 10.0, cells):
         y0 = initial_state(system, "equilateral", delta=float(delta))
-        w0 = deviation_vectors(system, y0, 1, seed, cell)[0]
+        w0 = deviation_vectors(system, y0, 1, seed)[0]
         starts.append(np.concatenate([y0, w0 / np.linalg.norm(w0), [0.0, 0.0, 0.0]]))
         E0.append(system.energy(y0))
     width = hy.recommended_simd_size()

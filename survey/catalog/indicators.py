@@ -57,10 +57,11 @@ class Indicator:
 
 
 REGISTRY = (
-    Indicator("ftle", TANGENT, ("ftle", "ftle_spread", "ftle_wba", "ftle_history"),
+    Indicator("ftle", TANGENT, ("ftle", "ftle_ensemble", "ensemble_orbits", "ftle_wba",
+                                "ftle_history"),
               "Benettin, Galgani, Giorgilli & Strelcyn, Meccanica 15 (1980) 9",
               map=MapStyle("magma", log=True), vote=Vote("ftle", -1, "ftle", True)),
-    Indicator("megno", TANGENT, ("megno", "megno_spread", "megno_slope", "megno_history"),
+    Indicator("megno", TANGENT, ("megno", "megno_ensemble", "megno_slope", "megno_history"),
               "Cincotta & Simo, Astron. Astrophys. Suppl. 147 (2000) 205",
               map=MapStyle("viridis", (0.0, 8.0)), vote=Vote("megno", -1, "megno")),
     Indicator("fli", TANGENT, ("fli", "fli_history"),
@@ -97,7 +98,7 @@ class IndicatorOptions:
     renorm_interval: float = 1.0   # time between renormalisations of the tangent vectors
     history_points: int = 64       # coarse time grid of the convergence histories
     project_flow: bool = False     # project deviations off the flow and grad H at t = 0
-    perturbations: int = 2         # extra orbits started perturbation_size away
+    perturbations: int = 16        # extra orbits started perturbation_size away
     perturbation_size: float = 1e-9
 
     def __post_init__(self):

@@ -6,7 +6,8 @@ attributes, the schema `verify` expects and the README's variable table.
 Dimensions: the grid axes (in the order the config writes them), then a variable's own:
 `crossing` (section points, NaN-padded, with n_crossings), `history_time` (convergence
 histories), `component` (phase-space state), `spatial` (3-D vectors), `observable` and
-`fundamental` (torus analysis).
+`fundamental` (torus analysis), `ensemble_statistic` (ENSEMBLE_STATISTICS of an indicator
+over the cell's orbit and its perturbed starts).
 """
 from __future__ import annotations
 
@@ -22,6 +23,11 @@ from .status import Status
 
 # which cells a variable has values for; elsewhere it holds its fill value
 ALL, STARTED, FINISHED = "all cells", "cells with a start", "cells with status ok or event"
+# an indicator over an ensemble of orbits: its mean, sample standard deviation and quantiles
+ENSEMBLE_STATISTICS = ("mean", "sd", "q05", "q50", "q95")
+ENSEMBLE_QUANTILES = (0.05, 0.5, 0.95)
+# below this many orbits an ensemble's spread is indicative only
+ENSEMBLE_MIN = 8
 
 
 class CellResult(NamedTuple):
@@ -124,13 +130,18 @@ VARIABLES = [
         lambda r: r.energy_error, symbol=r"$|\Delta E/E|$"),
     Var("angular_momentum_error", "max |J(t) - J(0)| / max(|J(0)|, 1) over the same times",
         lambda r: r.angular_momentum_error),
-    _measured("ftle", "finite-time maximal Lyapunov exponent at t_end, ensemble mean",
-              symbol=r"FTLE $\mu_T$ (1/time)"),
-    _measured("ftle_spread", "standard deviation of the FTLE over deviation vectors and "
-                             "perturbed starts"),
-    _measured("megno", "mean exponential growth factor of nearby orbits <Y> at t_end, "
-                       "ensemble mean", symbol=r"MEGNO $\langle Y\rangle$"),
-    _measured("megno_spread", "standard deviation of <Y> over the perturbed starts"),
+    _measured("ftle", "finite-time maximal Lyapunov exponent of the cell's orbit at t_end "
+                      "(mean over its deviation vectors)", symbol=r"FTLE $\mu_T$ (1/time)"),
+    _measured("ftle_ensemble", "the FTLE over the ensemble of the cell's orbit and its "
+                               "perturbed starts: mean, sample standard deviation, 5%, 50% "
+                               "and 95% quantiles", extra=("ensemble_statistic",)),
+    _measured("ensemble_orbits", "orbits in the ensemble statistics (the cell's orbit and "
+                                 "its perturbed starts that finished)", dtype="i8"),
+    _measured("megno", "mean exponential growth factor of nearby orbits <Y> of the cell's "
+                       "orbit at t_end", symbol=r"MEGNO $\langle Y\rangle$"),
+    _measured("megno_ensemble", "<Y> over the ensemble of the cell's orbit and its "
+                                "perturbed starts: mean, sample standard deviation, 5%, 50% "
+                                "and 95% quantiles", extra=("ensemble_statistic",)),
     _measured("megno_slope", "least-squares slope d<Y>/dt over the second half of the run "
                              "(about ftle/2 in chaos)"),
     _measured("fli", "fast Lyapunov indicator: max ln(|w|/|w0|) of the first deviation "

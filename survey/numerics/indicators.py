@@ -17,6 +17,7 @@ started a tiny distance away.
 """
 from __future__ import annotations
 
+import hashlib
 import math
 import statistics
 from typing import NamedTuple, Sequence
@@ -26,7 +27,7 @@ import numpy as np
 from ..catalog import defaults
 from ..catalog.indicators import IndicatorOptions
 from ..catalog.status import Status
-from ..catalog.variables import history_times
+from ..catalog.variables import ENSEMBLE_QUANTILES, ENSEMBLE_STATISTICS, history_times
 from ..physics.portable import orthonormal, vdot, vnorm
 from ..physics.system import System, rhs
 from .events import Crossings
@@ -36,10 +37,11 @@ from .integrate import EVAL, EVENTS, FINE, Outcome, integrate_batch
 class ChaosIndicators(NamedTuple):
     status: Status
     t: float
-    ftle: float            # mean over the ensemble of ln(|w(t)|/|w0|)/t
-    ftle_spread: float     # standard deviation over the ensemble (0 for one member)
-    megno: float           # <Y>(t), mean over the nominal and perturbed orbits
-    megno_spread: float    # 0 without perturbed orbits
+    ftle: float            # the cell's orbit: ln(|w(t)|/|w0|)/t, mean over its vectors
+    ftle_ensemble: np.ndarray   # ENSEMBLE_STATISTICS over the orbit and its perturbed starts
+    ensemble_orbits: int   # orbits in the ensemble statistics
+    megno: float           # <Y>(t) of the cell's orbit
+    megno_ensemble: np.ndarray
     megno_slope: float     # least-squares d<Y>/dt over the history's second half (~lambda/2)
     fli: float             # first deviation vector
     sali: float            # nan with one deviation vector
@@ -77,18 +79,26 @@ def _constraints(system: System, y0, project_flow: bool) -> np.ndarray:
     return orthonormal(np.array(rows))
 
 
-def deviation_vectors(system: System, y0, count: int, seed: int, cell: int = 0,
+def deviation_vectors(system: System, y0, count: int, seed: int,
                       project_flow: bool = False, stream: int = 0) -> np.ndarray:
-    """`count` unit deviation vectors (count, n), random from (seed, cell, stream) alone --
-    the same whatever the chunking of a survey -- with zero total position and momentum
-    deviation (such a vector never grows and reports every orbit regular)."""
-    rng = np.random.default_rng([seed, cell, stream])
+    """`count` unit deviation vectors (count, n), random from (seed, the start y0, stream)
+    alone -- the same orbit gets the same vectors in any grid, chunk or worker -- with zero
+    total position and momentum deviation (such a vector never grows and reports every
+    orbit regular)."""
+    rng = np.random.default_rng([seed, *state_key(y0), stream])
     w = rng.normal(size=(count, system.n))
     C = _constraints(system, y0, project_flow)
     coefficients = vdot(w[:, None, :], C[None])         # (count, constraints)
     for k in range(len(C)):
         w -= coefficients[:, k:k + 1] * C[k]
     return w / vnorm(w)[:, None]
+
+
+def state_key(y0) -> list[int]:
+    """Four 32-bit words of the SHA-256 of a state's float64 bits: a seed that follows the
+    orbit, not its place in a grid."""
+    digest = hashlib.sha256(np.ascontiguousarray(y0, dtype="<f8").tobytes()).digest()
+    return [int.from_bytes(digest[4 * i:4 * i + 4], "little") for i in range(4)]
 
 
 def _sali(w1, w2):
@@ -101,14 +111,16 @@ def _sali(w1, w2):
     return np.minimum(plus, minus), 0.5 * plus * minus
 
 
-def _spread(values) -> float:
-    """Sample standard deviation with exact sums (statistics: the same on any CPU); 0 for
-    one value, NaN if any is not finite."""
-    if len(values) < 2:
-        return 0.0
-    if not all(map(math.isfinite, values)):
-        return math.nan
-    return statistics.stdev(values)
+def ensemble_statistics(values) -> np.ndarray:
+    """ENSEMBLE_STATISTICS of one indicator over an ensemble of orbits: the mean and sample
+    standard deviation with exact sums (statistics: the same on any CPU; the deviation NaN
+    for one orbit) and the 5/50/95% quantiles (linear interpolation between order
+    statistics). All NaN if any value is not finite."""
+    if not values or not all(map(math.isfinite, values)):
+        return np.full(len(ENSEMBLE_STATISTICS), np.nan)
+    sd = statistics.stdev(values) if len(values) >= 2 else math.nan
+    return np.array([statistics.fmean(values), sd,
+                     *np.quantile(np.array(values), ENSEMBLE_QUANTILES)])
 
 
 def _ls_slope(t, v):
@@ -140,25 +152,25 @@ class Ensemble(NamedTuple):
     nominal: int              # the first `nominal` jobs integrate the nominal orbit
 
 
-def ensemble(system: System, y0, options: IndicatorOptions, cell: int = 0,
+def ensemble(system: System, y0, options: IndicatorOptions,
              control_tangents: bool = False) -> Ensemble:
-    """The jobs of a cell: deviation vectors and perturbed starts seeded by (seed, cell),
-    so a cell's jobs are the same whatever the chunk it travels in. The first nominal job
+    """The jobs of a cell: deviation vectors and perturbed starts seeded by (seed, y0), so
+    a cell's jobs are the same in any grid and whatever the chunk it travels in. The first nominal job
     records crossings, samples and the fine samples; the other nominal copies samples (the
     histories of their vectors); the perturbed orbits nothing."""
     o = options
     y0 = np.asarray(y0, dtype=float)
-    w0 = deviation_vectors(system, y0, o.deviations, o.seed, cell, o.project_flow)
+    w0 = deviation_vectors(system, y0, o.deviations, o.seed, o.project_flow)
     per_job = o.deviations if control_tangents else 1
     nominal = 1 if control_tangents else o.deviations
     starts = [y0] * nominal
     tangents = [w0] if control_tangents else [w[None] for w in w0]
     record = [EVENTS | EVAL | FINE] + [EVAL] * (nominal - 1)
     for j in range(o.perturbations):
-        xi = deviation_vectors(system, y0, 1, o.seed, cell, stream=1 + j)[0]
+        xi = deviation_vectors(system, y0, 1, o.seed, stream=1 + j)[0]
         yp = y0 + o.perturbation_size * float(vnorm(y0)) * xi
         starts.append(yp)
-        tangents.append(deviation_vectors(system, yp, per_job, o.seed, cell, o.project_flow,
+        tangents.append(deviation_vectors(system, yp, per_job, o.seed, o.project_flow,
                                           stream=1 + j))
         record.append(0)
     return Ensemble(np.array(starts), np.array(tangents), np.array(record, dtype=np.int64),
@@ -193,8 +205,11 @@ def combine(system: System, y0, t_final: float, options: IndicatorOptions, jobs:
     ftle_h = sample_log / th[:, None]
     megno_h = z[:, 1] / th
 
-    ftles = list(log_growth / out.t) if out.t > 0 else [np.nan] * k
-    megnos = [out.megno_sums[1] / out.t if out.t > 0 else np.nan]
+    # one value per orbit: the cell's orbit (its vectors agree to ~1e-4: they share it),
+    # then each perturbed start that finished
+    ftle = statistics.fmean(log_growth / out.t) if out.t > 0 else np.nan
+    megno = out.megno_sums[1] / out.t if out.t > 0 else np.nan
+    ftles, megnos = [ftle], [megno]
     for res in outcomes[jobs.nominal:] if status.finished else ():
         if res.status == Status.TIME_LIMIT:
             status = Status.TIME_LIMIT
@@ -216,8 +231,8 @@ def combine(system: System, y0, t_final: float, options: IndicatorOptions, jobs:
     half = history >= 0.5 * t_final
     return ChaosIndicators(
         status=status, t=out.t,
-        ftle=statistics.fmean(ftles), ftle_spread=_spread(ftles),
-        megno=statistics.fmean(megnos), megno_spread=_spread(megnos),
+        ftle=ftle, ftle_ensemble=ensemble_statistics(ftles), ensemble_orbits=len(ftles),
+        megno=megno, megno_ensemble=ensemble_statistics(megnos),
         megno_slope=_ls_slope(th[half], megno_h[half]),
         fli=float(out.fli[0]), sali=float(sali), gali2=float(gali2), ftle_wba=out.ftle_wba,
         history_time=history, ftle_history=sum(ftle_h.T) / ftle_h.shape[1],
@@ -239,7 +254,7 @@ def batch_options(t_final: float, options: IndicatorOptions, *, events=(), rtol=
 
 
 def chaos_indicators(system: System, y0, t_final: float, options=IndicatorOptions(), *,
-                     cell: int = 0, lanes=None, **run) -> ChaosIndicators:
+                     lanes=None, **run) -> ChaosIndicators:
     """Integrate y0 to t_final with `options.deviations` tangent vectors (MEGNO of the first,
     summed by the driver at step ends), plus `options.perturbations` nearby orbits, as
     lanes of one batch, and return the indicators, their ensemble spread and convergence
@@ -247,7 +262,7 @@ def chaos_indicators(system: System, y0, t_final: float, options=IndicatorOption
     max_steps, max_events, control_tangents, t_fine: the times the nominal orbit is sampled
     at for the torus analysis, Outcome.fine; time_limit: wall-clock seconds per orbit, 0 for
     none -- one that runs out makes the status TIME_LIMIT)."""
-    jobs = ensemble(system, y0, options, cell, run.get("control_tangents", False))
+    jobs = ensemble(system, y0, options, run.get("control_tangents", False))
     outcomes = integrate_batch(system, jobs.starts, t_final, tangents=jobs.tangents,
                                record=jobs.record, lanes=lanes,
                                **batch_options(t_final, options, **run))

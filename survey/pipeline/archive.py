@@ -23,6 +23,7 @@ from ..catalog.variables import (
     FINISHED,
     STARTED,
     VARIABLES,
+    ENSEMBLE_STATISTICS,
     CellResult,
     V,
     Var,
@@ -54,6 +55,7 @@ def cell_shape(config, v: Var) -> tuple[int, ...]:
              "history_time": config.tables["indicators"]["history_points"],
              "component": 2 * s["bodies"] * s["dim"], "spatial": 3,
              "observable": len(config.tables["tori"]["observables"]),
+             "ensemble_statistic": len(ENSEMBLE_STATISTICS),
              "fundamental": len(fundamental_names(s["bodies"], s["dim"]))}
     return tuple(sizes[d] for d in v.extra)
 
@@ -181,6 +183,10 @@ def coordinates(config) -> dict:
         coords["crossing"] = ("crossing", np.arange(n), {"long_name": "index of the kept "
                                                                       "section crossing",
                                                          "units": "1"})
+    if config.tables["indicators"]["which"]:
+        coords["ensemble_statistic_name"] = ("ensemble_statistic", list(ENSEMBLE_STATISTICS), {
+            "long_name": "statistic over the ensemble of the cell's orbit and its perturbed "
+                         "starts (q05: the 5% quantile)"})
     if config.tables["system"]["dim"] == 3:
         coords["spatial_axis"] = ("spatial", ["x", "y", "z"], {"long_name": "spatial axis"})
     if config.tables["tori"]["analyse"]:

@@ -1,9 +1,10 @@
 """A survey's cells: their starts, the task a worker runs on a chunk of them, and everything
 one cell computes.
 
-A cell's result depends only on the config and its own index (deviation vectors are seeded
-by (seed, cell index)), never on the chunk it travels in or the worker that runs it, so an
-archive is the same bit for bit whatever the chunk size or worker count.
+A cell's result depends only on the config and its start (deviation vectors and perturbed
+starts are seeded by (seed, start)), never on its place in the grid, the chunk it travels
+in or the worker that runs it: an archive is the same bit for bit whatever the chunk size
+or worker count, and the same start gives the same numbers in any grid.
 """
 from __future__ import annotations
 
@@ -134,8 +135,7 @@ def _compute(task: CellTask, system, events, cells, starts) -> list[CellResult]:
         run["max_events"] = task.section["max_crossings"]
     if ind["which"]:
         options = indicator_options(ind)
-        jobs = [ensemble(system, y0, options, cell, integ["control_tangents"])
-                for cell, y0 in zip(cells, starts)]
+        jobs = [ensemble(system, y0, options, integ["control_tangents"]) for y0 in starts]
         outcomes = integrate_batch(
             system, np.concatenate([j.starts for j in jobs]), t_final,
             tangents=np.concatenate([j.tangents for j in jobs]),

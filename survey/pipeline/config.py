@@ -117,7 +117,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
                                                   "and gali2 need 2)", low=1, high=64,
                            hint="each is integrated beside the orbit; more than a handful "
                                 "add nothing to the exponent"),
-        "seed": Key("int", _IND.seed, "seed of the deviation vectors (with the cell index)",
+        "seed": Key("int", _IND.seed, "seed of the deviation vectors and perturbed starts (with the cell's start)",
                     low=0),
         "renorm_interval": Key("float", _IND.renorm_interval, "time between "
                                "renormalisations of the deviation vectors", "time", above=0),

@@ -22,7 +22,7 @@ from ..analysis.classify import stored_table
 from ..catalog.indicators import OWNER, REGISTRY
 from ..catalog.regimes import REGULAR, Regime, Thresholds
 from ..catalog.status import Status
-from ..catalog.variables import V, label
+from ..catalog.variables import ENSEMBLE_MIN, V, label
 
 # the indicators drawn as maps (and in one-axis scans), in the registry's order
 MAPS = [(i.headline, i.map) for i in REGISTRY if i.map is not None]
@@ -217,8 +217,9 @@ def indicator_map(ds, name, cmap="viridis", clip=None, log=False, overlay=False)
 
 
 def scan(ds, names) -> Figure:
-    """Indicators along a one-axis grid with their ensemble spread as error bars and the
-    regime shaded behind (the paper's LyapunovSides and LyapunovScanEquil)."""
+    """Indicators along a one-axis grid, each cell's orbit with the 5-95% range of its
+    ensemble (the orbit and its perturbed starts) as a bar, and the regime shaded behind
+    (the paper's LyapunovSides and LyapunovScanEquil)."""
     a = grid_axes(ds)[0]
     values = ds[a].values
     steps = np.diff(values)
@@ -240,10 +241,11 @@ def scan(ds, names) -> Figure:
                     ax.axvspan(edges[i], edges[i + 1], color=REGIME_COLOURS[r], alpha=0.18,
                                lw=0)
         y = np.where(_unfinished(ds), np.nan, ds[name].values.astype(float))
-        spread = ds.get(f"{name}_spread")
-        yerr = None if spread is None else np.where(np.isfinite(y), spread.values, np.nan)
-        ax.errorbar(x, y, yerr=yerr, fmt="o-", ms=2.5, lw=0.8, color="k", ecolor="0.4",
-                    elinewidth=0.7, capsize=1.5)
+        ax.plot(x, y, "o-", ms=2.5, lw=0.8, color="k")
+        band = _ensemble_range(ds, name)
+        if band is not None:
+            low, high, note = band
+            ax.vlines(x, low, high, color="0.4", lw=0.7, label=note)
         for level, style, text in _reference_lines(ds, name):
             ax.axhline(level, color="0.3", ls=style, lw=0.8, label=text)
         if name in (V.ftle, V.megno) and _positive(y):
@@ -271,6 +273,21 @@ def scan(ds, names) -> Figure:
                             for r in present], loc="outside lower center", fontsize="small",
                    ncol=min(len(present), 4), title="regime (cells)", frameon=False)
     return fig
+
+
+def _ensemble_range(ds, name):
+    """(5% quantiles, 95% quantiles, legend text) of an indicator's ensembles, or None."""
+    if f"{name}_ensemble" not in ds or V.ensemble_orbits not in ds:
+        return None
+    stats = list(ds["ensemble_statistic_name"].values.astype(str))
+    q = ds[f"{name}_ensemble"].values
+    low, high = q[..., stats.index("q05")], q[..., stats.index("q95")]
+    if not np.isfinite(high - low).any() or not np.any(high > low):
+        return None
+    orbits = ds[V.ensemble_orbits].values
+    n = int(np.max(orbits)) if (orbits > 0).any() else 0
+    note = f"5-95% of {n} orbits" + (" (indicative)" if n < ENSEMBLE_MIN else "")
+    return low, high, note
 
 
 def _reference_lines(ds, name):

@@ -3,7 +3,6 @@ written for a reader who has not seen the config."""
 from __future__ import annotations
 
 import json
-import math
 import tomllib
 from pathlib import Path
 
@@ -15,18 +14,8 @@ from ..catalog import defaults
 from ..catalog.indicators import INDICATORS
 from ..catalog.regimes import IRREGULAR, REGULAR, Regime, Thresholds
 from ..catalog.status import Status
-from ..catalog.variables import V
+from ..catalog.variables import ENSEMBLE_MIN, V
 from . import plots
-
-
-def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
-    """95% Wilson score interval of a binomial proportion k/n."""
-    if n == 0:
-        return (math.nan, math.nan)
-    p = k / n
-    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return max(0.0, centre - half), min(1.0, centre + half)
 
 
 PROVENANCE_LINE = "- Code: survey "
@@ -96,17 +85,15 @@ def markdown(ds, figure_names=()) -> str:
     if not np.any(ds[V.status].values == Status.OK):
         out += ["**No cell finished** (see the status of each cell): there are no indicator "
                 "values, and the figures show only the regimes.", ""]
-    out += ["## Regimes", "", "| regime | cells | share | 95% interval | meaning |",
-            "| --- | --- | --- | --- | --- |"]
+    out += ["## Regimes", "", "| regime | cells | share | meaning |", "| --- | --- | --- | --- |"]
     for r in Regime:
         k = int(np.sum(regime == r))
         if k:
-            lo, hi = wilson(k, n)
-            out.append(f"| {r.name.lower()} | {k} | {100 * k / n:.1f}% | "
-                       f"{100 * lo:.1f}-{100 * hi:.1f}% | {r.meaning} |")
-    out += ["", "Intervals: Wilson score, 95%, treating the cells as a sample of the "
-                "grid's region.", ""]
+            out.append(f"| {r.name.lower()} | {k} | {100 * k / n:.1f}% | {r.meaning} |")
+    out += ["", "The cells are a deterministic grid, not a random sample: a share is a count, "
+                "with no sampling interval.", ""]
 
+    out += _ensembles(ds, regime)
     out += _onsets(ds, axes, regime)
     out += _tori_table(ds, axes, regime)
     out += _agreement(ds, th)
@@ -115,6 +102,46 @@ def markdown(ds, figure_names=()) -> str:
     if figure_names:
         out += ["## Figures", ""] + [f"![{name}]({name})" for name in figure_names] + [""]
     return "\n".join(out)
+
+
+def _ensembles(ds, regime) -> list[str]:
+    """How far the indicators of nearby orbits spread: per regime, the cells' median FTLE
+    and <Y> and the median over cells of their ensembles' sd and 5-95% range."""
+    if V.ftle_ensemble not in ds or V.ensemble_orbits not in ds:
+        return []
+    config = tomllib.loads(ds.attrs.get("config", ""))
+    size = config.get("indicators", {}).get("perturbation_size", 1e-9)
+    orbits = ds[V.ensemble_orbits].values
+    finished = orbits > 0
+    if not finished.any():
+        return []
+    n = int(np.max(orbits[finished]))
+    stats = list(ds["ensemble_statistic_name"].values.astype(str))
+    out = ["## Spread over nearby orbits", "",
+           f"Each cell's FTLE and <Y> are its own orbit's. Their spread comes from an ensemble "
+           f"of {n} orbit{'s' * (n != 1)} per cell: the cell's and {n - 1} started {size:g} "
+           "(relative) away, each with its own deviation vector; the deviation vectors of one "
+           "orbit agree to ~1e-4 and are not a spread."]
+    if n == 1:
+        return out[:2] + ["Each cell integrated its own orbit only ([indicators] perturbations "
+                          "= 0): no spread over nearby orbits was measured.", ""]
+    if n < ENSEMBLE_MIN:
+        out.append(f"**With {n} orbits per cell these spreads are indicative only** (fewer "
+                   f"than {ENSEMBLE_MIN}; [indicators] perturbations sets it).")
+    out += ["", "| regime | cells | median FTLE | median sd | median 5-95% range | median <Y> "
+                "| its median 5-95% range |", "| --- | --- | --- | --- | --- | --- | --- |"]
+    f, m = ds[V.ftle_ensemble].values, ds[V.megno_ensemble].values
+    q05, q95, sd = stats.index("q05"), stats.index("q95"), stats.index("sd")
+    for r in Regime:
+        cells = finished & (regime == r)
+        if not cells.any():
+            continue
+        med = lambda x: float(np.nanmedian(x[cells])) if np.isfinite(x[cells]).any() \
+            else np.nan
+        out.append(f"| {r.name.lower()} | {int(cells.sum())} | {med(ds[V.ftle].values):.3g} | "
+                   f"{med(f[..., sd]):.2g} | {med(f[..., q95] - f[..., q05]):.2g} | "
+                   f"{med(ds[V.megno].values):.3g} | {med(m[..., q95] - m[..., q05]):.2g} |")
+    return out + [""]
 
 
 # axes along which "where chaos sets in" means nothing: coordinates of a start on the

@@ -73,7 +73,7 @@ def test_the_areal_system_in_lanes():
     system = System.create(potential="areal_barrier")
     starts = np.array([initial_state(system, "equilateral", side=3 ** 0.5, delta=float(d),
                                      energy=9.0) for d in np.linspace(0.0, 3.0, 16)])
-    tangents = np.array([deviation_vectors(system, y, 2, 1, c) for c, y in enumerate(starts)])
+    tangents = np.array([deviation_vectors(system, y, 2, 1) for y in starts])
     check(system, starts, tangents, np.full(16, EVENTS), 20.0, (1, 16), megno=True,
           events=[section_event(system)])
 
@@ -91,5 +91,5 @@ def test_other_systems_in_lanes(case):
                                                                  endpoint=False)]) * 1.2
     starts = np.array([system.state(base + 0.05 * rng.normal(size=(N, 2)),
                                     0.2 * rng.normal(size=(N, 2))) for _ in range(17)])
-    tangents = np.array([deviation_vectors(system, y, 1, 2, c) for c, y in enumerate(starts)])
+    tangents = np.array([deviation_vectors(system, y, 1, 2) for y in starts])
     check(system, starts, tangents, np.zeros(17, dtype=np.int64), 5.0, (1, 17), megno=True)

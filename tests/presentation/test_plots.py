@@ -38,7 +38,8 @@ def grid1(tmp_path_factory):
     cfg = {"survey": {"name": "g1", "output": str(tmp / "g1.nc")},
            "initial": {"family": "equilateral",
                        "delta": {"start": 3.0, "stop": 5.0, "num": 9}},
-           "integration": {"t_final": 300.0}, "section": {"coordinate": "phi"}}
+           "integration": {"t_final": 300.0}, "section": {"coordinate": "phi"},
+           "indicators": {"perturbations": 1}}
     return xr.open_dataset(run_survey(cfg))
 
 
@@ -75,7 +76,8 @@ def test_scan_shades_each_cell_by_regime_with_error_bars(grid1):
     counts = {r.name.lower(): int((grid1.regime.values == r).sum()) for r in Regime}
     regimes = [t.get_text() for t in fig.legends[0].get_texts()]    # the figure's legend
     assert all(f"{name} ({k})" in regimes for name, k in counts.items() if k)
-    assert axes[0].containers                                       # error bars
+    bars = [c for c in axes[0].collections if c.get_label().startswith("5-95%")]
+    assert bars and bars[0].get_label() == "5-95% of 2 orbits (indicative)"   # the ensemble
 
 
 def test_section_convergence_and_frequency_map(grid1):
@@ -95,16 +97,18 @@ def test_section_convergence_and_frequency_map(grid1):
 def test_report_states_what_was_run_regimes_onset_and_thresholds(grid1, tmp_path):
     path = report.write(grid1, tmp_path, "g1")
     text = path.read_text()
-    for heading in ("## What was run", "## Regimes", "## Where chaos sets in", "## Tori found",
+    for heading in ("## What was run", "## Regimes", "## Spread over nearby orbits",
+                    "## Where chaos sets in", "## Tori found",
                     "## Where the indicators agree", "## Thresholds used, and why",
                     "## Conservation and failures", "## Figures"):
         assert heading in text, heading
+    # grid1 runs one perturbed start: two orbits per cell, said to be indicative only
+    assert "an ensemble of 2 orbits per cell" in text and "indicative only" in text
+    assert "Wilson" not in text and "95% interval" not in text
     assert "family `equilateral`" in text and "t = 300" in text
     assert "## Regimes along delta" in text and "- delta = 3 to " in text
     for name in ("g1_scan.png", "g1_convergence.png"):
         assert (tmp_path / name).exists() and f"({name})" in text
-    lo, hi = report.wilson(5, 20)
-    assert lo < 0.25 < hi and report.wilson(0, 10)[0] == 0.0
 
 
 def test_onset_estimate():
