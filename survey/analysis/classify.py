@@ -1,8 +1,12 @@
 """Is a cell on a KAM torus, in a resonance, periodic, sticky or chaotic -- and how sure are
 we? `classify` decides each cell's regime from the evidence an archive stores (the status,
 Birkhoff digits, MEGNO, FTLE, SALI, frequency diffusion and resonance), so it can be run
-again on any archive with other thresholds and no integration."""
+again on any archive with other thresholds and no integration; at half a cell's horizon
+too, from the histories, which is how a verdict in doubt is found (and extended by the
+survey). It reads an xarray Dataset, or `Table`: the workers' plain arrays."""
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 
@@ -18,19 +22,60 @@ EVIDENCE = tuple((i.name, i.vote) for i in REGISTRY if i.vote is not None)
 LYAPUNOV = tuple(name for name, _ in EVIDENCE if BY_NAME[name].source == TANGENT)
 
 
-def evidence_votes(ds, th: Thresholds) -> dict[str, np.ndarray]:
+class Table(dict):
+    """Arrays by variable name, cells first (and the coordinates classify reads), read the
+    way classify reads a Dataset: `name in table`, `table[name].values`."""
+
+    def __getitem__(self, name):
+        return _Column(dict.__getitem__(self, name))
+
+
+class _Column(NamedTuple):
+    values: np.ndarray
+
+    @property
+    def shape(self):
+        return self.values.shape
+
+
+def horizon(ds) -> np.ndarray:
+    """Each cell's horizon: regime_horizon where stored, else the archive's t_final (the
+    last history time)."""
+    if V.regime_horizon in ds:
+        return ds[V.regime_horizon].values
+    return np.full(ds[V.status].shape, float(ds["history_time"].values[-1]))
+
+
+def at_half_horizon(ds, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """(values, times) of a history variable at the history time nearest half each cell's
+    horizon."""
+    times = ds["history_time"].values
+    half = 0.5 * horizon(ds)
+    with np.errstate(invalid="ignore"):
+        index = np.argmin(np.abs(times - np.nan_to_num(half, nan=-1.0)[..., None]), axis=-1)
+    values = np.take_along_axis(ds[name].values, index[..., None], axis=-1)[..., 0]
+    return np.where(np.isfinite(half), values, np.nan), times[index]
+
+
+def evidence_votes(ds, th: Thresholds, half: bool = False) -> dict[str, np.ndarray]:
     """Each line of evidence present in the archive as votes: +1 regular, -1 chaotic, 0 no
     vote (between the thresholds), NaN where the evidence is missing. The FTLE is measured
-    in units of ln(T)/T, a torus's FTLE at the time reached."""
+    in units of ln(T)/T, a torus's FTLE at the time reached. With `half`, the evidence at
+    half each cell's horizon (Vote.half: its history there, or the variable stored for it);
+    a line with none has no vote."""
     votes = {}
     for key, vote in EVIDENCE:
-        if vote.variable not in ds:
+        name = vote.half if half else vote.variable
+        if not name or name not in ds:
             continue
-        x = ds[vote.variable].values.astype(float)
+        if half and ds[name].values.ndim > len(ds[V.status].shape):
+            x, t = at_half_horizon(ds, name)
+        else:
+            x = ds[name].values.astype(float)
+            t = ds[V.t_end].values if vote.per_torus_rate else None
         if vote.per_torus_rate:
-            t_end = ds[V.t_end].values
             with np.errstate(invalid="ignore", divide="ignore"):
-                x = x / (np.log(t_end) / t_end)
+                x = x / (np.log(t) / t)
         regular, chaotic = (vote.sign * getattr(th, f"{vote.thresholds}_{side}")
                             for side in ("regular", "chaotic"))
         with np.errstate(invalid="ignore"):
@@ -40,11 +85,14 @@ def evidence_votes(ds, th: Thresholds) -> dict[str, np.ndarray]:
     return votes
 
 
-def classify(ds, thresholds: Thresholds | None = None):
+def classify(ds, thresholds: Thresholds | None = None, half: bool = False):
     """(regime, confidence) of every cell of an archive, from the evidence it stores:
     the status, WBA digits (at T and T/2), MEGNO (and its history at T/2), FTLE, SALI,
     frequency diffusion and resonance. Works on archives missing some of it (old ones, or
-    [indicators] which = []): absent evidence has no vote.
+    [indicators] which = []): absent evidence has no vote. With `half`: the verdict at
+    half each cell's horizon, from the evidence there (evidence_votes); the frequencies and
+    the first half's digits are not known there, so regular is torus and mixed votes are
+    undetermined.
 
     Each line of evidence votes regular, chaotic or not at all (Thresholds). Then:
     regular votes only -> periodic (at most one shape frequency), resonant (a resonance of
@@ -57,7 +105,7 @@ def classify(ds, thresholds: Thresholds | None = None):
     th = thresholds or Thresholds.from_table(stored_table(ds))
     shape = ds[V.status].shape
     status = ds[V.status].values
-    votes = evidence_votes(ds, th)
+    votes = evidence_votes(ds, th, half)
     stack = np.stack(list(votes.values())) if votes else np.full((1,) + shape, np.nan)
     present = np.sum(np.isfinite(stack), axis=0)
     regular = np.sum(stack == 1, axis=0)
@@ -71,9 +119,9 @@ def classify(ds, thresholds: Thresholds | None = None):
     only_regular = (regular > 0) & (chaotic == 0)
     regime[only_regular] = Regime.TORUS
     confidence[only_regular] = share_reg[only_regular]
-    if V.resonance_distance in ds:
+    if V.resonance_distance in ds and not half:
         regime[only_regular & on_resonance(ds, th)] = Regime.RESONANT
-    if V.frequency in ds:
+    if V.frequency in ds and not half:
         labels = [str(x) for x in ds["fundamental_name"].values]
         shape_cols = [i for i, name in enumerate(labels) if name.startswith("shape")]
         n_shape = np.sum(np.isfinite(ds[V.frequency].values[..., shape_cols]), axis=-1)
@@ -83,12 +131,10 @@ def classify(ds, thresholds: Thresholds | None = None):
     confidence[only_chaotic] = share_chaos[only_chaotic]
     mixed = (chaotic > 0) & (regular > 0)
     early = np.zeros(shape, dtype=bool)
-    if V.birkhoff_digits_half in ds:
+    if V.birkhoff_digits_half in ds and not half:
         early |= ds[V.birkhoff_digits_half].values >= th.digits_regular
-    if V.megno_history in ds:
-        times = ds["history_time"].values
-        at_half = int(np.argmin(np.abs(times - times[-1] / 2)))
-        early |= ds[V.megno_history].values[..., at_half] <= th.megno_regular
+    if V.megno_history in ds and not half:
+        early |= at_half_horizon(ds, V.megno_history)[0] <= th.megno_regular
     late = np.zeros(shape, dtype=bool)
     for name in LYAPUNOV:
         if name in votes:
@@ -104,6 +150,24 @@ def classify(ds, thresholds: Thresholds | None = None):
     confidence[(status == Status.INACCESSIBLE) | (status == Status.COLLISION)] = 1.0
     confidence[failed | (regime == Regime.UNDETERMINED)] = 0.0
     return regime, confidence
+
+
+def verdict_class(regime) -> np.ndarray:
+    """The class a verdict's stability is judged by: 1 regular (torus, resonant,
+    periodic), 2 irregular (chaotic, sticky), 0 anything else (undetermined, a failed run)
+    -- a torus that turns out resonant has not changed its mind."""
+    regime = np.asarray(regime)
+    return np.where(np.isin(regime, REGULAR), 1, np.where(np.isin(regime, IRREGULAR), 2, 0))
+
+
+def stable(history) -> np.ndarray:
+    """1 where the last verdict of a regime_history (..., horizon; -1 past the last) is of
+    the class of the one before, else 0."""
+    history = np.asarray(history)
+    decided = np.sum(history >= 0, axis=-1)
+    last = np.take_along_axis(history, np.maximum(decided - 1, 0)[..., None], -1)[..., 0]
+    before = np.take_along_axis(history, np.maximum(decided - 2, 0)[..., None], -1)[..., 0]
+    return ((decided >= 2) & (verdict_class(last) == verdict_class(before))).astype(np.int8)
 
 
 def on_resonance(ds, th: Thresholds) -> np.ndarray:

@@ -12,3 +12,5 @@ DIM = 2
 POTENTIAL = "perimetric_power"     # with its default parameters, the paper's U = P^2/2
 SAMPLE_INTERVAL = 0.1       # time between the orbit samples of the torus analysis
 NAFF_LINES = 5              # NAFF lines per shape signal and half orbit
+EXTEND = 4                  # a verdict in doubt at T is decided again at EXTEND * T ...
+EXTEND_ROUNDS = 1           # ... up to this many times

@@ -26,12 +26,15 @@ class MapStyle:
 class Vote:
     """How a line of evidence votes: the variable read, +1 if larger values are more regular
     (-1: more chaotic), and the catalog.regimes.Thresholds fields `<thresholds>_regular` and
-    `<thresholds>_chaotic`; `per_torus_rate`: measured in units of ln(T)/T, a torus's FTLE."""
+    `<thresholds>_chaotic`; `per_torus_rate`: measured in units of ln(T)/T, a torus's FTLE;
+    `half`: the variable holding its value at half the cell's horizon (a history, read at
+    that time, or a scalar), "" if there is none -- the verdict at T/2."""
 
     variable: str
     sign: int
     thresholds: str
     per_torus_rate: bool = False
+    half: str = ""
 
 
 @dataclass(frozen=True)
@@ -60,22 +63,24 @@ REGISTRY = (
     Indicator("ftle", TANGENT, ("ftle", "ftle_ensemble", "ensemble_orbits", "ftle_wba",
                                 "ftle_history"),
               "Benettin, Galgani, Giorgilli & Strelcyn, Meccanica 15 (1980) 9",
-              map=MapStyle("magma", log=True), vote=Vote("ftle", -1, "ftle", True)),
+              map=MapStyle("magma", log=True),
+              vote=Vote("ftle", -1, "ftle", True, half="ftle_history")),
     Indicator("megno", TANGENT, ("megno", "megno_ensemble", "megno_slope", "megno_history"),
               "Cincotta & Simo, Astron. Astrophys. Suppl. 147 (2000) 205",
-              map=MapStyle("viridis", (0.0, 8.0)), vote=Vote("megno", -1, "megno")),
+              map=MapStyle("viridis", (0.0, 8.0)),
+              vote=Vote("megno", -1, "megno", half="megno_history")),
     Indicator("fli", TANGENT, ("fli", "fli_history"),
               "Froeschle, Lega & Gonczi, Celest. Mech. Dyn. Astron. 67 (1997) 41",
               map=MapStyle("cividis")),
     Indicator("sali", TANGENT, ("sali", "sali_history"), "Skokos, J. Phys. A 34 (2001) 10029",
-              deviations=2, vote=Vote("sali", +1, "sali")),
+              deviations=2, vote=Vote("sali", +1, "sali", half="sali_history")),
     Indicator("gali2", TANGENT, ("gali2",),
               "Skokos, Bountis & Antonopoulos, Physica D 231 (2007) 30", deviations=2),
     Indicator("wba", TORUS, ("birkhoff_digits", "birkhoff_digits_half",
                              "birkhoff_digits_observable", "birkhoff_digits_observable_half"),
               "Das, Saiki, Sander & Yorke, Nonlinearity 30 (2017) 4111",
               map=MapStyle("viridis_r", (0.0, 12.0)),
-              vote=Vote("birkhoff_digits", +1, "digits")),
+              vote=Vote("birkhoff_digits", +1, "digits", half="birkhoff_digits_half")),
     Indicator("diffusion", TORUS, ("frequency_diffusion", "frequency", "frequency_change",
                                    "resonance", "resonance_order", "resonance_distance"),
               "Laskar, Physica D 67 (1993) 257",

@@ -7,7 +7,8 @@ Dimensions: the grid axes (in the order the config writes them), then a variable
 `crossing` (section points, NaN-padded, with n_crossings), `history_time` (convergence
 histories), `component` (phase-space state), `spatial` (3-D vectors), `observable` and
 `fundamental` (torus analysis), `ensemble_statistic` (ENSEMBLE_STATISTICS of an indicator
-over the cell's orbit and its perturbed starts).
+over the cell's orbit and its perturbed starts), `horizon` (the verdicts at t_final / 2,
+t_final and each extension's end).
 """
 from __future__ import annotations
 
@@ -49,6 +50,8 @@ class CellResult(NamedTuple):
     crossing_time: np.ndarray | None = None    # kept crossings
     crossing_state: np.ndarray | None = None
     reduced: Any = None                    # physics.jacobi.Reduced of the kept crossings
+    horizon: float = np.nan                # the run's t_final: T, or k^r T once extended
+    verdicts: Any = None                   # regimes at T/2, T, k T, ... (-1 past the last)
 
 
 @dataclass(frozen=True)
@@ -91,6 +94,11 @@ def _section(c):
     return c.tables["section_enabled"]
 
 
+def _decided(c):
+    """Whether a config's cells carry evidence to decide their regime by."""
+    return bool(c.tables["indicators"]["which"]) or bool(c.tables["tori"]["analyse"])
+
+
 def _planar3(c):
     s = c.tables["system"]
     return s["bodies"] == 3 and s["dim"] == 2
@@ -122,6 +130,16 @@ VARIABLES = [
         flags=Regime, derived=True, symbol="regime"),
     Var("regime_confidence", "share of the lines of evidence present that support the "
                              "regime", None, ALL, derived=True),
+    Var("regime_stable", "1 where the regime is that of the horizon before (the same class: "
+                         "regular, irregular or other), else 0", None, ALL, "i1",
+        derived=True),
+    Var("regime_horizon", "the horizon of the cell's evidence and regime: t_final, or "
+                          "k^r t_final where a verdict in doubt was decided again",
+        lambda r: r.horizon, STARTED, symbol="horizon"),
+    Var("regime_history", "the regime decided at each horizon (at t_final / 2 and t_final "
+                          "from the first run, then at the end of each extension; -1 past "
+                          "the last)", lambda r: r.verdicts, STARTED, "i1", ("horizon",),
+        when=_decided),
     Var("t_end", "time reached by the integration", lambda r: r.t_end),
     Var("energy", "energy H at t = 0", lambda r: r.energy, symbol="$E$"),
     Var("angular_momentum", "total angular momentum at t = 0 (z component in 2-D)",
@@ -238,6 +256,19 @@ def markdown_table() -> str:
 def history_times(t_final: float, points: int) -> np.ndarray:
     """The time grid of the convergence histories: `points` evenly spaced up to t_final."""
     return np.linspace(t_final / points, t_final, points)
+
+
+def horizon_factors(extend: int, rounds: int) -> list[float]:
+    """The horizons a cell's verdict may be decided at, in units of t_final: 1/2 and 1 from
+    the first run, then k, k^2, ... for each extension round (none if extend = 0)."""
+    return [0.5, 1.0] + ([float(extend) ** r for r in range(1, rounds + 1)] if extend else [])
+
+
+def history_grid(t_final: float, points: int, extend: int, rounds: int) -> np.ndarray:
+    """The archive's history times: `points` per t_final, up to the longest horizon, so
+    that a run to any horizon fills a prefix of it."""
+    longest = int(horizon_factors(extend, rounds)[-1])
+    return history_times(t_final * longest, points * longest)
 
 
 OBSERVABLES = {

@@ -15,7 +15,7 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
-from ..analysis.classify import classify, stored_table
+from ..analysis.classify import classify, stable, stored_table
 from ..catalog.errors import ArchiveError
 from ..catalog.regimes import Thresholds
 from ..catalog.variables import (
@@ -28,7 +28,8 @@ from ..catalog.variables import (
     V,
     Var,
     fundamental_names,
-    history_times,
+    history_grid,
+    horizon_factors,
 )
 from .build import system_terms
 from .resources import GROUP_BYTES
@@ -51,8 +52,12 @@ def variables(config) -> list[Var]:
 def cell_shape(config, v: Var) -> tuple[int, ...]:
     """The shape of one cell's value of v (its own dimensions' sizes)."""
     s = config.tables["system"]
+    tori = config.tables["tori"]
     sizes = {"crossing": config.tables["section"]["max_crossings"],
-             "history_time": config.tables["indicators"]["history_points"],
+             "history_time": history_grid(config.tables["integration"]["t_final"],
+                                          config.tables["indicators"]["history_points"],
+                                          tori["extend"], tori["extend_rounds"]).size,
+             "horizon": len(horizon_factors(tori["extend"], tori["extend_rounds"])),
              "component": 2 * s["bodies"] * s["dim"], "spatial": 3,
              "observable": len(config.tables["tori"]["observables"]),
              "ensemble_statistic": len(ENSEMBLE_STATISTICS),
@@ -172,9 +177,18 @@ def coordinates(config) -> dict:
         "long_name": f"parameter {a.param} of the {terms[a.term][0]} term {terms[a.term][1]}"
         if a.term >= 0 else f"initial-condition parameter {a.name}", "units": "1"})
         for a in config.axes}
-    coords["history_time"] = ("history_time", history_times(
-        config.tables["integration"]["t_final"], config.tables["indicators"]["history_points"]),
-        {"long_name": "time of the convergence history points", "units": "1"})
+    tori = config.tables["tori"]
+    coords["history_time"] = ("history_time", history_grid(
+        config.tables["integration"]["t_final"], config.tables["indicators"]["history_points"],
+        tori["extend"], tori["extend_rounds"]),
+        {"long_name": "time of the convergence history points (a cell's history ends at "
+                      "its regime_horizon)", "units": "1"})
+    if V.regime_history in {v.name for v in variables(config)}:
+        coords["horizon_factor"] = ("horizon", horizon_factors(tori["extend"],
+                                                               tori["extend_rounds"]),
+                                    {"long_name": "horizon of each verdict of "
+                                                  "regime_history, in units of t_final",
+                                     "units": "1"})
     coords["component_name"] = ("component", _component_labels(config),
                                 {"long_name": "phase-space component (positions, then "
                                               "momenta)"})
@@ -283,10 +297,13 @@ def _append(path, entries):
 
 def derive(ds) -> dict:
     """The derived variables of an archive's Dataset (and the attributes they carry): the
-    regime and its confidence, with the thresholds that decided them."""
+    regime and its confidence, with the thresholds that decided them, and whether it is
+    the class of the verdict at the horizon before."""
     thresholds = Thresholds.from_table(stored_table(ds))
     regime, confidence = classify(ds, thresholds)
-    return {V.regime: regime, V.regime_confidence: confidence,
+    steady = stable(ds[V.regime_history].values) if V.regime_history in ds else \
+        np.zeros(regime.shape, dtype=np.int8)
+    return {V.regime: regime, V.regime_confidence: confidence, V.regime_stable: steady,
             "regime:attrs": {"thresholds": thresholds.describe()}}
 
 

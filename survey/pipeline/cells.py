@@ -13,9 +13,18 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..analysis.classify import Table, classify, verdict_class
 from ..catalog.errors import ConfigError, Inaccessible
+from ..catalog.regimes import Thresholds
 from ..catalog.status import Status
-from ..catalog.variables import CellResult, history_times
+from ..catalog.variables import (
+    CellResult,
+    V,
+    fundamental_names,
+    history_grid,
+    history_times,
+    horizon_factors,
+)
 from ..numerics import torus
 from ..numerics.indicators import batch_options, combine, conservation_errors, ensemble
 from ..numerics.integrate import integrate_batch
@@ -121,11 +130,73 @@ def jobs_per_cell(task: CellTask) -> int:
 
 
 def _compute(task: CellTask, system, events, cells, starts) -> list[CellResult]:
-    """The CellResults of cells with a start, one batch for all their orbits."""
+    """The CellResults of cells with a start, one batch for all their orbits; then the
+    verdicts in doubt decided again on longer runs (_extend)."""
     if not cells:
         return []
+    results = _run(task, system, events, starts, 1)
+    if not (task.indicators["which"] or task.tori["analyse"]):
+        return results
+    return _extend(task, system, events, starts, results)
+
+
+def _extend(task: CellTask, system, events, starts, results) -> list[CellResult]:
+    """Verdicts against a longer horizon. Each cell's regime is decided at T/2 and T from
+    its run; a cell whose verdict changed class between them, or whose evidence did not
+    all vote for it (a line between its thresholds, or against it), runs again from its
+    start to extend x T and is decided there -- and again, up to extend_rounds times, while
+    still in doubt. Every cell carries its verdicts (regime_history) and the horizon of the
+    run its evidence comes from; a cell's result depends on itself alone, so verify and any
+    chunking reproduce it."""
+    tor = task.tori
+    factors = horizon_factors(tor["extend"], tor["extend_rounds"])
+    half, _ = _verdicts(task, system, results, half=True)
+    end, confidence = _verdicts(task, system, results)
+    verdicts = np.full((len(results), len(factors)), -1, dtype=np.int8)
+    verdicts[:, 0], verdicts[:, 1] = half, end
+    todo = [k for k, r in enumerate(results)
+            if _in_doubt(r, half[k], end[k], confidence[k])]
+    for level in range(2, len(factors)):
+        if not todo:
+            break
+        longer = _run(task, system, events, [starts[k] for k in todo], int(factors[level]))
+        new, confidence = _verdicts(task, system, longer)
+        for k, r, v in zip(todo, longer, new):
+            results[k] = r
+            verdicts[k, level] = v
+        todo = [k for k, r, v, c in zip(todo, longer, new, confidence)
+                if _in_doubt(r, verdicts[k, level - 1], v, c)]
+    return [r._replace(verdicts=v) for r, v in zip(results, verdicts)]
+
+
+def _in_doubt(result: CellResult, before, now, confidence) -> bool:
+    """A finished run whose verdict changed class since the horizon before, or that not
+    every line of evidence supports."""
+    return result.status.finished and (verdict_class(before) != verdict_class(now)
+                                       or confidence < 1.0)
+
+
+def _verdicts(task: CellTask, system, results, half: bool = False):
+    """(regime, confidence) of each result, as the archive will derive them, at its
+    horizon or at half of it."""
+    slots = [slot for slot in task.slots if slot.name != V.regime_history]
+    arrays = archive.empty_results(slots, len(results))
+    for k, result in enumerate(results):
+        archive.fill_row(arrays, k, result)
+    tor, ind = task.tori, task.indicators
+    table = Table(arrays, history_time=history_grid(
+        task.integration["t_final"], ind["history_points"], tor["extend"],
+        tor["extend_rounds"]), fundamental_name=np.array(fundamental_names(
+            system.n_bodies, system.dim)))
+    return classify(table, Thresholds.from_table(tor), half=half)
+
+
+def _run(task: CellTask, system, events, starts, factor: int) -> list[CellResult]:
+    """Integrate cells to factor x t_final, their orbits as lanes of one batch, and compute
+    everything a cell stores from those runs."""
     integ, ind, tor = task.integration, task.indicators, task.tori
-    t_final = integ["t_final"]
+    t_final = factor * integ["t_final"]
+    points = factor * ind["history_points"]
     run = dict(rtol=integ["rtol"], atol=integ["atol"], max_steps=integ["max_steps"],
                time_limit=integ["cell_time_limit"], events=events)
     dt = tor["sample_interval"]
@@ -134,7 +205,7 @@ def _compute(task: CellTask, system, events, cells, starts) -> list[CellResult]:
     if task.section:
         run["max_events"] = task.section["max_crossings"]
     if ind["which"]:
-        options = indicator_options(ind)
+        options = replace(indicator_options(ind), history_points=points)
         jobs = [ensemble(system, y0, options, integ["control_tangents"]) for y0 in starts]
         outcomes = integrate_batch(
             system, np.concatenate([j.starts for j in jobs]), t_final,
@@ -148,9 +219,9 @@ def _compute(task: CellTask, system, events, cells, starts) -> list[CellResult]:
         ends = [(i.outcome, i.status, (i.energy_error, i.angular_momentum_error))
                 for i in indicators]
     else:
-        history = history_times(t_final, ind["history_points"])
+        history = history_times(t_final, points)
         outcomes = integrate_batch(system, np.array(starts), t_final, t_eval=history, **run)
-        indicators = [None] * len(cells)
+        indicators = [None] * len(starts)
         ends = []
         for y0, out in zip(starts, outcomes):
             done = ~np.isnan(out.samples[:, 0])
@@ -170,7 +241,8 @@ def _compute(task: CellTask, system, events, cells, starts) -> list[CellResult]:
             angular_momentum_error=errors[1], indicators=ind_k, tori=evidence,
             n_crossings=out.n_crossings,
             crossing_time=out.crossings.t, crossing_state=out.crossings.y,
-            reduced=reduced(system, out.crossings.y) if planar3 else None))
+            reduced=reduced(system, out.crossings.y) if planar3 else None,
+            horizon=t_final))
     return results
 
 

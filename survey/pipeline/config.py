@@ -154,6 +154,16 @@ SCHEMA: dict[str, dict[str, Key]] = {
                                                       "averages", choices=tuple(OBSERVABLES)),
         "lines": Key("int", defaults.NAFF_LINES, "NAFF lines per shape signal and half orbit",
                      low=1, high=50),
+        "extend": Key("int", defaults.EXTEND, "a cell whose verdict changed from t_final / 2 "
+                                              "to t_final, or whose evidence sits between "
+                                              "a regular and a chaotic threshold, is "
+                                              "integrated again to extend x t_final and "
+                                              "decided again; 0: never",
+                      low=0, high=16),
+        "extend_rounds": Key("int", defaults.EXTEND_ROUNDS, "how many times a verdict still "
+                                                            "in doubt is extended again "
+                                                            "(each by the factor extend)",
+                             low=1, high=4),
         **{f.name: Key(f.type if f.type in ("int", "float") else "float", f.default,
                        f.metadata["doc"]) for f in fields(Thresholds)},
     },

@@ -6,6 +6,7 @@ import os
 from pathlib import Path
 
 from ..catalog.errors import ConfigError
+from ..catalog.variables import horizon_factors
 
 # the archive is written a group of variables at a time, each group at most this large
 # in memory: one pass over the checkpoint files per group, not per variable
@@ -50,12 +51,15 @@ def check_memory(tables: dict, n_cells: int):
     memory, naming the setting whose reduction would help most."""
     import psutil
     s, sec, ind, dsk = tables["system"], tables["section"], tables["indicators"], tables["dask"]
+    tori = tables["tori"]
+    # an extended cell runs to the longest horizon, and the histories span it
+    longest = int(horizon_factors(tori["extend"], tori["extend_rounds"])[-1])
     size = dict(n_cells=n_cells, n=2 * s["bodies"] * s["dim"], deviations=ind["deviations"],
                 crossings=sec["max_crossings"] if tables["section_enabled"] else 0,
-                store_state=sec["store_state"], history=ind["history_points"],
+                store_state=sec["store_state"], history=ind["history_points"] * longest,
                 chunk=dsk["chunk_size"] or 256, workers=dsk["workers"],
-                samples=int(tables["integration"]["t_final"] / tables["tori"]["sample_interval"])
-                if tables["tori"]["analyse"] else 0)
+                samples=int(longest * tables["integration"]["t_final"] / tori["sample_interval"])
+                if tori["analyse"] else 0)
     total = memory_needed(**size)
     machine = psutil.virtual_memory().total
     if total <= 0.8 * machine:
@@ -63,6 +67,8 @@ def check_memory(tables: dict, n_cells: int):
     smaller = {"[initial] (the grid)": dict(n_cells=1), "[system].bodies": dict(n=6),
                "[section].max_crossings": dict(crossings=1),
                "[indicators].history_points": dict(history=2),
+               "[tori].extend": dict(history=ind["history_points"],
+                                     samples=size["samples"] // longest),
                "[indicators].deviations": dict(deviations=1),
                "[tori].sample_interval": dict(samples=0),
                "[dask].chunk_size": dict(chunk=1), "[dask].workers": dict(workers=1)}

@@ -19,8 +19,9 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
 from ..analysis.classify import stored_table
+from ..catalog import defaults
 from ..catalog.indicators import OWNER, REGISTRY
-from ..catalog.regimes import REGULAR, Regime, Thresholds
+from ..catalog.regimes import IRREGULAR, REGULAR, Regime, Thresholds
 from ..catalog.status import Status
 from ..catalog.variables import ENSEMBLE_MIN, V, label
 
@@ -96,13 +97,14 @@ def survey_title(ds) -> str:
             "mass_weighted") else "") for t in system["interactions"])
     else:
         potential = system.get("potential", "perimetric_power")
-    T = float(np.nanmax(ds[V.t_end].values)) if V.t_end in ds and \
-        np.isfinite(ds[V.t_end].values).any() else config.get("integration", {}).get("t_final")
+    T = float(config.get("integration", {}).get("t_final", defaults.T_FINAL))
+    longest = float(np.nanmax(ds[V.regime_horizon].values)) if V.regime_horizon in ds and \
+        np.isfinite(ds[V.regime_horizon].values).any() else T
     axes = grid_axes(ds)
     varies = (f"; {', '.join(axes)} varied over {ds[V.status].size} cells" if axes
               else "; one cell")
-    return (f"{name}: {family} family under {potential}, T = {T:g}{varies}" if T is not None
-            else f"{name}: {family} family under {potential}{varies}")
+    extended = f" (verdicts in doubt to {longest:g})" if longest > T else ""
+    return f"{name}: {family} family under {potential}, T = {T:g}{extended}{varies}"
 
 
 def save(figs: dict[str, Figure], folder, stem: str) -> list[Path]:
@@ -136,6 +138,36 @@ def _mask_layer(ax, ds, x, y):
     return handles
 
 
+def unconfirmed(ds) -> np.ndarray:
+    """Cells whose regular or irregular verdict is not that of the horizon before (regime
+    history): claimed to their horizon only."""
+    if V.regime_stable not in ds:
+        return np.zeros(ds[V.status].shape, dtype=bool)
+    decided = np.isin(ds[V.regime].values, REGULAR + IRREGULAR)
+    return decided & (ds[V.regime_stable].values == 0)
+
+
+UNCONFIRMED = dict(hatch="////", facecolor="none", edgecolor="0.15", lw=0)
+
+
+def _hatch_cells(ax, x, y, mask):
+    """Hatch the cells of a map where mask holds (cell edges halfway between centres)."""
+    from matplotlib.collections import PatchCollection
+    from matplotlib.patches import Rectangle
+
+    def edges(c):
+        c = np.asarray(c, dtype=float)
+        if c.size == 1:
+            return np.array([c[0] - 0.5, c[0] + 0.5])
+        mid = (c[1:] + c[:-1]) / 2
+        return np.concatenate([[2 * c[0] - mid[0]], mid, [2 * c[-1] - mid[-1]]])
+    ex, ey = edges(x), edges(y)
+    boxes = [Rectangle((ex[i], ey[j]), ex[i + 1] - ex[i], ey[j + 1] - ey[j])
+             for i, j in zip(*np.nonzero(mask))]
+    if boxes:
+        ax.add_collection(PatchCollection(boxes, match_original=False, **UNCONFIRMED))
+
+
 def _rgba(colour):
     from matplotlib.colors import to_rgba
     return to_rgba(colour)
@@ -158,10 +190,16 @@ def regime_map(ds) -> Figure:
     cmap = ListedColormap(colours)
     norm = BoundaryNorm(np.arange(len(Regime) + 1) - 0.5, len(Regime))
     ax.pcolormesh(x, y, regime.T, cmap=cmap, norm=norm, shading="nearest")
+    doubt = unconfirmed(ds)
+    _hatch_cells(ax, x, y, doubt)
     counts = [(r, int(np.sum(regime == r))) for r in Regime]
-    ax.legend(handles=[Patch(color=REGIME_COLOURS[r], label=f"{r.name.lower()} ({n})")
-                       for r, n in counts if n], loc="upper left", bbox_to_anchor=(1.02, 1),
-              fontsize="small", title="regime (cells)")
+    handles = [Patch(color=REGIME_COLOURS[r], label=f"{r.name.lower()} ({n})")
+               for r, n in counts if n]
+    if doubt.any():
+        handles.append(Patch(**UNCONFIRMED, label=f"not confirmed at the horizon before "
+                                                  f"({int(doubt.sum())})"))
+    ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.02, 1), fontsize="small",
+              title="regime (cells)")
     hist.barh([r.name.lower() for r, n in counts if n], [n for r, n in counts if n],
               color=[REGIME_COLOURS[r] for r, n in counts if n])
     hist.set_xlabel("cells")
@@ -234,12 +272,15 @@ def scan(ds, names) -> Figure:
                             (x[1:] + x[:-1]) / 2,
                             [x[-1] + (x[-1] - x[-2]) / 2 if x.size > 1 else x[0] + 0.5]])
     regime = ds[V.regime].values if V.regime in ds else None
+    doubt = unconfirmed(ds)
     for ax, name in zip(axes, names):
         if regime is not None:
             for r in Regime:
                 for i in np.flatnonzero(regime == r):
                     ax.axvspan(edges[i], edges[i + 1], color=REGIME_COLOURS[r], alpha=0.18,
                                lw=0)
+            for i in np.flatnonzero(doubt):
+                ax.axvspan(edges[i], edges[i + 1], **UNCONFIRMED, alpha=0.35)
         y = np.where(_unfinished(ds), np.nan, ds[name].values.astype(float))
         ax.plot(x, y, "o-", ms=2.5, lw=0.8, color="k")
         band = _ensemble_range(ds, name)
@@ -247,7 +288,11 @@ def scan(ds, names) -> Figure:
             low, high, note = band
             ax.vlines(x, low, high, color="0.4", lw=0.7, label=note)
         for level, style, text in _reference_lines(ds, name):
-            ax.axhline(level, color="0.3", ls=style, lw=0.8, label=text)
+            if np.ndim(level):        # per cell: each at its own horizon
+                ax.plot(x, level, color="0.3", ls=style, lw=0.8, label=text,
+                        drawstyle="steps-mid")
+            else:
+                ax.axhline(level, color="0.3", ls=style, lw=0.8, label=text)
         if name in (V.ftle, V.megno) and _positive(y):
             ax.set_yscale("log")
             _below_log_axis(ax, x, y)
@@ -268,10 +313,13 @@ def scan(ds, names) -> Figure:
         present = [r for r in Regime if np.any(regime == r)]
         # the figure's legend, below the panels: the layout makes room for it and for
         # each panel's legend of lines beside it
-        fig.legend(handles=[Patch(color=REGIME_COLOURS[r], alpha=0.4,
-                                  label=f"{r.name.lower()} ({int(np.sum(regime == r))})")
-                            for r in present], loc="outside lower center", fontsize="small",
-                   ncol=min(len(present), 4), title="regime (cells)", frameon=False)
+        handles = [Patch(color=REGIME_COLOURS[r], alpha=0.4,
+                         label=f"{r.name.lower()} ({int(np.sum(regime == r))})")
+                   for r in present]
+        if doubt.any():
+            handles.append(Patch(**UNCONFIRMED, label=f"not confirmed ({int(doubt.sum())})"))
+        fig.legend(handles=handles, loc="outside lower center", fontsize="small",
+                   ncol=min(len(handles), 4), title="regime (cells)", frameon=False)
     return fig
 
 
@@ -292,7 +340,8 @@ def _ensemble_range(ds, name):
 
 def _reference_lines(ds, name):
     """Where the indicator's votes change (dashed: regular side, dotted: chaotic side):
-    (level, line style, legend text)."""
+    (level, line style, legend text). A level in units of ln(T)/T is per cell, at the time
+    each reached, where those differ (cells decided at a longer horizon)."""
     th = Thresholds.from_table(stored_table(ds))
     for indicator in REGISTRY:
         vote = indicator.vote
@@ -303,9 +352,16 @@ def _reference_lines(ds, name):
         if vote.per_torus_rate:
             if V.t_end not in ds:
                 return []
-            T = float(np.nanmax(ds[V.t_end].values))
+            t = ds[V.t_end].values.astype(float)
+            T = float(np.nanmax(t)) if np.isfinite(t).any() else np.nan
             if not T > 0:
                 return []
+            if np.nanmin(t) < T:
+                unit = [f" ({level:g} ln T / T, T each cell's)" for level in levels]
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    rate = np.where(t > 1, np.log(t) / t, np.nan)
+                return [(level * rate, style, f"{side} vote{unit[k]}") for k, (level, style,
+                        side) in enumerate(zip(levels, ("--", ":"), ("regular", "chaotic")))]
             unit = [f" ({level:g} ln T / T)" for level in levels]
             levels = [level * np.log(T) / T for level in levels]
         return [(level, style, f"{side} vote {level:.3g}{unit[k] if unit else ''}")

@@ -85,13 +85,21 @@ def markdown(ds, figure_names=()) -> str:
     if not np.any(ds[V.status].values == Status.OK):
         out += ["**No cell finished** (see the status of each cell): there are no indicator "
                 "values, and the figures show only the regimes.", ""]
-    out += ["## Regimes", "", "| regime | cells | share | meaning |", "| --- | --- | --- | --- |"]
+    steady = ds[V.regime_stable].values == 1 if V.regime_stable in ds else \
+        np.zeros(regime.shape, dtype=bool)
+    out += ["## Regimes", "", "| regime | cells | share | confirmed | meaning |",
+            "| --- | --- | --- | --- | --- |"]
     for r in Regime:
         k = int(np.sum(regime == r))
         if k:
-            out.append(f"| {r.name.lower()} | {k} | {100 * k / n:.1f}% | {r.meaning} |")
-    out += ["", "The cells are a deterministic grid, not a random sample: a share is a count, "
-                "with no sampling interval.", ""]
+            sure = int(np.sum((regime == r) & steady)) if r in REGULAR + IRREGULAR else None
+            out.append(f"| {r.name.lower()} | {k} | {100 * k / n:.1f}% | "
+                       f"{'—' if sure is None else sure} | {r.meaning} |")
+    out += ["", "Confirmed: the verdict is of the class (regular or irregular) decided at the "
+                "horizon before; the others are claimed to their horizon only. The cells are "
+                "a deterministic grid, not a random sample: a share is a count, with no "
+                "sampling interval.", ""]
+    out += _horizons(ds, regime, steady, integ.get("t_final", defaults.T_FINAL))
 
     out += _ensembles(ds, regime)
     out += _onsets(ds, axes, regime)
@@ -102,6 +110,44 @@ def markdown(ds, figure_names=()) -> str:
     if figure_names:
         out += ["## Figures", ""] + [f"![{name}]({name})" for name in figure_names] + [""]
     return "\n".join(out)
+
+
+def _horizons(ds, regime, steady, T) -> list[str]:
+    """How far each verdict was checked: the horizons cells were decided at, and the cells
+    whose verdict is not confirmed."""
+    if V.regime_history not in ds:
+        return []
+    factors = ds["horizon_factor"].values
+    final = ds[V.regime_horizon].values
+    started = np.isfinite(final)
+    out = ["## Verdicts against a longer horizon", "",
+           f"Each cell's regime is decided at T/2 and T = {T:g} from its run."]
+    if factors.size > 2:
+        out[-1] += (" A cell whose verdict changed class between them, or whose evidence did "
+                    "not all vote for it (a line between its thresholds, or against it), was "
+                    "integrated again from its start to a longer horizon and decided there"
+                    f" (horizons up to {factors[-1]:g} T).")
+    else:
+        out[-1] += " No verdict was extended to a longer horizon ([tori] extend = 0)."
+    out += ["", "| horizon | cells decided there | regular | irregular | confirmed |",
+            "| --- | --- | --- | --- | --- |"]
+    for f in factors[1:]:
+        at = started & np.isclose(final, f * T)
+        if at.any():
+            out.append(f"| {f:g} T = {f * T:g} | {int(at.sum())} | "
+                       f"{int(np.sum(at & np.isin(regime, REGULAR)))} | "
+                       f"{int(np.sum(at & np.isin(regime, IRREGULAR)))} | "
+                       f"{int(np.sum(at & steady))} |")
+    doubt = np.isin(regime, REGULAR + IRREGULAR) & ~steady
+    if doubt.any():
+        axes = list(ds[V.status].dims)
+        where = [", ".join(f"{a}={float(ds[a].values[i]):g}" for a, i in zip(axes, idx))
+                 for idx in zip(*np.nonzero(doubt))]
+        shown = "; ".join(where[:12]) + (f"; and {len(where) - 12} more" if len(where) > 12
+                                         else "")
+        out += ["", f"Not confirmed ({int(doubt.sum())}): {shown}. Their regime holds to its "
+                    "horizon; the horizon before decided another class."]
+    return out + [""]
 
 
 def _ensembles(ds, regime) -> list[str]:
@@ -194,9 +240,11 @@ def _onsets(ds, axes, regime) -> list[str]:
                        f"{axes[0]} = {found['estimate']:.4g} +- {found['error']:.2g} (half the "
                        "grid step).")
             if found["all_irregular_from"] is not None:
+                mixed = found["all_irregular_from"] > found["first_irregular"]
                 out.append(f"Every cell is irregular from {axes[0]} = "
-                           f"{found['all_irregular_from']:g} on; in between regular islands "
-                           "and sticky or weakly chaotic cells alternate.")
+                           f"{found['all_irregular_from']:g} on" + (
+                               "; in between regular islands and sticky or weakly chaotic "
+                               "cells alternate." if mixed else "."))
         out.append("")
     elif len(axes) == 2:
         a, b = axes

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from survey.analysis.classify import evidence_votes
+from survey.analysis.classify import Table, evidence_votes
 from survey.catalog.indicators import INDICATORS, REGISTRY, TANGENT, TORUS
 from survey.catalog.regimes import Thresholds
 from survey.catalog.variables import BY_NAME, V, label
@@ -83,3 +83,29 @@ def test_maps_draw_it_and_scans_mark_its_thresholds(indicator):
     lines = [ln for ax in scan.axes for ln in ax.get_lines() if ln.get_linestyle() in ("--",
                                                                                       ":")]
     assert bool(lines) == (indicator.vote is not None)
+
+
+@pytest.mark.parametrize("indicator", [i for i in REGISTRY if i.vote and i.vote.half],
+                         ids=lambda i: i.name)
+def test_its_vote_at_half_the_horizon_reads_each_cells_half(indicator):
+    """The verdict at T/2 reads a history at half each cell's own horizon (cells extended
+    to 4T read 2T), or the variable that holds the value at T/2."""
+    vote = indicator.vote
+    th = Thresholds()
+    regular, chaotic = (getattr(th, f"{vote.thresholds}_{side}") for side in ("regular",
+                                                                              "chaotic"))
+    times = np.linspace(62.5, 4000.0, 64)              # a grid to 4 T, T = 1000
+    horizon = np.array([1000.0, 4000.0, 1000.0])
+    at = [times.tolist().index(h / 2) for h in horizon]
+    unit = np.log(horizon / 2) / (horizon / 2) if vote.per_torus_rate else np.ones(3)
+    values = np.array([regular + vote.sign, (regular + chaotic) / 2, chaotic - vote.sign]) * unit
+    assert vote.half in indicator.variables
+    if BY_NAME[vote.half].extra == ("history_time",):
+        column = np.full((3, times.size), np.nan)
+        column[np.arange(3), at] = values
+    else:
+        column = values
+    table = Table({vote.half: column, V.regime_horizon: horizon, V.t_end: horizon,
+                   V.status: np.zeros(3, np.int8)}, history_time=times)
+    np.testing.assert_array_equal(evidence_votes(table, th, half=True)[indicator.name],
+                                  [1.0, 0.0, -1.0])

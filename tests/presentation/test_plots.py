@@ -72,7 +72,10 @@ def test_scan_shades_each_cell_by_regime_with_error_bars(grid1):
                                                   r"MEGNO $\langle Y\rangle$"]
     assert axes[-1].get_xlabel() == r"$\delta$"
     n = grid1.sizes["delta"]
-    assert len([p for p in axes[0].patches]) == n                   # one band per cell
+    hatched = [p for p in axes[0].patches if p.get_hatch()]
+    assert len(axes[0].patches) - len(hatched) == n                 # one band per cell
+    # and a hatch over each cell whose verdict is not that of the horizon before
+    assert len(hatched) == int(plots.unconfirmed(grid1).sum())
     counts = {r.name.lower(): int((grid1.regime.values == r).sum()) for r in Regime}
     regimes = [t.get_text() for t in fig.legends[0].get_texts()]    # the figure's legend
     assert all(f"{name} ({k})" in regimes for name, k in counts.items() if k)

@@ -1,0 +1,75 @@
+"""Verdicts against a longer horizon, as a survey runs them: a cell whose verdict changed
+from T/2 to T, or that not every line of evidence supports, is integrated again to k T
+and decided there; its stored evidence is then that run's, bit for bit."""
+import numpy as np
+
+from survey.analysis.classify import verdict_class
+from survey.catalog.variables import BY_NAME, V
+from survey.pipeline.sweep import run
+
+
+def survey(tmp_path, name, t_final, **extra):
+    return run({"survey": {"name": name, "output": str(tmp_path / f"{name}.nc")},
+                "initial": {"family": "equilateral", "delta": [1.0, 4.2, 4.5, 6.0]},
+                "integration": {"t_final": t_final},
+                "indicators": {"perturbations": 2, **extra.pop("indicators", {})},
+                "section": {"coordinate": "phi", "max_crossings": 20},
+                "dask": {"workers": 1}, **extra})
+
+
+def test_a_verdict_in_doubt_is_decided_again_on_a_run_four_times_longer(tmp_path):
+    ds = survey(tmp_path, "v", 100.0)
+    horizon, history = ds[V.regime_horizon].values, ds[V.regime_history].values
+    confidence = ds[V.regime_confidence].values
+    assert list(ds["horizon_factor"].values) == [0.5, 1.0, 4.0]
+    kept, extended = horizon == 100.0, horizon == 400.0
+    assert kept.any() and extended.any() and np.all(kept | extended)
+    # kept at T: the same class at T/2 and T, every line of evidence for it, nothing after
+    assert np.all(verdict_class(history[kept, 0]) == verdict_class(history[kept, 1]))
+    assert np.all(confidence[kept] == 1.0) and np.all(history[kept, 2] == -1)
+    assert np.all(ds[V.regime_stable].values[kept] == 1)
+    # the last verdict is the archive's regime; stable where its class is the one before
+    assert np.all(history[:, 1:].max(axis=1) >= 0)
+    last = np.where(extended, history[:, 2], history[:, 1])
+    np.testing.assert_array_equal(last, ds[V.regime].values)
+    np.testing.assert_array_equal(
+        ds[V.regime_stable].values[extended],
+        verdict_class(history[extended, 2]) == verdict_class(history[extended, 1]))
+    # an extended cell's evidence is that of the run to 4 T: a survey to 400 with the same
+    # history grid and no extension gives the same bits
+    longer = survey(tmp_path, "longer", 400.0, indicators={"history_points": 256},
+                    tori={"extend": 0})
+    assert np.all(longer[V.regime_horizon].values == 400.0)
+    np.testing.assert_array_equal(ds["history_time"].values, longer["history_time"].values)
+    same = [k for k in ds.data_vars if BY_NAME[k].reproducible and not BY_NAME[k].derived
+            and k not in (V.regime_history,)]
+    assert V.ftle in same and V.birkhoff_digits in same and V.crossing_phi in same
+    for name in same:
+        a, b = ds[name].values[extended], longer[name].values[extended]
+        assert a.tobytes() == b.tobytes(), name
+    np.testing.assert_array_equal(ds[V.regime].values[extended],
+                                  longer[V.regime].values[extended])
+
+
+def test_extend_zero_decides_at_t_only(tmp_path):
+    ds = survey(tmp_path, "flat", 100.0, tori={"extend": 0})
+    assert list(ds["horizon_factor"].values) == [0.5, 1.0]
+    assert np.all(ds[V.regime_horizon].values == 100.0)
+    assert ds.sizes["history_time"] == 64
+    np.testing.assert_array_equal(ds[V.regime_history].values[:, 1], ds[V.regime].values)
+
+
+def test_the_onset_cells_that_turn_chaotic_by_4t_are_never_regular_and_stable(tmp_path):
+    """The issue's independent runs (two orbits 1e-9 apart per delta, MEGNO to 4e4): delta
+    = 4.175 looks a torus at T = 2000 and is chaotic by 1e4; 4.225 stays regular to 4e4.
+    With the default horizon checks the first is not claimed regular and stable, the
+    second is."""
+    ds = run({"survey": {"name": "onset", "output": str(tmp_path / "onset.nc")},
+              "initial": {"family": "equilateral", "delta": [4.175, 4.225]},
+              "integration": {"t_final": 2000.0}, "indicators": {"perturbations": 1},
+              "dask": {"workers": 1}})
+    regular = np.isin(ds[V.regime].values, [0, 1, 2])
+    steady = ds[V.regime_stable].values == 1
+    assert not (regular[0] and steady[0])
+    assert ds[V.regime_horizon].values[0] == 8000.0      # it was in doubt at T
+    assert regular[1] and steady[1]
