@@ -123,9 +123,13 @@ def classify(ds, thresholds: Thresholds | None = None, half: bool = False):
         regime[only_regular & on_resonance(ds, th)] = Regime.RESONANT
     if V.frequency in ds and not half:
         labels = [str(x) for x in ds["fundamental_name"].values]
-        shape_cols = [i for i, name in enumerate(labels) if name.startswith("shape")]
-        n_shape = np.sum(np.isfinite(ds[V.frequency].values[..., shape_cols]), axis=-1)
-        regime[only_regular & (n_shape <= 1)] = Regime.PERIODIC
+        cols = [i for i, name in enumerate(labels) if name.startswith("shape")]
+        change = ds[V.frequency_change].values[..., cols] if V.frequency_change in ds else \
+            np.zeros(ds[V.frequency].values[..., cols].shape)
+        regime[only_regular & harmonic(ds[V.frequency].values[..., cols], change, th)] = \
+            Regime.PERIODIC
+    if V.moving_shapes in ds and not half:
+        regime[only_regular & (ds[V.moving_shapes].values == 0)] = Regime.EQUILIBRIUM
     only_chaotic = (chaotic > 0) & (regular == 0)
     regime[only_chaotic] = Regime.CHAOTIC
     confidence[only_chaotic] = share_chaos[only_chaotic]
@@ -150,6 +154,32 @@ def classify(ds, thresholds: Thresholds | None = None, half: bool = False):
     confidence[(status == Status.INACCESSIBLE) | (status == Status.COLLISION)] = 1.0
     confidence[failed | (regime == Regime.UNDETERMINED)] = 0.0
     return regime, confidence
+
+
+def harmonic(nu: np.ndarray, change: np.ndarray, th: Thresholds) -> np.ndarray:
+    """Cells whose shape frequencies nu (..., k; NaN where none) are all harmonics of one:
+    every pair in a ratio p/q with p + q <= resonance_order, to harmonic_width or to their
+    own uncertainty, the change between the orbit's halves `change` (the figure-eight's
+    lines are 2 and 3 times its frequency). A single frequency is; none is not (a shape
+    that does not move is an equilibrium)."""
+    nu, change = np.abs(nu), np.nan_to_num(np.abs(change), nan=np.inf)
+    known = np.isfinite(nu)
+    out = known.sum(axis=-1) >= 1
+    scale = np.max(np.where(known, nu, 0.0), axis=-1)
+    k = nu.shape[-1]
+    for i in range(k):
+        for j in range(i + 1, k):
+            both = known[..., i] & known[..., j]
+            fit = np.zeros(out.shape, dtype=bool)
+            for q in range(1, th.resonance_order):
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    p = np.round(q * nu[..., i] / nu[..., j])
+                    miss = np.abs(q * nu[..., i] - p * nu[..., j])
+                    tol = np.maximum(th.harmonic_width * np.hypot(p, q) * scale,
+                                     q * change[..., i] + p * change[..., j])
+                    fit |= (p >= 1) & (p + q <= th.resonance_order) & (miss <= tol)
+            out &= ~both | fit
+    return out
 
 
 def verdict_class(regime) -> np.ndarray:

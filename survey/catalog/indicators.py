@@ -82,7 +82,8 @@ REGISTRY = (
               map=MapStyle("viridis_r", (0.0, 12.0)),
               vote=Vote("birkhoff_digits", +1, "digits", half="birkhoff_digits_half")),
     Indicator("diffusion", TORUS, ("frequency_diffusion", "frequency", "frequency_change",
-                                   "resonance", "resonance_order", "resonance_distance"),
+                                   "resonance", "resonance_order", "resonance_distance",
+                                   "moving_shapes"),
               "Laskar, Physica D 67 (1993) 257",
               vote=Vote("frequency_diffusion", -1, "diffusion")),
 )

@@ -18,6 +18,7 @@ class Regime(enum.IntEnum):
     COLLISION = 5
     INACCESSIBLE = 6
     UNDETERMINED = 7
+    EQUILIBRIUM = 8
 
     @property
     def meaning(self) -> str:
@@ -28,18 +29,20 @@ REGIME_MEANINGS = {
     Regime.TORUS: "quasi-periodic: every line of evidence regular",
     Regime.RESONANT: "regular, with frequencies on a low-order resonance m . nu = 0 (to "
                      "resonance_width)",
-    Regime.PERIODIC: "regular with at most one shape frequency (a relative equilibrium or a "
-                     "periodic orbit of the shape)",
+    Regime.PERIODIC: "regular, every shape line a harmonic of one frequency (a periodic "
+                     "orbit of the shape, e.g. the figure-eight)",
     Regime.STICKY: "regular in the first half, chaotic by T: an orbit that clung to tori",
     Regime.CHAOTIC: "every line of evidence chaotic",
     Regime.COLLISION: "the integration stopped at a near collision",
     Regime.INACCESSIBLE: "no start at this grid point",
     Regime.UNDETERMINED: "the lines of evidence disagree, or the run failed",
+    Regime.EQUILIBRIUM: "regular, the shape does not move: at rest at a critical point, or a "
+                        "relative equilibrium (the rotating triangle)",
 }
 
 
 # the regimes a map or report counts as regular, and as irregular
-REGULAR = (Regime.TORUS, Regime.RESONANT, Regime.PERIODIC)
+REGULAR = (Regime.TORUS, Regime.RESONANT, Regime.PERIODIC, Regime.EQUILIBRIUM)
 IRREGULAR = (Regime.CHAOTIC, Regime.STICKY)
 
 
@@ -78,6 +81,11 @@ class Thresholds:
         "highest order |m|_1 of the resonances m . nu = 0 searched")})
     resonance_width: float = field(default=1e-7, metadata={"doc": (
         "|m . nu| / (|m| max|nu|) at or below which a regular orbit is resonant")})
+    harmonic_width: float = field(default=1e-6, metadata={"doc": (
+        "|q nu_i - p nu_j| / (|(p, q)| max|nu|) at or below which two shape frequencies are "
+        "harmonics of one (p + q <= resonance_order), or within their change between the "
+        "orbit's halves: all of them so, the orbit is periodic in shape (the figure-eight's "
+        "weakest line is known to ~1e-6 at 100 periods)")})
 
     def describe(self) -> str:
         return json.dumps(asdict(self))

@@ -198,6 +198,9 @@ VARIABLES = [
               lambda r: r.tori.frequencies.resonance_order, "i8"),
     _measured("resonance_distance", "|m . nu| / (|m| max |nu|) of the nearest resonance",
               lambda r: r.tori.frequencies.resonance_distance),
+    _measured("moving_shapes", "shape signals that move (0: the shape stays put -- an "
+                               "equilibrium, or a relative equilibrium)",
+              lambda r: r.tori.frequencies.moving, "i8"),
     Var("n_steps", "accepted integration steps of the nominal orbit", lambda r: r.n_steps,
         ALL, "i8"),
     Var("n_rhs", "right-hand-side evaluations of the nominal orbit", lambda r: r.n_rhs,

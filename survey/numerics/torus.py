@@ -123,7 +123,11 @@ def signals(system, states: np.ndarray):
         phi = np.unwrap(r.phi)
         shape = [_centred(r.sigma, r.p_sigma), _centred(r.eta, r.p_eta),
                  _centred(phi, r.p_phi) if np.ptp(phi) < 2 * np.pi else _unit(phi)]
-        return [z for z in shape if z is not None], _unit(r.theta)
+        theta = np.unwrap(r.theta)
+        # a shape that does not turn has no rotation line (NAFF on a constant would find a
+        # spurious one near 0 whose change between halves looks like diffusion)
+        turns = np.ptp(theta) > 1e-9
+        return [z for z in shape if z is not None], _unit(r.theta) if turns else None
     shape = [_centred(observable(name, system, states), np.gradient(
         observable(name, system, states))) for name in OBSERVABLES]
     return [z for z in shape if z is not None], None
@@ -270,6 +274,7 @@ class Frequencies(NamedTuple):
     resonance: np.ndarray       # (fundamental,) integer vector of the nearest resonance
     resonance_order: int        # its |m|_1 (-1: none searched)
     resonance_distance: float   # |m . nu| / (|m| max|nu|)
+    moving: int                 # shape signals that move (-1: not analysed)
 
 
 def frequency_analysis(system, states: np.ndarray, dt: float, lines: int = defaults.NAFF_LINES,
@@ -279,13 +284,14 @@ def frequency_analysis(system, states: np.ndarray, dt: float, lines: int = defau
     names = fundamental_names(system.n_bodies, system.dim)
     k = len(names)
     nan = Frequencies(np.full(k, np.nan), np.full(k, np.nan), np.nan, np.zeros(k, np.int64),
-                      -1, np.nan)
+                      -1, np.nan, -1)
     half = states.shape[0] // 2
     if half < 64:
         return nan
-    pooled, rotation = [], []
+    pooled, rotation, moving = [], [], 0
     for part in (slice(0, half), slice(half, 2 * half)):
         shape, rot = signals(system, states[part])
+        moving = max(moving, len(shape))
         found = []
         for z in shape:
             f, a = spectral_lines(z, dt, lines)
@@ -310,7 +316,7 @@ def frequency_analysis(system, states: np.ndarray, dt: float, lines: int = defau
     change[cols] = nu2 - nu1
     known = np.isfinite(freq)
     if not known.any():
-        return nan
+        return nan._replace(moving=moving)
     scale = np.max(np.abs(freq[known]))
     diffusion = log10(max(float(np.max(np.abs(change[known]))) / scale, 1e-16))
     m, order_found, distance = np.zeros(k, np.int64), -1, np.nan
@@ -323,7 +329,7 @@ def frequency_analysis(system, states: np.ndarray, dt: float, lines: int = defau
         best = int(np.flatnonzero(dist <= dist.min() * (1.0 + 1e-9) + 1e-15)[0])
         m[known] = vectors[best]
         order_found, distance = int(np.abs(vectors[best]).sum()), float(dist[best])
-    return Frequencies(freq, change, diffusion, m, order_found, distance)
+    return Frequencies(freq, change, diffusion, m, order_found, distance, moving)
 
 
 class TorusEvidence(NamedTuple):

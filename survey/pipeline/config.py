@@ -198,7 +198,7 @@ def markdown_tables() -> str:
     for table, keys in SCHEMA.items():
         out += [f"**[{table}]**", "", "| key | meaning | unit | default |",
                 "| --- | --- | --- | --- |"]
-        out += [f"| `{k}` | {spec.doc.replace('<', '&lt;').replace('>', '&gt;')} | "
+        out += [f"| `{k}` | {spec.doc.replace('<', '&lt;').replace('>', '&gt;').replace('|', '&#124;')} | "
                 f"{spec.unit or '—'} | {show(spec.default)} |" for k, spec in keys.items()]
         out.append("")
     return "\n".join(out).rstrip()

@@ -32,7 +32,8 @@ MAPS = [(i.headline, i.map) for i in REGISTRY if i.map is not None]
 REGIME_COLOURS = {Regime.TORUS: "#1f77b4", Regime.RESONANT: "#17becf",
                   Regime.PERIODIC: "#2ca02c", Regime.STICKY: "#ff7f0e",
                   Regime.CHAOTIC: "#d62728", Regime.COLLISION: "#000000",
-                  Regime.INACCESSIBLE: "#d9d9d9", Regime.UNDETERMINED: "#9467bd"}
+                  Regime.INACCESSIBLE: "#d9d9d9", Regime.UNDETERMINED: "#9467bd",
+                  Regime.EQUILIBRIUM: "#bcbd22"}
 
 
 STATUS_COLOURS = {Status.COLLISION: "#000000", Status.STEP_LIMIT: "#8c564b",

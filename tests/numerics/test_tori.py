@@ -79,7 +79,7 @@ def regime_at(ds, delta):
 
 def test_the_papers_tori_chaos_and_periodic_orbit(family):
     """Fig. EquilateralSet: delta = 0.5, 1.5, 3.5 on tori, 4.5 chaotic; the 'sides' orbit
-    (Fig. SidesPhase) chaotic; delta = 0 the rotating triangle, a periodic orbit."""
+    (Fig. SidesPhase) chaotic; delta = 0 the rotating triangle, a relative equilibrium."""
     eq, sides = family
     for delta in (0.5, 1.5, 3.5):
         assert regime_at(eq, delta) == Regime.TORUS, delta
@@ -87,7 +87,7 @@ def test_the_papers_tori_chaos_and_periodic_orbit(family):
     assert regime_at(eq, 4.5) == Regime.CHAOTIC
     assert Regime(int(sides.regime)) == Regime.CHAOTIC
     assert float(sides.regime_confidence) >= 0.8
-    assert regime_at(eq, 0.0) == Regime.PERIODIC
+    assert regime_at(eq, 0.0) == Regime.EQUILIBRIUM
 
 
 def test_tori_sit_three_digits_above_chaos_and_frequencies_diffuse_orders_apart(family):

@@ -1,6 +1,7 @@
 """A survey of Newtonian gravity as a user writes it: Lagrange's equilateral triangle, whose
 linear stability is Routh's criterion 27 (m1 m2 + m2 m3 + m3 m1) < M^2. The Routh-stable
-masses (1, 0.001, 0.0001) give a periodic cell, equal masses (unstable) a chaotic one."""
+masses (1, 0.001, 0.0001) give an equilibrium cell (a relative equilibrium: the shape stays
+put), equal masses (unstable) a chaotic one."""
 import math
 
 import numpy as np
@@ -39,8 +40,8 @@ t_final = {50 * 2 * math.pi / omega!r}
 
 
 @pytest.mark.parametrize("masses,term,regime", [
-    ((1.0, 0.001, 0.0001), GRAVITY, Regime.PERIODIC),
-    ((1.0, 0.001, 0.0001), WEIGHTED_POWER, Regime.PERIODIC),
+    ((1.0, 0.001, 0.0001), GRAVITY, Regime.EQUILIBRIUM),
+    ((1.0, 0.001, 0.0001), WEIGHTED_POWER, Regime.EQUILIBRIUM),
     ((1.0, 1.0, 1.0), GRAVITY, Regime.CHAOTIC)])
 def test_the_lagrange_triangle_is_regular_exactly_where_routh_says(tmp_path, masses, term,
                                                                    regime):
@@ -48,5 +49,5 @@ def test_the_lagrange_triangle_is_regular_exactly_where_routh_says(tmp_path, mas
     cfg.write_text(lagrange_config(masses, term, tmp_path / "x.nc"))
     ds = run(cfg, workers=1, progress=False)
     assert Regime(int(ds.regime.values.ravel()[0])) == regime
-    if regime == Regime.PERIODIC:      # the unstable one breaks up into close encounters
+    if regime == Regime.EQUILIBRIUM:   # the unstable one breaks up into close encounters
         assert float(ds.energy_error.max()) < 1e-10

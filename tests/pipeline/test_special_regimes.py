@@ -1,0 +1,75 @@
+"""The regimes of the special solutions, as surveys find them on the default settings:
+the figure-eight choreography of three equal masses under Newtonian gravity (Chenciner &
+Montgomery 2000; Simo's start, period 6.32591398) is periodic -- its shape lines are
+harmonics of one frequency; three Lennard-Jones atoms at rest at their minimum are an
+equilibrium (a constant signal never votes chaotic); the rotating equilateral triangle
+under P^2/2 is a relative equilibrium."""
+import numpy as np
+import pytest
+
+from survey import Regime, run
+
+FIGURE_EIGHT = """
+[survey]
+name = "figure8"
+output = "{out}"
+[system]
+interactions = [{{kind = "pair", potential = "gravity", params = {{G = 1.0}}}}]
+[initial]
+family = "explicit"
+positions = [[0.97000436, -0.24308753], [-0.97000436, 0.24308753], [0.0, 0.0]]
+velocities = [[0.466203685, 0.43236573], [0.466203685, 0.43236573],
+              [-0.93240737, -0.86473146]]
+[integration]
+t_final = 632.591398     # 100 periods
+[indicators]
+perturbations = 2
+"""
+
+LJ_AT_REST = """
+[survey]
+name = "lj"
+output = "{out}"
+[system]
+interactions = [{{kind = "pair", potential = "lennard_jones", params = {{epsilon = 1.0, sigma = 1.0}}}}]
+[initial]
+family = "equilibrium"
+positions = [[0.0, 0.0], [1.12, 0.0], [0.56, 0.97]]
+speed = 0.0
+[integration]
+t_final = 300.0
+[indicators]
+perturbations = 2
+"""
+
+ROTATING = """
+[survey]
+name = "rotating"
+output = "{out}"
+[initial]
+family = "equilateral"
+delta = 0.0
+[integration]
+t_final = 500.0
+[indicators]
+perturbations = 2
+"""
+
+
+@pytest.mark.parametrize("text,regime", [(FIGURE_EIGHT, Regime.PERIODIC),
+                                         (LJ_AT_REST, Regime.EQUILIBRIUM),
+                                         (ROTATING, Regime.EQUILIBRIUM)],
+                         ids=["figure-eight", "lj-at-rest", "rotating-triangle"])
+def test_special_solutions_get_their_regime(tmp_path, text, regime):
+    cfg = tmp_path / "special.toml"
+    cfg.write_text(text.format(out=tmp_path / "special.nc"))
+    ds = run(cfg, workers=1, progress=False)
+    assert Regime(int(ds.regime.values.ravel()[0])) == regime
+    assert float(ds.regime_confidence.values.ravel()[0]) == 1.0
+    assert int(ds.regime_stable.values.ravel()[0]) == 1
+    if regime == Regime.EQUILIBRIUM:
+        assert int(ds.moving_shapes.values.ravel()[0]) == 0
+    else:        # the figure-eight's shape frequencies: 2 and 3 times 1 / period
+        nu = np.abs(ds.frequency.values.ravel())
+        shape = np.sort(nu[np.isfinite(nu)][:-1])
+        np.testing.assert_allclose(shape, [2 / 6.32591398, 3 / 6.32591398], rtol=1e-6)
