@@ -29,6 +29,32 @@ def onset(x: np.ndarray, regime: np.ndarray) -> dict | None:
             "all_irregular_from": float(x[solid]) if solid < x.size else None}
 
 
+def verdicts_at(history: np.ndarray, level: int) -> np.ndarray:
+    """Each cell's verdict at horizon `level` of its regime_history (..., horizon): the last
+    one decided up to that level (a cell not run longer kept its verdict; -1 if none)."""
+    upto = history[..., :level + 1]
+    decided = np.sum(upto >= 0, axis=-1)
+    return np.where(decided > 0, np.take_along_axis(
+        upto, np.maximum(decided - 1, 0)[..., None], -1)[..., 0], -1)
+
+
+def onset_over_horizons(x: np.ndarray, regime: np.ndarray, history: np.ndarray,
+                        factors) -> dict | None:
+    """The onset of the final verdicts with an uncertainty that also covers how far it
+    still moved with the horizon: half the grid step, or its distance to the onset at the
+    horizon before the last (each cell's verdict there), whichever is larger. `by_horizon`:
+    (horizon factor, the onset from the verdicts at that horizon, or None) for T/2, T, ...
+    -- an onset still moving by the last horizon is not converged, and this says by how
+    much."""
+    found = onset(x, regime)
+    if found is None:
+        return None
+    by = [(f, onset(x, verdicts_at(history, k))) for k, f in enumerate(factors)]
+    shifts = [abs(o["estimate"] - found["estimate"]) for _, o in by[-2:-1] if o is not None]
+    return {**found, "by_horizon": [(f, None if o is None else o["estimate"]) for f, o in by],
+            "error": max([found["error"], *shifts])}
+
+
 def runs(values) -> list[tuple[int, int]]:
     """(first, last) index of each run of equal values."""
     edges = np.flatnonzero(np.diff(values)) + 1

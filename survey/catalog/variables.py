@@ -183,16 +183,22 @@ VARIABLES = [
     _measured("birkhoff_digits_observable_half", "weighted Birkhoff digits of convergence at "
                                                  "t_end / 2 of each observable",
               lambda r: r.tori.digits_each_half, extra=("observable",)),
-    _measured("frequency", "fundamental frequency in cycles per unit time (mean of the two "
-                           "halves of the orbit)", lambda r: r.tori.frequencies.frequency,
+    _measured("frequency", "fundamental frequency in cycles per unit time, a magnitude (mean "
+                           "of the two halves of the orbit)",
+              lambda r: r.tori.frequencies.frequency,
               extra=("fundamental",), symbol=r"$\nu$ (cycles/time)"),
+    Var("frequency_labelled", "the fundamental frequencies of the regular cells, the shape "
+                              "frequencies ordered to continue their grid neighbours' (one "
+                              "column follows one frequency through the grid)", None, ALL,
+        extra=("fundamental",), derived=True, when=lambda c: c.tables["tori"]["analyse"]),
     _measured("frequency_change", "change of each fundamental frequency from the first half "
                                   "of the orbit to the second",
               lambda r: r.tori.frequencies.change, extra=("fundamental",)),
     _measured("frequency_diffusion", "log10 max |nu(second half) - nu(first half)| / max "
                                      "|nu|", lambda r: r.tori.frequencies.diffusion,
               symbol=r"$\log_{10}|\Delta\nu|/|\nu|$"),
-    _measured("resonance", "integer vector m of the nearest resonance m . nu = 0",
+    _measured("resonance", "integer vector m of the nearest resonance m . nu = 0 among the "
+                           "shape frequencies (0 for the rotation)",
               lambda r: r.tori.frequencies.resonance, "i8", ("fundamental",)),
     _measured("resonance_order", "order |m|_1 of the nearest resonance (-1: none searched)",
               lambda r: r.tori.frequencies.resonance_order, "i8"),

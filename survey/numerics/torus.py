@@ -241,11 +241,12 @@ def frequency_basis(lines, max_dim: int, order: int, tol: float,
     amplitude), strongest first. A line closer than `resolution` (the Fourier resolution of
     the samples, 1/duration) to one already taken is the same line seen in another signal;
     a line within tol (relative) of an integer combination of order <= `order` of the basis
-    so far is a harmonic or a combination, not a new frequency."""
+    so far is a harmonic or a combination, not a new frequency. Magnitudes: a line and its
+    mirror (the same oscillation seen turning the other way in another signal) are one."""
     basis: list[float] = []
     taken: list[float] = []
     scale = max((abs(f) for f, _ in lines), default=1.0)
-    for f, a in sorted(lines, key=lambda x: -x[1]):
+    for f, a in sorted(((abs(f), a) for f, a in lines), key=lambda x: -x[1]):
         if a < 1e-6 or abs(f) < 1e-6 * scale:       # noise, or the mean of an angle's drift
             continue
         if any(abs(f - g) < resolution for g in taken):
@@ -280,7 +281,11 @@ class Frequencies(NamedTuple):
 def frequency_analysis(system, states: np.ndarray, dt: float, lines: int = defaults.NAFF_LINES,
                        order: int = Thresholds.resonance_order, tol: float = 1e-6) -> Frequencies:
     """Fundamental frequencies on the two halves of an orbit sampled every dt, their
-    diffusion, and the nearest resonance of order <= `order`."""
+    diffusion, and the nearest resonance of order <= `order` among the shape frequencies.
+    Frequencies are magnitudes (NAFF's sign only says which way a signal's phase portrait
+    turns, and flips within a family); the rotation, a reconstruction phase of the reduced
+    flow rather than one of its frequencies, takes part in the diffusion but in no
+    resonance."""
     names = fundamental_names(system.n_bodies, system.dim)
     k = len(names)
     nan = Frequencies(np.full(k, np.nan), np.full(k, np.nan), np.nan, np.zeros(k, np.int64),
@@ -300,7 +305,7 @@ def frequency_analysis(system, states: np.ndarray, dt: float, lines: int = defau
         rotation.append(spectral_lines(rot, dt, 1)[0][0] if rot is not None else np.nan)
     basis = frequency_basis(pooled[0], shape_dof(system.n_bodies, system.dim), order, tol,
                             1.0 / (half * dt))
-    second = np.array([f for f, _ in pooled[1]]) if pooled[1] else np.zeros(0)
+    second = np.array([abs(f) for f, _ in pooled[1]]) if pooled[1] else np.zeros(0)
     nu1, nu2 = [], []
     for b in basis:   # each frequency of the first half, matched to the second half's lines
         nu1.append(b)
@@ -312,22 +317,24 @@ def frequency_analysis(system, states: np.ndarray, dt: float, lines: int = defau
     freq, change = np.full(k, np.nan), np.full(k, np.nan)
     n_shape = len(basis)
     cols = list(range(n_shape)) + ([k - 1] if "rotation" in names else [])
-    freq[cols] = 0.5 * (nu1 + nu2)
-    change[cols] = nu2 - nu1
+    freq[cols] = 0.5 * (np.abs(nu1) + np.abs(nu2))
+    change[cols] = np.abs(nu2) - np.abs(nu1)
     known = np.isfinite(freq)
     if not known.any():
         return nan._replace(moving=moving)
     scale = np.max(np.abs(freq[known]))
     diffusion = log10(max(float(np.max(np.abs(change[known]))) / scale, 1e-16))
     m, order_found, distance = np.zeros(k, np.int64), -1, np.nan
-    if known.sum() >= 2:
-        vectors = integer_vectors(int(known.sum()), order)
-        dist = np.abs(_combinations(vectors, freq[known])) / (
-            np.sqrt(np.sum(vectors * vectors, axis=1)) * scale)
+    shape = known & np.array([name.startswith("shape") for name in names])
+    if shape.sum() >= 2:
+        nu = freq[shape]
+        vectors = integer_vectors(int(shape.sum()), order)
+        dist = np.abs(_combinations(vectors, nu)) / (
+            np.sqrt(np.sum(vectors * vectors, axis=1)) * np.max(nu))
         # the lowest order among the vectors equally near (multiples of one vector, or
         # vectors on a frequency that is ~0): a tie is not left to rounding
         best = int(np.flatnonzero(dist <= dist.min() * (1.0 + 1e-9) + 1e-15)[0])
-        m[known] = vectors[best]
+        m[shape] = vectors[best]
         order_found, distance = int(np.abs(vectors[best]).sum()), float(dist[best])
     return Frequencies(freq, change, diffusion, m, order_found, distance, moving)
 

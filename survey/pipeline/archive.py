@@ -16,6 +16,7 @@ from typing import Callable, NamedTuple
 import numpy as np
 
 from ..analysis.classify import classify, stable, stored_table
+from ..analysis.frequencies import labelled
 from ..catalog.errors import ArchiveError
 from ..catalog.regimes import Thresholds
 from ..catalog.variables import (
@@ -258,7 +259,7 @@ def write(config, load: Callable[[list[str]], dict], command: str) -> Path:
                            dims + v.extra, {}) for v in group])
         with xr.open_dataset(tmp, engine="netcdf4") as ds:    # reads only what it needs
             derived = derive(ds)
-        _append(tmp, [(v, derived[v.name], dims, derived.get(v.name + ":attrs", {}))
+        _append(tmp, [(v, derived[v.name], dims + v.extra, derived.get(v.name + ":attrs", {}))
                       for v in variables(config) if v.derived])
         with open(tmp, "rb+") as fh:
             os.fsync(fh.fileno())
@@ -303,8 +304,11 @@ def derive(ds) -> dict:
     regime, confidence = classify(ds, thresholds)
     steady = stable(ds[V.regime_history].values) if V.regime_history in ds else \
         np.zeros(regime.shape, dtype=np.int8)
-    return {V.regime: regime, V.regime_confidence: confidence, V.regime_stable: steady,
-            "regime:attrs": {"thresholds": thresholds.describe()}}
+    out = {V.regime: regime, V.regime_confidence: confidence, V.regime_stable: steady,
+           "regime:attrs": {"thresholds": thresholds.describe()}}
+    if V.frequency in ds:
+        out[V.frequency_labelled] = labelled(ds, regime)
+    return out
 
 
 def partial_path(out: Path) -> Path:

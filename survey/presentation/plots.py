@@ -69,7 +69,9 @@ def figures(ds, variables=None) -> dict[str, Figure]:
         out["section"] = section(ds)
     if V.megno_history in ds and np.isfinite(ds[V.megno_history].values).any():
         out["convergence"] = convergence(ds)
-    if V.frequency in ds and V.regime in ds:     # frequencies mean something on regular cells
+    if V.frequency in ds and V.regime in ds and sum(
+            str(n).startswith("shape") for n in ds["fundamental_name"].values) >= 3:
+        # frequencies mean something on regular cells; the map needs three of them
         regular = np.isin(ds[V.regime].values, REGULAR)
         if np.isfinite(ds[V.frequency].values[regular]).any():
             out["frequency_map"] = frequency_map(ds)
@@ -139,6 +141,17 @@ def _mask_layer(ax, ds, x, y):
     return handles
 
 
+def confidence_shade(ds) -> np.ndarray:
+    """How much of a regime's colour a cell gets: 0.35 + 0.65 x its confidence (the share
+    of the lines of evidence for it), full where the regime is a status (collision,
+    inaccessible) or no confidence is stored."""
+    if V.regime_confidence not in ds:
+        return np.ones(ds[V.status].shape)
+    c = np.nan_to_num(ds[V.regime_confidence].values.astype(float), nan=1.0)
+    decided = np.isin(ds[V.regime].values, REGULAR + IRREGULAR + (Regime.UNDETERMINED,))
+    return np.where(decided, 0.35 + 0.65 * np.clip(c, 0.0, 1.0), 1.0)
+
+
 def unconfirmed(ds) -> np.ndarray:
     """Cells whose regular or irregular verdict is not that of the horizon before (regime
     history): claimed to their horizon only."""
@@ -190,7 +203,12 @@ def regime_map(ds) -> Figure:
     colours = [REGIME_COLOURS[r] for r in Regime]
     cmap = ListedColormap(colours)
     norm = BoundaryNorm(np.arange(len(Regime) + 1) - 0.5, len(Regime))
-    ax.pcolormesh(x, y, regime.T, cmap=cmap, norm=norm, shading="nearest")
+    # paler where fewer lines of evidence support the regime: a cell 1 of 5 lines called
+    # chaotic is not drawn like one all 5 did
+    rgba = cmap(norm(regime))
+    rgba[..., :3] = 1.0 - confidence_shade(ds)[..., None] * (1.0 - rgba[..., :3])
+    ax.pcolormesh(x, y, np.moveaxis(rgba, 0, 1) if rgba.ndim == 3 else rgba,
+                  shading="nearest")
     doubt = unconfirmed(ds)
     _hatch_cells(ax, x, y, doubt)
     counts = [(r, int(np.sum(regime == r))) for r in Regime]
@@ -200,7 +218,7 @@ def regime_map(ds) -> Figure:
         handles.append(Patch(**UNCONFIRMED, label=f"not confirmed at the horizon before "
                                                   f"({int(doubt.sum())})"))
     ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.02, 1), fontsize="small",
-              title="regime (cells)")
+              title="regime (cells);\npaler: fewer lines of\nevidence vote for it")
     hist.barh([r.name.lower() for r, n in counts if n], [n for r, n in counts if n],
               color=[REGIME_COLOURS[r] for r, n in counts if n])
     hist.set_xlabel("cells")
@@ -276,10 +294,11 @@ def scan(ds, names) -> Figure:
     doubt = unconfirmed(ds)
     for ax, name in zip(axes, names):
         if regime is not None:
+            shade = confidence_shade(ds)
             for r in Regime:
                 for i in np.flatnonzero(regime == r):
-                    ax.axvspan(edges[i], edges[i + 1], color=REGIME_COLOURS[r], alpha=0.18,
-                               lw=0)
+                    ax.axvspan(edges[i], edges[i + 1], color=REGIME_COLOURS[r],
+                               alpha=0.22 * shade[i], lw=0)
             for i in np.flatnonzero(doubt):
                 ax.axvspan(edges[i], edges[i + 1], **UNCONFIRMED, alpha=0.35)
         y = np.where(_unfinished(ds), np.nan, ds[name].values.astype(float))
@@ -320,7 +339,8 @@ def scan(ds, names) -> Figure:
         if doubt.any():
             handles.append(Patch(**UNCONFIRMED, label=f"not confirmed ({int(doubt.sum())})"))
         fig.legend(handles=handles, loc="outside lower center", fontsize="small",
-                   ncol=min(len(handles), 4), title="regime (cells)", frameon=False)
+                   ncol=min(len(handles), 4), frameon=False,
+                   title="regime (cells); paler where fewer lines of evidence vote for it")
     return fig
 
 
@@ -458,18 +478,15 @@ def cell_labels(ds) -> list[str]:
 
 
 def frequency_map(ds, order: int = 5) -> Figure:
-    """The frequency map of the regular cells: two shape frequencies divided by a third
-    (for three bodies in the plane, the rotation frequency, unless the orbits do not
-    rotate (J = 0): then the third shape frequency), with the resonance lines
-    m1 x + m2 y + m3 = 0 of order |m| <= `order` -- the Arnold web."""
+    """The frequency map of the regular cells: the first two labelled shape frequencies
+    divided by the third (frequency_labelled: one column follows one frequency across the
+    grid; the rotation, not a frequency of the reduced flow, divides nothing), with the
+    resonance lines m1 x + m2 y + m3 = 0 of order |m| <= `order` -- the Arnold web."""
     names = [str(n) for n in ds["fundamental_name"].values]
-    f = np.abs(ds[V.frequency].values.reshape(-1, len(names)))
+    source = V.frequency_labelled if V.frequency_labelled in ds else V.frequency
+    f = np.abs(ds[source].values.reshape(-1, len(names)))
     regime = ds[V.regime].values.ravel() if V.regime in ds else np.zeros(len(f), int)
-    ref = names.index("rotation") if "rotation" in names else 2
-    with np.errstate(invalid="ignore", divide="ignore"):
-        spin = (f[:, ref] / f[:, 0])[np.isin(regime, [Regime.TORUS, Regime.RESONANT])]
-    if ref != 2 and np.isfinite(spin).any() and np.nanmedian(spin) < 1e-3:
-        ref = 2                      # the tori do not rotate (J = 0): nothing to divide by
+    ref = 2
     x, y = f[:, 0] / f[:, ref], f[:, 1] / f[:, ref]
     fig = Figure(figsize=(6.4, 5.6), layout="constrained")
     ax = fig.add_subplot()

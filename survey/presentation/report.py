@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 
 from ..analysis.classify import evidence_votes, stored_table
-from ..analysis.onset import onset, runs
+from ..analysis.frequencies import twist
+from ..analysis.onset import onset, onset_over_horizons, runs
 from ..catalog import defaults
 from ..catalog.indicators import INDICATORS
 from ..catalog.regimes import IRREGULAR, REGULAR, Regime, Thresholds
@@ -239,6 +240,7 @@ def _onsets(ds, axes, regime) -> list[str]:
                        f"the first irregular cell is at {found['first_irregular']:g}: onset "
                        f"{axes[0]} = {found['estimate']:.4g} +- {found['error']:.2g} (half the "
                        "grid step).")
+            out += _onset_horizons(ds, x, regime, axes[0])
             if found["all_irregular_from"] is not None:
                 mixed = found["all_irregular_from"] > found["first_irregular"]
                 out.append(f"Every cell is irregular from {axes[0]} = "
@@ -248,19 +250,46 @@ def _onsets(ds, axes, regime) -> list[str]:
         out.append("")
     elif len(axes) == 2:
         a, b = axes
+        history = None
+        if V.regime_history in ds:
+            history = ds[V.regime_history].values
+            history = history if ds[V.regime_history].dims[0] == a else history.swapaxes(0, 1)
+            factors = [float(f) for f in ds["horizon_factor"].values]
         out += [f"## Where chaos sets in along {a}, for each {b}", "",
                 f"| {b} | regular cells | irregular cells | onset along {a} |",
                 "| --- | --- | --- | --- |"]
         x = ds[a].values
         for j, yb in enumerate(ds[b].values):
             col = regime[:, j]
-            found = onset(x, col)
+            found = onset(x, col) if history is None else \
+                onset_over_horizons(x, col, history[:, j], factors)
             where = "none" if found is None else \
                 f"{found['estimate']:.4g} +- {found['error']:.2g}"
             out.append(f"| {yb:g} | {int(np.isin(col, REGULAR).sum())} | "
                        f"{int(np.isin(col, IRREGULAR).sum())} | {where} |")
-        out.append("")
+        out += ["", "Each onset's uncertainty: half the grid step, or its shift over the last "
+                    "step of the horizon of the verdicts, whichever is larger." if history is
+                    not None else "Each onset's uncertainty: half the grid step.", ""]
     return out
+
+
+def _onset_horizons(ds, x, regime, axis) -> list[str]:
+    """How the onset moved with the horizon of the verdicts, and the uncertainty that
+    covers it."""
+    if V.regime_history not in ds:
+        return []
+    factors = [float(f) for f in ds["horizon_factor"].values]
+    found = onset_over_horizons(x, regime, ds[V.regime_history].values, factors)
+    if found is None:
+        return []
+    T = float(ds[V.regime_horizon].min())
+    moved = "; ".join(f"at {f:g} T = {f * T:g}: " + ("none" if e is None else f"{e:.4g}")
+                      for f, e in found["by_horizon"])
+    return [f"The onset from each cell's verdict at each horizon ({moved}). With its shift "
+            f"over the last step of the horizon: onset {axis} = {found['estimate']:.4g} +- "
+            f"{found['error']:.2g}. The perturbed "
+            "starts are not classified, so how the onset varies with the seed is not in "
+            "this uncertainty."]
 
 
 def _tori_table(ds, axes, regime, rows: int = 15) -> list[str]:
@@ -270,28 +299,65 @@ def _tori_table(ds, axes, regime, rows: int = 15) -> list[str]:
     if not cells.size:
         return ["## Tori", "", "No regular cell.", ""]
     names = [str(v) for v in ds["fundamental_name"].values]
-    freq = ds[V.frequency].values.reshape(-1, len(names))
-    m = ds[V.resonance].values.reshape(-1, len(names))
+    raw = ds[V.frequency].values.reshape(-1, len(names))
+    freq = ds[V.frequency_labelled].values.reshape(-1, len(names)) \
+        if V.frequency_labelled in ds else raw
+    m = _relabel(ds[V.resonance].values.reshape(-1, len(names)), raw, freq)
     dist = ds[V.resonance_distance].values.ravel()
     digits = ds[V.birkhoff_digits].values.ravel()
     coords = plots.cell_labels(ds)
     pick = cells if cells.size <= rows else cells[np.linspace(0, cells.size - 1, rows).astype(int)]
     out = ["## Tori found", "",
            f"{cells.size} regular cells; {'all' if cells.size <= rows else f'{rows} evenly chosen'} "
-           "shown. Frequencies in cycles per unit time (shape basis, then rotation), as "
-           "magnitudes (the archive keeps NAFF's sign, which only says which way a signal's "
-           "phase portrait turns); the nearest resonance m . nu = 0 of the signed "
-           "frequencies and its relative distance.", "",
+           "shown. Frequencies in cycles per unit time, magnitudes: the shape frequencies "
+           "labelled across the grid (a column follows one frequency from cell to cell), "
+           "then the rotation, which is a phase of the reconstruction and takes part in no "
+           "resonance; the nearest resonance m . nu = 0 among the shape frequencies and its "
+           "relative distance.", "",
            f"| cell | regime | digits | {' | '.join(names)} | nearest resonance m | distance |",
            "| --- | --- | --- | " + " | ".join("---" for _ in names) + " | --- | --- |"]
     for c in pick:
         f = " | ".join("—" if not np.isfinite(v) else f"{abs(v):.7f}" for v in freq[c])
         near = (f"{tuple(int(v) for v in m[c])} | {dist[c]:.1e}" if np.isfinite(dist[c])
-                else "— (fewer than two frequencies) | —")
+                else "— (fewer than two shape frequencies) | —")
         out.append(f"| {coords[c]} | {Regime(regime.ravel()[c]).name.lower()} | "
                    f"{digits[c]:.1f} | {f} | {near} |")
     out.append("")
+    if len(axes) == 1:
+        out += _twist(ds[axes[0]].values, freq, names, axes[0])
     return out
+
+
+def _relabel(m, raw, labelled):
+    """The resonance vectors m (cells, fundamental) in the labelled columns' order."""
+    out = m.copy()
+    for c in range(m.shape[0]):
+        for j in range(m.shape[1]):
+            same = np.flatnonzero(raw[c] == labelled[c, j])
+            if same.size and np.isfinite(labelled[c, j]):
+                out[c, j] = m[c, same[0]]
+    return out
+
+
+def _twist(x, freq, names, axis) -> list[str]:
+    """Where d nu / d(axis) of a labelled shape frequency changes sign between consecutive
+    regular cells: a twistless torus lies there (KAM's twist condition fails)."""
+    slope = twist(x, freq)
+    found = []
+    for j, name in enumerate(names):
+        if not name.startswith("shape"):
+            continue
+        s = slope[:, j]
+        ok = np.flatnonzero(np.isfinite(s) & (s != 0))
+        for a, b in zip(ok[:-1], ok[1:]):
+            if np.sign(s[a]) != np.sign(s[b]):
+                found.append(f"{name} between {axis} = {x[a + 1]:g} and {x[b]:g}"
+                             if a + 1 < b else f"{name} at {axis} = {x[a + 1]:g}")
+    if not found:
+        return ["Twist: every labelled shape frequency changes monotonically along "
+                f"{axis} over the regular cells (no twistless torus found).", ""]
+    return [f"Twist: d nu / d {axis} changes sign -- a twistless torus, where KAM's twist "
+            f"condition fails -- for {'; '.join(found)}.", ""]
 
 
 def _agreement(ds, th) -> list[str]:

@@ -47,3 +47,19 @@ def test_the_verdict_at_half_the_horizon_comes_from_the_histories():
     assert list(at_half) == [R.TORUS, R.TORUS, R.CHAOTIC]
     assert list(at_end) == [R.TORUS, R.CHAOTIC, R.CHAOTIC]
     np.testing.assert_array_equal(confidence_half, [1.0, 1.0, 1.0])
+
+
+def test_the_onset_carries_its_shift_with_the_horizon():
+    """Verdicts at T/2, T, 4T (-1: not run longer): the onset of the final verdicts, from
+    each cell's verdict at each horizon, with an error covering its last shift."""
+    from survey.analysis.onset import onset_over_horizons, verdicts_at
+    x = np.array([1.0, 2.0, 3.0, 4.0, 5.0])
+    T, C, U = R.TORUS, R.CHAOTIC, R.UNDETERMINED
+    history = np.array([[T, T, -1], [T, T, -1], [T, T, C], [U, C, C], [C, C, -1]])
+    np.testing.assert_array_equal(verdicts_at(history, 1), [T, T, T, C, C])
+    np.testing.assert_array_equal(verdicts_at(history, 2), [T, T, C, C, C])
+    final = verdicts_at(history, 2)
+    found = onset_over_horizons(x, final, history, [0.5, 1.0, 4.0])
+    assert found["estimate"] == 2.5
+    assert found["by_horizon"] == [(0.5, 4.0), (1.0, 3.5), (4.0, 2.5)]   # U is not chaos
+    assert found["error"] == 1.0            # moved by 1 from T to 4T; half a step is 0.5

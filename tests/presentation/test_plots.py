@@ -94,7 +94,8 @@ def test_section_convergence_and_frequency_map(grid1):
                                    for ln in lines)
     fmap = figs["frequency_map"].axes[0]
     assert len(fmap.get_lines()) > 5                  # resonance lines of order <= 5
-    assert "rotation" in fmap.get_xlabel()
+    # a shape frequency divides, never the rotation (not a frequency of the reduced flow)
+    assert "shape_3" in fmap.get_xlabel() and "rotation" not in fmap.get_xlabel()
 
 
 def test_report_states_what_was_run_regimes_onset_and_thresholds(grid1, tmp_path):
