@@ -143,12 +143,13 @@ def _mask_layer(ax, ds, x, y):
 
 def confidence_shade(ds) -> np.ndarray:
     """How much of a regime's colour a cell gets: 0.35 + 0.65 x its confidence (the share
-    of the lines of evidence for it), full where the regime is a status (collision,
-    inaccessible) or no confidence is stored."""
+    of the lines of evidence for it), full where the regime is undetermined (its
+    confidence is 0 by definition) or a status (collision, inaccessible), or where no
+    confidence is stored."""
     if V.regime_confidence not in ds:
         return np.ones(ds[V.status].shape)
     c = np.nan_to_num(ds[V.regime_confidence].values.astype(float), nan=1.0)
-    decided = np.isin(ds[V.regime].values, REGULAR + IRREGULAR + (Regime.UNDETERMINED,))
+    decided = np.isin(ds[V.regime].values, REGULAR + IRREGULAR)
     return np.where(decided, 0.35 + 0.65 * np.clip(c, 0.0, 1.0), 1.0)
 
 
@@ -494,9 +495,13 @@ def frequency_map(ds, order: int = 5) -> Figure:
     regular = keep & np.isin(regime, REGULAR)
     frame = regular if regular.any() else keep
     if frame.any():
-        pad = 0.08 * max(np.ptp(x[frame]), np.ptp(y[frame]), 1e-3)
-        xl = (x[frame].min() - pad, x[frame].max() + pad)
-        yl = (y[frame].min() - pad, y[frame].max() + pad)
+        # framed on the bulk (1-99% of the cells), so that a stray cell does not squeeze
+        # the families into a corner; those outside are counted in the legend
+        lo = [np.percentile(v[frame], 1) for v in (x, y)]
+        hi = [np.percentile(v[frame], 99) for v in (x, y)]
+        pad = 0.08 * max(hi[0] - lo[0], hi[1] - lo[1], 1e-3)
+        xl, yl = (lo[0] - pad, hi[0] + pad), (lo[1] - pad, hi[1] + pad)
+        outside = frame & ((x < xl[0]) | (x > xl[1]) | (y < yl[0]) | (y > yl[1]))
         for m1, m2, m3 in itertools.product(range(-order, order + 1), repeat=3):
             n = abs(m1) + abs(m2) + abs(m3)
             if (m1, m2) == (0, 0) or n > order or np.gcd.reduce([m1, m2, m3]) != 1:
@@ -515,6 +520,8 @@ def frequency_map(ds, order: int = 5) -> Figure:
             if cells.any():
                 ax.scatter(x[cells], y[cells], s=12, color=REGIME_COLOURS[r],
                            label=f"{r.name.lower()} ({int(cells.sum())})", rasterized=True)
+        if outside.any():
+            ax.plot([], [], " ", label=f"outside the frame: {int(outside.sum())}")
         ax.set_xlim(xl)
         ax.set_ylim(yl)
         ax.legend(fontsize="small", title="regime (cells)")

@@ -324,7 +324,10 @@ def _tori_table(ds, axes, regime, rows: int = 15) -> list[str]:
                    f"{digits[c]:.1f} | {f} | {near} |")
     out.append("")
     if len(axes) == 1:
-        out += _twist(ds[axes[0]].values, freq, names, axes[0])
+        noise = np.nanmax(np.abs(ds[V.frequency_change].values.reshape(-1, len(names))),
+                          axis=1, initial=0.0) if V.frequency_change in ds else \
+            np.zeros(len(freq))
+        out += _twist(ds[axes[0]].values, freq, noise, names, axes[0])
     return out
 
 
@@ -339,16 +342,20 @@ def _relabel(m, raw, labelled):
     return out
 
 
-def _twist(x, freq, names, axis) -> list[str]:
+def _twist(x, freq, noise, names, axis) -> list[str]:
     """Where d nu / d(axis) of a labelled shape frequency changes sign between consecutive
-    regular cells: a twistless torus lies there (KAM's twist condition fails)."""
+    regular cells: a twistless torus lies there (KAM's twist condition fails). Only steps
+    larger than the two cells' frequency uncertainty (their largest change between the
+    orbit's halves, `noise`) count: a frequency flat to that is not seen to turn."""
     slope = twist(x, freq)
+    step = np.abs(np.diff(freq, axis=0))
     found = []
     for j, name in enumerate(names):
         if not name.startswith("shape"):
             continue
         s = slope[:, j]
-        ok = np.flatnonzero(np.isfinite(s) & (s != 0))
+        with np.errstate(invalid="ignore"):
+            ok = np.flatnonzero(np.isfinite(s) & (step[:, j] > noise[:-1] + noise[1:]))
         for a, b in zip(ok[:-1], ok[1:]):
             if np.sign(s[a]) != np.sign(s[b]):
                 found.append(f"{name} between {axis} = {x[a + 1]:g} and {x[b]:g}"

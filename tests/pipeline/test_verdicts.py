@@ -73,3 +73,22 @@ def test_the_onset_cells_that_turn_chaotic_by_4t_are_never_regular_and_stable(tm
     assert not (regular[0] and steady[0])
     assert ds[V.regime_horizon].values[0] == 8000.0      # it was in doubt at T
     assert regular[1] and steady[1]
+
+
+def test_the_equilateral_familys_frequencies_are_three_continuous_curves(tmp_path):
+    """Along delta in [0.25, 4] the labelled shape frequencies vary continuously (no jump
+    between neighbours, no sign) and start at the rotating triangle's linearised normal
+    modes 2 Omega, Omega (1 +- 1/sqrt 2) over 2 pi (Omega = 3)."""
+    ds = run({"survey": {"name": "eq", "output": str(tmp_path / "eq.nc")},
+              "initial": {"family": "equilateral",
+                          "delta": {"start": 0.25, "stop": 4.0, "num": 16}},
+              "integration": {"t_final": 500.0}, "indicators": {"perturbations": 1},
+              "dask": {"workers": 1}})
+    assert np.isin(ds[V.regime].values, [0, 1]).all()
+    nu = ds[V.frequency_labelled].values[:, :3]
+    assert np.all(nu > 0)
+    # no jump between neighbours: a swapped label would move one by 15% or more
+    assert np.max(np.abs(np.diff(nu, axis=0)) / nu[1:]) < 0.1
+    omega = 3.0
+    modes = np.array([2 * omega, omega * (1 + 2 ** -0.5), omega * (1 - 2 ** -0.5)]) / (2 * np.pi)
+    np.testing.assert_allclose(nu[0], modes, rtol=2e-3)
