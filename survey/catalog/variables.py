@@ -113,6 +113,13 @@ def _measured(name, long_name, value=None, dtype="f8", extra=(), symbol=""):
                symbol=symbol)
 
 
+def _ensemble(name, of):
+    return _measured(f"{name}_ensemble", f"{of} over the ensemble of the cell's orbit and its "
+                                         "perturbed starts: mean, sample standard deviation, "
+                                         "5%, 50% and 95% quantiles",
+                     extra=("ensemble_statistic",))
+
+
 def _history(name, of):
     return _measured(f"{name}_history", f"{of} convergence history", extra=("history_time",))
 
@@ -150,16 +157,12 @@ VARIABLES = [
         lambda r: r.angular_momentum_error),
     _measured("ftle", "finite-time maximal Lyapunov exponent of the cell's orbit at t_end "
                       "(mean over its deviation vectors)", symbol=r"FTLE $\mu_T$ (1/time)"),
-    _measured("ftle_ensemble", "the FTLE over the ensemble of the cell's orbit and its "
-                               "perturbed starts: mean, sample standard deviation, 5%, 50% "
-                               "and 95% quantiles", extra=("ensemble_statistic",)),
+    _ensemble("ftle", "the FTLE"),
     _measured("ensemble_orbits", "orbits in the ensemble statistics (the cell's orbit and "
                                  "its perturbed starts that finished)", dtype="i8"),
     _measured("megno", "mean exponential growth factor of nearby orbits <Y> of the cell's "
                        "orbit at t_end", symbol=r"MEGNO $\langle Y\rangle$"),
-    _measured("megno_ensemble", "<Y> over the ensemble of the cell's orbit and its "
-                                "perturbed starts: mean, sample standard deviation, 5%, 50% "
-                                "and 95% quantiles", extra=("ensemble_statistic",)),
+    _ensemble("megno", "<Y>"),
     _measured("megno_slope", "least-squares slope d<Y>/dt over the second half of the run "
                              "(about ftle/2 in chaos)"),
     _measured("fli", "fast Lyapunov indicator: max ln(|w|/|w0|) of the first deviation "

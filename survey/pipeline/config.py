@@ -720,6 +720,9 @@ def _validate_cross(tables: dict, system: System):
                           "cluster")
     if ind["renorm_interval"] > integ["t_final"]:
         raise ConfigError("[indicators].renorm_interval", "is longer than t_final")
+    if tables["tori"]["extend"] == 1:
+        raise ConfigError("[tori].extend", "1 would decide a verdict in doubt again at the same "
+                                           "horizon; use 0 (never) or a factor of 2 or more")
     if tables["tori"]["analyse"] and not tables["tori"]["observables"]:
         raise ConfigError("[tori].observables", "needs at least one observable (or set "
                                                 "analyse = false)")

@@ -26,6 +26,9 @@ coordinate = "phi"
 
 # (what to change, expected fragment of the error: always the key)
 BAD = [
+    ("[tori]\nextend = 1", "[tori].extend: 1 would decide a verdict in doubt again at the same horizon"),
+    ("[tori]\nextend = -2", "[tori].extend: must be >= 0"),
+    ("[tori]\nextend_rounds = 9", "[tori].extend_rounds: must be <= 4"),
     ("[sytem]\nbodies = 3", "[sytem]: unknown table (did you mean 'system'?)"),
     ("[system]\nmass = [1, 1, 1]", "[system].mass: unknown key (did you mean 'masses'?)"),
     ("[system]\nmasses = 'abc'", "[system].masses: expected a list of numbers"),
