@@ -134,10 +134,15 @@ def _plot(args):
 
 
 def _report(args):
+    import contextlib
+
     from .pipeline.archive import open_archive
     from .presentation import report
-    with open_archive(args.archive) as ds:
-        path = report.write(ds, args.out or Path(args.archive).parent, Path(args.archive).stem)
+    archive = Path(args.archive)
+    check = archive.with_name(f"{archive.stem}_check.nc")    # its [check] run, if any
+    with open_archive(archive) as ds, contextlib.ExitStack() as stack:
+        other = stack.enter_context(open_archive(check)) if check.exists() else None
+        path = report.write(ds, args.out or archive.parent, archive.stem, check=other)
     print(f"wrote {path} and its figures")
     return 0
 
@@ -151,12 +156,8 @@ def _reproduce(args):
     is 1."""
     import shutil
 
-    import xarray as xr
-
     from .pipeline import orbits
     from .pipeline.config import load_config
-    from .pipeline.sweep import run_survey
-    from .presentation import report
     results = Path(args.results)
     staging = results / ".staging"
     staging.mkdir(parents=True, exist_ok=True)
@@ -171,10 +172,8 @@ def _reproduce(args):
             continue
         config = load_config(path)
         config.tables["survey"]["output"] = str(staging / f"{config.name}.nc")
-        made = run_survey(config, progress=False if args.no_progress else None,
-                          command=f"python -m survey reproduce ({path.name})")
-        with xr.open_dataset(made) as ds:
-            report.write(ds, staging, made.stem)
+        made = _survey(config, command=f"python -m survey reproduce ({path.name})",
+                       progress=False if args.no_progress else None)
         print(f"made {made}, its report and figures")
     changed = []
     for new in sorted(p for p in staging.iterdir() if p.is_file()):
@@ -226,7 +225,6 @@ def _uncommitted(path) -> bool:
 def _run(args):
     from .pipeline.config import load_config, parse_config
     from .pipeline.resources import ensure_writable
-    from .pipeline.sweep import run_survey
     if args.config is None:
         config = parse_config(DEFAULT_CONFIG.read_text(), "embedded default (survey/default.toml)")
     else:
@@ -234,20 +232,44 @@ def _run(args):
     if args.output:
         ensure_writable(Path(args.output))
         config.tables["survey"]["output"] = args.output
-    progress = False if args.no_progress else None
-    path = run_survey(config, workers=args.workers, scheduler=args.scheduler,
-                      progress=progress, command="python -m survey " + " ".join(sys.argv[1:]))
-    print(f"wrote {path} ({config.n_cells} cells)")
+    _survey(config, command="python -m survey " + " ".join(sys.argv[1:]),
+            progress=False if args.no_progress else None, workers=args.workers,
+            scheduler=args.scheduler, summary=True, write_report=not args.no_report)
+    return 0
+
+
+def _survey(config, command, summary=False, write_report=True, **kw) -> Path:
+    """Run a survey -- and its [check] run, the same survey with another seed and ensemble
+    size, if it has one -- then write its report beside the archive."""
+    import contextlib
+
     import xarray as xr
 
-    from .analysis.classify import summary
-    with xr.open_dataset(path) as ds:
-        print("\n".join(summary(ds)))
-        if not args.no_report:
-            from .presentation import report
-            written = report.write(ds, path.parent, path.stem)
-            print(f"report and figures: {written} (and {path.stem}_*.png beside it)")
-    return 0
+    from .analysis.classify import summary as summarise
+    from .pipeline.sweep import run_survey
+    from .presentation import report
+    path = run_survey(config, command=command, **kw)
+    if summary:
+        print(f"wrote {path} ({config.n_cells} cells)")
+    second = config.check()
+    check = None
+    if second is not None:
+        ind = second.tables["indicators"]
+        print(f"checking: the same survey with seed {ind['seed']} and {ind['perturbations']} "
+              "perturbed orbits per cell")
+        check = run_survey(second, command=f"{command} [check]", **kw)
+        if summary:
+            print(f"wrote {check}")
+    with contextlib.ExitStack() as stack:
+        ds = stack.enter_context(xr.open_dataset(path))
+        other = stack.enter_context(xr.open_dataset(check)) if check else None
+        if summary:
+            print("\n".join(summarise(ds)))
+        if write_report:
+            written = report.write(ds, path.parent, path.stem, check=other)
+            if summary:
+                print(f"report and figures: {written} (and {path.stem}_*.png beside it)")
+    return path
 
 
 def _verify(args):

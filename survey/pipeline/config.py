@@ -167,6 +167,15 @@ SCHEMA: dict[str, dict[str, Key]] = {
         **{f.name: Key(f.type if f.type in ("int", "float") else "float", f.default,
                        f.metadata["doc"]) for f in fields(Thresholds)},
     },
+    "check": {
+        "seed": Key("int", -1, "seed of a second run of the same survey, with another ensemble "
+                               "(-1: [indicators].seed + 1); with a [check] table the survey is "
+                               "run again into <output>_check.nc and the report states every "
+                               "claim at both seeds and ensemble sizes", low=-1),
+        "perturbations": Key("int", -1, "perturbed orbits per cell of that second run (-1: "
+                                        "twice [indicators].perturbations, at least 8)",
+                             low=-1, high=1000),
+    },
     "dask": {
         "workers": Key("int", 2, "local worker processes (1 thread each)", low=1, high=512,
                        hint="more workers than cores only queue; for more machines give "
@@ -262,13 +271,36 @@ class Config:
         return {a.name: float(a.values[i]) for a, i in zip(self.axes, at)
                 if (a.term >= 0) == terms}
 
+    def check(self) -> "Config | None":
+        """The survey again with the [check] table's seed and ensemble size, into
+        <output>_check.nc (its own archive, with its own config text), or None without
+        [check]: what the report compares the claims with."""
+        if not self.tables["check_enabled"]:
+            return None
+        raw = tomllib.loads(self.text)
+        raw.pop("check")
+        raw.setdefault("indicators", {}).update(
+            seed=self.tables["check"]["seed"],
+            perturbations=self.tables["check"]["perturbations"])
+        survey = raw.setdefault("survey", {})
+        survey["name"] = f"{self.name}_check"
+        if survey.get("output"):        # the text names the file its own output implies
+            path = Path(survey["output"])
+            survey["output"] = str(path.with_name(f"{path.stem}_check.nc"))
+        check = validate(raw, _to_toml(raw), f"{self.source} [check]", check_output=False)
+        check.tables["survey"]["output"] = str(self.output.with_name(
+            f"{self.output.stem}_check.nc"))
+        ensure_writable(check.output)
+        return check
+
     def result_key(self) -> str:
         """Hash of everything that determines the cells' results -- the result tables, the
         grid (axis names and values, fixed family parameters, cell count) -- and the code
         that computes them: checkpoints are reused only under it. [dask] and [survey] do not
         change results and are left out."""
         h = hashlib.sha256()
-        relevant = {k: v for k, v in self.tables.items() if k not in ("dask", "survey")}
+        relevant = {k: v for k, v in self.tables.items()
+                    if k not in ("dask", "survey", "check", "check_enabled")}
         relevant["tori"] = {k: v for k, v in relevant["tori"].items()
                             if k not in CLASSIFICATION_ONLY}
         h.update(json.dumps(relevant, sort_keys=True, default=_jsonable).encode())
@@ -534,6 +566,7 @@ def validate(raw: dict, text: str, where: str = "<config>", check_output: bool =
                 body[key] = spec.default
         tables[table] = body
     tables["section_enabled"] = "section" in raw
+    tables["check_enabled"] = "check" in raw
     _validate_names(tables)
     check_memory(tables, math.prod(_axis_size(v) for v in initial_raw.values()))
 
@@ -723,6 +756,19 @@ def _validate_cross(tables: dict, system: System):
     if tables["tori"]["extend"] == 1:
         raise ConfigError("[tori].extend", "1 would decide a verdict in doubt again at the same "
                                            "horizon; use 0 (never) or a factor of 2 or more")
+    if tables["check_enabled"]:
+        check = tables["check"]
+        if not ind["which"]:
+            raise ConfigError("[check]", "compares the indicators of two ensembles, and "
+                                         "[indicators] which = [] computes none; drop [check] "
+                                         "or choose indicators")
+        if check["seed"] < 0:
+            check["seed"] = ind["seed"] + 1
+        if check["perturbations"] < 0:
+            check["perturbations"] = max(8, 2 * ind["perturbations"])
+        if (check["seed"], check["perturbations"]) == (ind["seed"], ind["perturbations"]):
+            raise ConfigError("[check]", "the same seed and perturbations as [indicators] "
+                                         "would repeat the survey bit for bit; change either")
     if tables["tori"]["analyse"] and not tables["tori"]["observables"]:
         raise ConfigError("[tori].observables", "needs at least one observable (or set "
                                                 "analyse = false)")

@@ -29,13 +29,15 @@ def without_provenance(text: str) -> str:
                      if not line.startswith(PROVENANCE_LINE))
 
 
-def write(ds, folder, stem: str | None = None, figures: bool = True) -> Path:
-    """Write STEM_report.md and its figures into `folder`; returns the report's path."""
+def write(ds, folder, stem: str | None = None, figures: bool = True, check=None) -> Path:
+    """Write STEM_report.md and its figures into `folder`; returns the report's path.
+    check: the archive of the survey's [check] run (another seed and ensemble size), whose
+    claims the report states beside its own."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     stem = stem or Path(ds.encoding.get("source", "survey")).stem
     figs = plots.save(plots.figures(ds), folder, stem) if figures else []
-    text = markdown(ds, [p.name for p in figs])
+    text = markdown(ds, [p.name for p in figs], check)
     path = folder / f"{stem}_report.md"
     tmp = path.with_name(f".{path.name}.tmp")
     tmp.write_text(text)
@@ -43,7 +45,7 @@ def write(ds, folder, stem: str | None = None, figures: bool = True) -> Path:
     return path
 
 
-def markdown(ds, figure_names=()) -> str:
+def markdown(ds, figure_names=(), check=None) -> str:
     config = tomllib.loads(ds.attrs.get("config", ""))
     axes = list(ds[V.status].dims)
     regime = ds[V.regime].values
@@ -103,7 +105,8 @@ def markdown(ds, figure_names=()) -> str:
     out += _horizons(ds, regime, steady, integ.get("t_final", defaults.T_FINAL))
 
     out += _ensembles(ds, regime)
-    out += _onsets(ds, axes, regime)
+    out += _onsets(ds, axes, regime, check)
+    out += _second_run(ds, check, regime)
     out += _tori_table(ds, axes, regime)
     out += _agreement(ds, th)
     out += _thresholds(th)
@@ -208,7 +211,7 @@ def _why_no_onset(ds, axis) -> str:
     return ""
 
 
-def _onsets(ds, axes, regime) -> list[str]:
+def _onsets(ds, axes, regime, check=None) -> list[str]:
     out = []
     meaningful = [a for a in axes if not _why_no_onset(ds, a)]
     skipped = [f"No onset is given along {a}: {_why_no_onset(ds, a)}." for a in axes
@@ -240,7 +243,7 @@ def _onsets(ds, axes, regime) -> list[str]:
                        f"the first irregular cell is at {found['first_irregular']:g}: onset "
                        f"{axes[0]} = {found['estimate']:.4g} +- {found['error']:.2g} (half the "
                        "grid step).")
-            out += _onset_horizons(ds, x, regime, axes[0])
+            out += _onset_horizons(ds, x, regime, axes[0], check)
             if found["all_irregular_from"] is not None:
                 mixed = found["all_irregular_from"] > found["first_irregular"]
                 out.append(f"Every cell is irregular from {axes[0]} = "
@@ -250,46 +253,139 @@ def _onsets(ds, axes, regime) -> list[str]:
         out.append("")
     elif len(axes) == 2:
         a, b = axes
-        history = None
-        if V.regime_history in ds:
-            history = ds[V.regime_history].values
-            history = history if ds[V.regime_history].dims[0] == a else history.swapaxes(0, 1)
-            factors = [float(f) for f in ds["horizon_factor"].values]
+        seed = "" if check is None else f" (seed {_seed(check)})"
         out += [f"## Where chaos sets in along {a}, for each {b}", "",
-                f"| {b} | regular cells | irregular cells | onset along {a} |",
-                "| --- | --- | --- | --- |"]
+                f"| {b} | regular cells | irregular cells | onset along {a} |"
+                + (f" the same{seed} |" if check is not None else ""),
+                "| --- | --- | --- | --- |" + (" --- |" if check is not None else "")]
         x = ds[a].values
+        columns = [_onset_columns(ds, a, regime)]
+        if check is not None:
+            columns.append(_onset_columns(check, a, _transposed(check, a,
+                                                                check[V.regime].values)))
         for j, yb in enumerate(ds[b].values):
             col = regime[:, j]
-            found = onset(x, col) if history is None else \
-                onset_over_horizons(x, col, history[:, j], factors)
-            where = "none" if found is None else \
-                f"{found['estimate']:.4g} +- {found['error']:.2g}"
+            where = ["none" if found is None else
+                     f"{found['estimate']:.4g} +- {found['error']:.2g}"
+                     for found in (c(j) for c in columns)]
             out.append(f"| {yb:g} | {int(np.isin(col, REGULAR).sum())} | "
-                       f"{int(np.isin(col, IRREGULAR).sum())} | {where} |")
+                       f"{int(np.isin(col, IRREGULAR).sum())} | {' | '.join(where)} |")
         out += ["", "Each onset's uncertainty: half the grid step, or its shift over the last "
-                    "step of the horizon of the verdicts, whichever is larger." if history is
-                    not None else "Each onset's uncertainty: half the grid step.", ""]
+                    "step of the horizon of the verdicts, whichever is larger." if
+                    V.regime_history in ds else "Each onset's uncertainty: half the grid step.",
+                ""]
     return out
 
 
-def _onset_horizons(ds, x, regime, axis) -> list[str]:
-    """How the onset moved with the horizon of the verdicts, and the uncertainty that
-    covers it."""
+def _seed(ds) -> int:
+    config = tomllib.loads(ds.attrs.get("config", ""))
+    return int(config.get("indicators", {}).get("seed", 0))
+
+
+def _transposed(ds, first, values):
+    """A 2-D array of ds's cells with the axis `first` first."""
+    return values if ds[V.status].dims[0] == first else values.swapaxes(0, 1)
+
+
+def _onset_columns(ds, a, regime):
+    """onset(j): the onset along axis `a` in column j of a 2-D archive (regime with a
+    first), over the horizons of the verdicts where they are stored."""
+    x = ds[a].values
+    if V.regime_history not in ds:
+        return lambda j: onset(x, regime[:, j])
+    history = _transposed(ds, a, ds[V.regime_history].values)
+    factors = [float(f) for f in ds["horizon_factor"].values]
+    return lambda j: onset_over_horizons(x, regime[:, j], history[:, j], factors)
+
+
+def _onset_1d(ds, x):
+    """The onset along the one axis of an archive, over its horizons where stored."""
+    regime = ds[V.regime].values
+    if V.regime_history not in ds:
+        return onset(x, regime)
+    return onset_over_horizons(x, regime, ds[V.regime_history].values,
+                               [float(f) for f in ds["horizon_factor"].values])
+
+
+def _onset_horizons(ds, x, regime, axis, check=None) -> list[str]:
+    """How the onset moved with the horizon of the verdicts and with the seed, and the
+    uncertainty that covers both."""
     if V.regime_history not in ds:
         return []
-    factors = [float(f) for f in ds["horizon_factor"].values]
-    found = onset_over_horizons(x, regime, ds[V.regime_history].values, factors)
+    found = _onset_1d(ds, x)
     if found is None:
         return []
     T = float(ds[V.regime_horizon].min())
     moved = "; ".join(f"at {f:g} T = {f * T:g}: " + ("none" if e is None else f"{e:.4g}")
                       for f, e in found["by_horizon"])
-    return [f"The onset from each cell's verdict at each horizon ({moved}). With its shift "
-            f"over the last step of the horizon: onset {axis} = {found['estimate']:.4g} +- "
-            f"{found['error']:.2g}. The perturbed "
-            "starts are not classified, so how the onset varies with the seed is not in "
-            "this uncertainty."]
+    out = [f"The onset from each cell's verdict at each horizon ({moved}). With its shift "
+           f"over the last step of the horizon: onset {axis} = {found['estimate']:.4g} +- "
+           f"{found['error']:.2g}."]
+    other = None if check is None else _onset_1d(check, check[axis].values)
+    if check is None:
+        out[-1] += (" How the onset varies with the seed (the deviation vectors) is not in "
+                    "this uncertainty: a [check] run would measure it.")
+    elif other is None:
+        out[-1] += (f" With seed {_seed(check)} the regime does not change from regular to "
+                    f"chaotic along {axis}: the onset does not survive another seed.")
+    else:
+        shift = abs(other["estimate"] - found["estimate"])
+        out[-1] += (f" With seed {_seed(check)}: onset {other['estimate']:.4g} +- "
+                    f"{other['error']:.2g}; the seed moves it by {shift:.2g}, so onset "
+                    f"{axis} = {found['estimate']:.4g} +- "
+                    f"{max(found['error'], other['error'], shift):.2g} over both.")
+    return out
+
+
+def _second_run(ds, check, regime) -> list[str]:
+    """The survey's claims beside those of its [check] run (another seed and ensemble
+    size): the regime counts, the cells whose verdict changed class, the spreads."""
+    if check is None:
+        return []
+    if check[V.regime].shape != regime.shape:
+        return ["## The same survey with another seed and ensemble", "",
+                "The [check] archive has another grid: nothing is compared.", ""]
+    orbits = [int(np.max(x[V.ensemble_orbits].values, initial=0)) if V.ensemble_orbits in x
+              else 1 for x in (ds, check)]
+    other = check[V.regime].values
+    out = ["## The same survey with another seed and ensemble", "",
+           f"Every cell run again with seed {_seed(check)} (here {_seed(ds)}) and {orbits[1]} "
+           f"orbits per cell (here {orbits[0]}): its own deviation vectors and perturbed "
+           "starts, the same grid, thresholds and horizons.", "",
+           "| regime | cells here | cells there |", "| --- | --- | --- |"]
+    for r in Regime:
+        a, b = int(np.sum(regime == r)), int(np.sum(other == r))
+        if a or b:
+            out.append(f"| {r.name.lower()} | {a} | {b} |")
+
+    def kind(x):
+        return np.where(np.isin(x, REGULAR), 1, np.where(np.isin(x, IRREGULAR), -1, 0))
+    moved = kind(regime) != kind(other)
+    axes = list(ds[V.status].dims)
+    where = [", ".join(f"{a}={float(ds[a].values[i]):g}" for a, i in zip(axes, idx))
+             + f" ({Regime(regime[idx]).name.lower()} -> {Regime(other[idx]).name.lower()})"
+             for idx in zip(*np.nonzero(moved))]
+    out += ["", f"Verdicts of another class (regular, irregular, undetermined) with the other "
+                f"seed: {int(moved.sum())} of {regime.size} cells" + (
+                    ": " + "; ".join(where[:12]) + ("; ..." if len(where) > 12 else "") + "."
+                    if where else ".")]
+    if min(orbits) > 1 and V.ftle_ensemble in ds and V.ftle_ensemble in check:
+        sd = list(ds["ensemble_statistic_name"].values.astype(str)).index("sd")
+        rows = []
+        for r in Regime:
+            cells = (regime == r) & (other == r) & (ds[V.ensemble_orbits].values > 1) & \
+                (check[V.ensemble_orbits].values > 1)
+            if cells.any():
+                here = float(np.nanmedian(ds[V.ftle_ensemble].values[..., sd][cells]))
+                there = float(np.nanmedian(check[V.ftle_ensemble].values[..., sd][cells]))
+                rows.append(f"| {r.name.lower()} | {int(cells.sum())} | {here:.2g} | "
+                            f"{there:.2g} |")
+        if rows:
+            out += ["", f"The FTLE's spread over nearby orbits ({orbits[0]} and {orbits[1]} "
+                        "orbits per cell), in the cells of the same regime in both runs:", "",
+                    "| regime | cells | median sd here | median sd there |",
+                    "| --- | --- | --- | --- |", *rows]
+    return out + [""]
 
 
 def _tori_table(ds, axes, regime, rows: int = 15) -> list[str]:

@@ -26,6 +26,10 @@ coordinate = "phi"
 
 # (what to change, expected fragment of the error: always the key)
 BAD = [
+    ("[check]\nseed = 0\nperturbations = 16", "[check]: the same seed and perturbations as [indicators] would repeat the survey"),
+    ("[check]\nperturbations = -2", "[check].perturbations: must be >= -1"),
+    ("[check]\nsed = 1", "[check].sed: unknown key (did you mean 'seed'?)"),
+    ("[indicators]\nwhich = []\n[check]", "[check]: compares the indicators of two ensembles"),
     ("[tori]\nextend = 1", "[tori].extend: 1 would decide a verdict in doubt again at the same horizon"),
     ("[tori]\nextend = -2", "[tori].extend: must be >= 0"),
     ("[tori]\nextend_rounds = 9", "[tori].extend_rounds: must be <= 4"),
@@ -214,3 +218,28 @@ def test_more_local_workers_than_the_machine_can_run_are_refused_before_work_sta
         parse_config(text, "t")
     with pytest.raises(ConfigError, match="workers: .* use at most"):
         run_survey({"initial": {"family": "equilateral", "delta": [1.0]}}, workers=too_many)
+
+
+def test_check_is_the_same_survey_with_another_seed_and_ensemble(tmp_path):
+    """[check] defaults to the next seed and twice the ensemble (at least 8); its config
+    text is the workflow's with those two keys, its name and output suffixed _check (the
+    output a --output override gives too); it does not change the survey's own result key."""
+    text = GOOD.format(out=tmp_path / "x.nc")
+    plain = parse_config(text)
+    config = parse_config(text + "[check]\n")
+    assert config.result_key() == plain.result_key()
+    check = config.check()
+    ind = check.tables["indicators"]
+    assert (ind["seed"], ind["perturbations"]) == (1, 32)
+    assert check.name == "t_check" and check.output == tmp_path / "x_check.nc"
+    assert check.check() is None and plain.check() is None
+    assert parse_config(check.text).result_key() == check.result_key()
+    assert check.result_key() != config.result_key()
+    config.tables["survey"]["output"] = str(tmp_path / "elsewhere" / "y.nc")
+    moved = config.check()
+    assert moved.output == tmp_path / "elsewhere" / "y_check.nc"
+    assert moved.text == check.text         # the text names the workflow's own output
+    small = parse_config(text.replace("[integration]", "[indicators]\nperturbations = 2\n"
+                                      "[integration]") + "[check]\nseed = 7\n").check()
+    assert (small.tables["indicators"]["seed"], small.tables["indicators"]["perturbations"]) \
+        == (7, 8)

@@ -92,3 +92,47 @@ def test_the_equilateral_familys_frequencies_are_three_continuous_curves(tmp_pat
     omega = 3.0
     modes = np.array([2 * omega, omega * (1 + 2 ** -0.5), omega * (1 - 2 ** -0.5)]) / (2 * np.pi)
     np.testing.assert_allclose(nu[0], modes, rtol=2e-3)
+
+
+def test_a_check_run_states_the_claims_at_another_seed_and_ensemble(tmp_path, capsys):
+    """`run` with a [check] table runs the survey again with the next seed and twice the
+    ensemble into <output>_check.nc: the same orbits (their energy errors agree bit for
+    bit), other deviation vectors and perturbed starts (other FTLEs); the report gives the
+    onset at both seeds and the regimes side by side, and `report` finds the check run
+    again beside its archive."""
+    import xarray as xr
+
+    from survey.cli import main
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(f"""
+[survey]
+name = "c"
+output = "{tmp_path / 'c.nc'}"
+[initial]
+family = "equilateral"
+delta = {{start = 3.5, stop = 5.0, num = 4}}
+[integration]
+t_final = 200.0
+[indicators]
+perturbations = 2
+[check]
+[dask]
+workers = 1
+""")
+    assert main(["run", str(cfg), "--no-progress"]) == 0
+    assert "seed 1 and 8 perturbed orbits" in capsys.readouterr().out
+    with xr.open_dataset(tmp_path / "c.nc") as a, xr.open_dataset(tmp_path / "c_check.nc") as b:
+        np.testing.assert_array_equal(a[V.energy_error].values, b[V.energy_error].values)
+        assert np.all(a[V.ftle].values != b[V.ftle].values)
+        assert (int(a[V.ensemble_orbits].max()), int(b[V.ensemble_orbits].max())) == (3, 9)
+        counts = [(r, int(np.sum(a[V.regime].values == r)), int(np.sum(b[V.regime].values == r)))
+                  for r in np.unique(np.r_[a[V.regime].values, b[V.regime].values])]
+    report = (tmp_path / "c_report.md").read_text()
+    assert "## The same survey with another seed and ensemble" in report
+    assert "With seed 1: onset" in report or "With seed 1 the regime does not change" in report
+    from survey.catalog.regimes import Regime
+    for r, here, there in counts:
+        assert f"| {Regime(r).name.lower()} | {here} | {there} |" in report
+    (tmp_path / "c_report.md").unlink()
+    assert main(["report", str(tmp_path / "c.nc")]) == 0
+    assert "## The same survey with another seed" in (tmp_path / "c_report.md").read_text()
