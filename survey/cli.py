@@ -9,7 +9,8 @@ from pathlib import Path
 from .catalog import defaults
 
 # commands that run the integrator, so compile its kernels on a machine's first run
-COMPILING_COMMANDS = ("run", "reproduce", "verify", "orbit", "bench")
+COMPILING_COMMANDS = ("run", "reproduce", "verify", "orbit", "bench", "equilibria",
+                      "periodic")
 # the embedded default survey (`python -m survey run`)
 DEFAULT_CONFIG = Path(__file__).parent / "default.toml"
 BENCH_PARTS = ["scan", "cell", "fixed", "integrator", "step", "indicators", "tori", "terms",
@@ -272,6 +273,16 @@ def _survey(config, command, summary=False, write_report=True, **kw) -> Path:
     return path
 
 
+def _equilibria(args):
+    from .pipeline.special import print_equilibria
+    return print_equilibria(args.config, args.json)
+
+
+def _periodic(args):
+    from .pipeline.special import print_periodic
+    return print_periodic(args.config, args.json)
+
+
 def _verify(args):
     from .catalog.errors import ConfigError
     from .pipeline.sweep import verify
@@ -322,6 +333,19 @@ def build_parser():
     rr.add_argument("--only", action="append", help="only these workflows (file stem)")
     rr.add_argument("--no-progress", action="store_true")
     rr.set_defaults(func=_reproduce)
+    e = sub.add_parser("equilibria", help="relative equilibria (rigid rotations, or rest) "
+                                          "of a config's system near its [initial] start, "
+                                          "with their linear stability; table [equilibria]")
+    e.add_argument("config", help="TOML file: [system], one [initial] start, [equilibria]")
+    e.add_argument("--json", action="store_true", help="print the numbers as JSON")
+    e.set_defaults(func=_equilibria)
+    po = sub.add_parser("periodic", help="the periodic orbit (or relative periodic orbit) "
+                                         "through a config's [initial] start, by Newton "
+                                         "shooting, with its Floquet multipliers; table "
+                                         "[periodic]")
+    po.add_argument("config", help="TOML file: [system], one [initial] start, [periodic]")
+    po.add_argument("--json", action="store_true", help="print the numbers as JSON")
+    po.set_defaults(func=_periodic)
     v = sub.add_parser("verify", help="recompute a sample of an archive's cells from its "
                                       "stored config and compare bit for bit")
     v.add_argument("archive")

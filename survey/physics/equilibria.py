@@ -1,11 +1,14 @@
 """Equilibria of a system: forces and the Hessian of U from the right-hand side's exact
-tangent forces, and the equilibrium reached by descending the potential.
+tangent forces, the equilibrium reached by descending the potential, and relative
+equilibria (rigid rotations) with their linear stability.
 
 The descent's linear algebra is compiled here in a fixed order of IEEE operations
 (portable.symmetric_eigen instead of LAPACK): a chaotic orbit started at an equilibrium
 amplifies a difference in its last bit, so the start must be the same bits on every
 machine."""
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 
@@ -113,3 +116,267 @@ def equilibrium_positions(system: System, start, max_iter: int = 100) -> np.ndar
         raise ValueError(f"no equilibrium within {max_iter} Newton steps from positions")
     return q - centre_of_mass(system.masses, q)
 
+
+
+# ------------------------------------------------------------------ relative equilibria
+#
+# A relative equilibrium rotates rigidly at a rate Omega: in the frame rotating with it the
+# bodies are at rest, at a critical point of the amended potential U + J^2 / (2 I) (fixed
+# angular momentum J) or of the augmented potential U - Omega^2 I / 2 (fixed rate). Both are
+# solved, and linearised, in mass-weighted coordinates with the centre of mass removed:
+# xi = B^T sqrt(m) q, with B an orthonormal basis of the configurations whose centre of mass
+# is at the origin -- canonical with eta = B^T p / sqrt(m), I = |xi|^2.
+
+
+class RelativeEquilibrium(NamedTuple):
+    """A relative equilibrium and its linear stability in the reduced space (the centre of
+    mass and the rotation with its conjugate, the angular momentum, removed)."""
+
+    positions: np.ndarray     # (N, d) at t = 0, centre of mass at the origin
+    rotation_rate: float      # Omega, counter-clockwise; 0 at rest
+    energy: float
+    angular_momentum: float
+    eigenvalues: np.ndarray   # of the linearisation in the rotating frame, reduced (complex)
+    krein: np.ndarray         # per eigenvalue: the Krein sign of an elliptic pair's upper
+    #                           member (+1, -1), 0 for any other eigenvalue
+    stable: bool              # spectrally stable: every reduced eigenvalue on the imaginary axis
+    residual: float           # |gradient of the amended potential| relative to its terms
+
+    @property
+    def frequencies(self) -> np.ndarray:
+        """The normal modes' frequencies in the rotating frame (cycles per unit time; the
+        shape oscillates at these), ascending; only for eigenvalues on the imaginary axis."""
+        lam = self.eigenvalues
+        on_axis = (lam.imag > 0) & (np.abs(lam.real) <= AXIS_TOLERANCE * _size(lam))
+        return np.sort(lam.imag[on_axis]) / (2 * np.pi)
+
+    def state(self, system: System) -> np.ndarray:
+        """The inertial-frame state at t = 0: positions, momenta m Omega e_z x q."""
+        q = self.positions
+        p = np.zeros_like(q)
+        if q.shape[1] == 2:
+            p[:, 0], p[:, 1] = -q[:, 1], q[:, 0]
+        return system.state(q, self.rotation_rate * system.masses[:, None] * p)
+
+
+AXIS_TOLERANCE = 1e-7     # |Re lambda| / max |lambda| below which an eigenvalue is imaginary
+
+
+def _size(lam) -> float:
+    return float(np.max(np.abs(lam), initial=0.0)) or 1.0
+
+
+def _frame(masses: np.ndarray, d: int):
+    """(T, w): T ((N d) x ((N - 1) d)) maps reduced mass-weighted coordinates xi to
+    sqrt(m) q; w = 1 / sqrt(m) per coordinate of q."""
+    s = np.sqrt(masses)
+    rows = np.vstack([s / np.linalg.norm(s), np.eye(s.size)])
+    B = orthonormal(rows)[1:s.size].T
+    return np.kron(B, np.eye(d)), np.repeat(1.0 / s, d)
+
+
+def _reduced_potential(system: System, T, w, xi):
+    """U's gradient and Hessian in the reduced coordinates xi, from the exact tangent
+    forces."""
+    q = (w * (T @ xi)).reshape(system.n_bodies, system.dim)
+    force, hess = forces(system, q, hessian=True)
+    return -T.T @ (w * force), T.T @ (w[:, None] * hess * w[None, :]) @ T, q
+
+
+def relative_equilibrium(system: System, start, angular_momentum: float | None = None,
+                         rotation_rate: float | None = None, max_iter: int = 80
+                         ) -> RelativeEquilibrium:
+    """The relative equilibrium reached from positions `start` (N, d) by Newton's method
+    on the gradient of the amended potential U + J^2 / (2 I) (given angular_momentum) or
+    of U - Omega^2 I / 2 (given rotation_rate; neither: an equilibrium at rest), least-
+    squares steps (the rotation is a zero direction), halved while the gradient grows.
+    Rotating solutions are planar: in 3-D only J = 0. Raises ValueError if it does not
+    converge."""
+    if angular_momentum is not None and rotation_rate is not None:
+        raise ValueError("give the angular momentum or the rotation rate, not both")
+    spin = angular_momentum if angular_momentum is not None else rotation_rate
+    if system.dim == 3 and spin:
+        raise ValueError("rotating relative equilibria are found in the plane (dim = 2); "
+                         "in 3-D only equilibria at rest (J = 0)")
+    T, w = _frame(system.masses, system.dim)
+    q0 = np.asarray(start, dtype=float).reshape(system.n_bodies, system.dim)
+    q0 = q0 - centre_of_mass(system.masses, q0)
+    xi = T.T @ (q0.ravel() / w)
+
+    def gradient(xi):
+        g, H, q = _reduced_potential(system, T, w, xi)
+        r2 = float(xi @ xi)
+        eye = np.eye(xi.size)
+        if angular_momentum is not None:
+            c = angular_momentum ** 2 / r2 ** 2
+            grad, hess = g - c * xi, H - c * eye + 4.0 * c / r2 * np.outer(xi, xi)
+        else:
+            omega2 = (rotation_rate or 0.0) ** 2
+            grad, hess = g - omega2 * xi, H - omega2 * eye
+        # the gradient's scale: the Hessian times the smallest mutual distance (mass-
+        # weighted), a force that moves the closest bodies by their distance
+        scale = np.linalg.norm(hess, 2) * np.min(_distances(q)) * np.sqrt(system.masses.min())
+        return grad, hess, scale
+
+    grad, hess, scale = gradient(xi)
+    step = np.full(xi.size, np.inf)
+    for _ in range(max_iter):
+        if not (np.all(np.isfinite(grad)) and np.all(np.isfinite(hess))):
+            raise ValueError("the potential is not finite on the way to a relative "
+                             "equilibrium (a collision?)")
+        step = _newton(hess, grad, xi, system.dim)
+        if np.linalg.norm(grad) <= 1e-13 * scale:
+            break
+        for _ in range(40):
+            trial = xi + step
+            g_t, h_t, s_t = gradient(trial)
+            if np.all(np.isfinite(g_t)) and np.linalg.norm(g_t) < np.linalg.norm(grad):
+                break
+            step = 0.5 * step
+        else:
+            break
+        xi, grad, hess, scale = trial, g_t, h_t, s_t
+    residual = float(np.linalg.norm(grad) / scale)
+    size = np.min(_distances((w * (T @ xi)).reshape(system.n_bodies, system.dim)))
+    if not (residual <= 1e-10 and np.linalg.norm(step) <= 1e-8 * size):
+        raise ValueError(f"no relative equilibrium from these positions within {max_iter} "
+                         f"Newton steps (relative gradient {residual:.1e}, last step "
+                         f"{np.linalg.norm(step) / size:.1e} of the closest distance)")
+    r2 = float(xi @ xi)
+    omega = angular_momentum / r2 if angular_momentum is not None else (rotation_rate or 0.0)
+    q = (w * (T @ xi)).reshape(system.n_bodies, system.dim)
+    # a body that drifted off feels no force and no curvature: a limit, not an equilibrium
+    d = system.dim
+    hq = forces(system, q, hessian=True)[1]
+    pull = np.array([np.linalg.norm(hq[i * d:(i + 1) * d, i * d:(i + 1) * d]) / m
+                     for i, m in enumerate(system.masses)])
+    if not np.all(pull > 1e-8 * pull.max()):
+        raise ValueError("bodies drifted apart: no bound relative equilibrium from these "
+                         "positions")
+    lam, krein = linear_stability(system, q, omega)
+    found = RelativeEquilibrium(q, float(omega), 0.0, float(omega * r2), lam, krein,
+                                bool(np.all(np.abs(lam.real) <= AXIS_TOLERANCE * _size(lam))),
+                                residual)
+    return found._replace(energy=float(system.energy(found.state(system))))
+
+
+def _rotations(xi, d):
+    """Orthonormal rows spanning the infinitesimal rotations of reduced positions xi."""
+    k = xi.size // d
+    gens = [np.array([[0.0, -1.0], [1.0, 0.0]])] if d == 2 else \
+        [np.cross(np.eye(3)[a], -np.eye(3)) for a in range(3)]
+    return orthonormal(np.array([np.kron(np.eye(k), g) @ xi for g in gens]))
+
+
+def _newton(hess, grad, xi, d):
+    """The Newton step with the rotations (exact zero directions) held fixed: least squares
+    on the Hessian with the rotations' directions given its own scale, so only a further
+    degeneracy (the size of an isochronous family at a given rate) is cut."""
+    R = _rotations(xi, d)
+    P = np.eye(xi.size) - R.T @ R
+    M = P @ hess @ P + np.linalg.norm(hess, 2) * R.T @ R
+    return -np.linalg.lstsq(M, P @ grad, rcond=1e-14)[0]
+
+
+def linear_stability(system: System, positions, rotation_rate: float):
+    """(eigenvalues, Krein signs) of the linearised flow at a relative equilibrium in the
+    frame rotating with it, H = |eta|^2 / 2 + U - Omega xi x eta in the reduced coordinates:
+    z' = J S z. The trivial part -- the rotation and its conjugate (the angular momentum, or
+    the size along an isochronous family) -- is removed by restricting to the symplectic
+    complement of the rotations and their partners in the generalised kernel of J S. The
+    Krein sign of an elliptic eigenvalue i w (w > 0) with eigenvector v is the sign of
+    v* S v: modes of opposite sign that collide can leave the axis, of one sign cannot."""
+    d = system.dim
+    T, w = _frame(system.masses, d)
+    q = np.asarray(positions, dtype=float).reshape(system.n_bodies, d)
+    q = q - centre_of_mass(system.masses, q)
+    xi = T.T @ (q.ravel() / w)
+    _, H, _ = _reduced_potential(system, T, w, xi)
+    n = xi.size
+    k = n // d
+    if d == 2:
+        gens = [np.array([[0.0, -1.0], [1.0, 0.0]])]
+    else:
+        gens = [np.cross(np.eye(3)[a], -np.eye(3)) for a in range(3)]
+    rot = np.kron(np.eye(k), np.array([[0.0, 1.0], [-1.0, 0.0]])) if d == 2 else np.zeros((n, n))
+    S = np.block([[H, -rotation_rate * rot], [-rotation_rate * rot.T, np.eye(n)]])
+    J = np.block([[np.zeros((n, n)), np.eye(n)], [-np.eye(n), np.zeros((n, n))]])
+    A = J @ S
+    eta = rotation_rate * rot.T @ xi            # the rotating frame's momenta at rest
+    zrot = [np.concatenate([np.kron(np.eye(k), g) @ xi, np.kron(np.eye(k), g) @ eta])
+            for g in gens]
+    zrot = [z for z in zrot if np.linalg.norm(z) > 1e-12 * np.linalg.norm(xi)]
+    W = nontrivial_subspace(A, zrot)
+    AW = W.T @ A @ W
+    lam, vec = np.linalg.eig(AW)
+    order = np.lexsort((lam.real, lam.imag))
+    lam, vec = lam[order], vec[:, order]
+    krein = np.zeros(lam.size, dtype=np.int8)
+    size = _size(lam)
+    for i, (l, v) in enumerate(zip(lam, vec.T)):
+        if l.imag > 0 and abs(l.real) <= AXIS_TOLERANCE * size:
+            full = W @ v
+            krein[i] = 1 if np.real(np.conj(full) @ S @ full) > 0 else -1
+    return lam, krein
+
+
+def nontrivial_subspace(N: np.ndarray, known, form: np.ndarray | None = None) -> np.ndarray:
+    """Orthonormal columns spanning what a symmetry leaves of a linearised Hamiltonian flow:
+    N is A (a Hamiltonian matrix, J S) or M - 1 (M a monodromy matrix); `known` are vectors
+    of its kernel that a symmetry gives (a rotation, a translation, the flow). Each is
+    paired with the vector of the generalised kernel, null(N^2), that the symplectic form
+    couples to it most (its conserved quantity's direction: angular momentum, momentum,
+    energy -- or the size along an isochronous family); the result is the symplectic
+    complement of those pairs, which the flow leaves invariant. form: the symplectic form's
+    matrix in these coordinates (default the canonical J)."""
+    dim = N.shape[0]
+    n = dim // 2
+    J = np.block([[np.zeros((n, n)), np.eye(n)], [-np.eye(n), np.zeros((n, n))]]) \
+        if form is None else form
+    _, sv, vt = np.linalg.svd(N @ N)
+    kernel = vt[sv <= 1e-9 * max(sv[0], 1e-300)].T
+    trivial = []
+    for z in known:
+        pairing = kernel.T @ (J.T @ z)                 # omega(z, K c) = z^T J K c
+        if np.linalg.norm(pairing) > 1e-12 * np.linalg.norm(z):
+            trivial += [z, kernel @ pairing]
+    if not trivial:
+        return np.eye(dim)
+    _, s2, v2 = np.linalg.svd(np.array(trivial) @ J)
+    return v2[np.sum(s2 > 1e-10 * s2[0]):].T
+
+
+def relative_equilibria(system: System, start, angular_momentum: float | None = None,
+                        rotation_rate: float | None = None, starts: int = 0,
+                        seed: int = 0) -> list[RelativeEquilibrium]:
+    """The distinct relative equilibria reached from `start` and from `starts` seeded
+    random configurations of the same size (positions normal about the centre with the
+    start's radius of gyration), by lowest energy first. Two are the same up to rotations,
+    reflections and permutations of the bodies when their energies and sorted mutual
+    distances agree to 1e-7."""
+    q0 = np.asarray(start, dtype=float).reshape(system.n_bodies, system.dim)
+    q0 = q0 - centre_of_mass(system.masses, q0)
+    radius = np.sqrt(np.sum(system.masses[:, None] * q0 ** 2) / system.masses.sum())
+    rng = np.random.default_rng(seed)
+    guesses = [q0] + [rng.normal(0.0, radius, q0.shape) for _ in range(starts)]
+    found: list[RelativeEquilibrium] = []
+    for guess in guesses:
+        try:
+            eq = relative_equilibrium(system, guess, angular_momentum, rotation_rate)
+        except (ValueError, np.linalg.LinAlgError):
+            continue
+        if not any(_same(eq, other) for other in found):
+            found.append(eq)
+    return sorted(found, key=lambda e: e.energy)
+
+
+def _distances(q):
+    i, j = np.triu_indices(q.shape[0], 1)
+    return np.sort(np.linalg.norm(q[i] - q[j], axis=1))
+
+
+def _same(a: RelativeEquilibrium, b: RelativeEquilibrium) -> bool:
+    scale = max(abs(a.energy), abs(b.energy), 1e-300)
+    da, db = _distances(a.positions), _distances(b.positions)
+    return abs(a.energy - b.energy) <= 1e-7 * scale and \
+        bool(np.all(np.abs(da - db) <= 1e-7 * np.max(da)))

@@ -1,0 +1,128 @@
+"""Relative equilibria and their stability against closed forms and direct integration:
+the paper's rotating triangle and rotating line under P^2/2, Lagrange's triangle under
+gravity (Routh's criterion), the Lennard-Jones trimer at rest."""
+import json
+import math
+
+import numpy as np
+import pytest
+
+from survey import integrate
+from survey.cli import main
+from survey.physics.equilibria import relative_equilibrium
+from survey.physics.system import System
+from survey.physics.terms import make_potential
+
+TRIANGLE = np.array([[1.0, 0.0], [-0.5, math.sqrt(3) / 2], [-0.5, -math.sqrt(3) / 2]])
+
+
+def distances(q):
+    return np.array([np.linalg.norm(q[0] - q[1]), np.linalg.norm(q[0] - q[2]),
+                     np.linalg.norm(q[1] - q[2])])
+
+
+def test_the_rotating_triangle_under_p2_has_the_closed_form_normal_modes():
+    """U = P^2/2, unit masses: Omega = 3 at any size, E = J Omega / 2 + (3 s)^2 / 2 with
+    J = 3 s^2; shape modes 2 Omega and Omega (1 +- 1/sqrt 2) in the rotating frame, stable."""
+    system = System.create()
+    rng = np.random.default_rng(3)
+    J = 36.0
+    eq = relative_equilibrium(system, 1.7 * TRIANGLE + 0.05 * rng.normal(size=(3, 2)),
+                              angular_momentum=J)
+    s = math.sqrt(J / 3)
+    np.testing.assert_allclose(distances(eq.positions), s, rtol=1e-12)
+    assert eq.rotation_rate == pytest.approx(3.0, rel=1e-13)
+    assert eq.energy == pytest.approx(J * 3 / 2 + (3 * s) ** 2 / 2, rel=1e-13)
+    modes = 3.0 * np.array([1 - 2 ** -0.5, 1 + 2 ** -0.5, 2.0]) / (2 * math.pi)
+    np.testing.assert_allclose(eq.frequencies, modes, rtol=1e-10)
+    assert eq.stable and eq.eigenvalues.size == 6
+    # the slow mode has the negative Krein sign: gyroscopically stabilised
+    assert list(eq.krein[eq.krein != 0]) == [-1, 1, 1]
+
+
+def test_a_relative_equilibrium_rotates_rigidly():
+    """The found state, integrated: the mutual distances stay what they were to 1e-10."""
+    system = System.create()
+    eq = relative_equilibrium(system, 2 * TRIANGLE, angular_momentum=36.0)
+    out = integrate(system, eq.state(system), (0.0, 10.0), t_eval=np.linspace(0, 10, 41))
+    for y in out.samples:
+        np.testing.assert_allclose(distances(system.split(y)[0]), distances(eq.positions),
+                                   rtol=1e-10)
+
+
+def test_the_rotating_line_is_unstable_at_the_rate_integration_finds():
+    """The collinear solution under P^2/2: Omega^2 = 8, sides a, a, 2a with I = 2 a^2 =
+    J / Omega; one real pair +- lambda. A start 1e-10 off it parts from the line like
+    e^(lambda t) (its area, linear in the distance from the line): the fitted rate agrees
+    with lambda to 2%."""
+    system = System.create()
+    J = 3.0
+    eq = relative_equilibrium(system, [[-1.0, 0.01], [0.0, 0.0], [1.0, 0.0]],
+                              angular_momentum=J)
+    assert eq.rotation_rate ** 2 == pytest.approx(8.0, rel=1e-12)
+    a = math.sqrt(J / eq.rotation_rate / 2)
+    np.testing.assert_allclose(np.sort(distances(eq.positions)), [a, a, 2 * a], rtol=1e-12)
+    assert not eq.stable
+    rate = max(z.real for z in eq.eigenvalues)
+    y0 = eq.state(system) + 1e-10 * np.random.default_rng(0).normal(size=system.n)
+    times = np.linspace(0.0, 20.0, 401)
+    out = integrate(system, y0, (0.0, 20.0), t_eval=times, rtol=1e-13, atol=1e-13)
+    q = system.split(out.samples)[0]
+    e1, e2 = q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]
+    off = np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])     # the area: linear off the line
+    window = (off > 1e-8) & (off < 1e-4)
+    slope = np.polyfit(times[window], np.log(off[window]), 1)[0]
+    assert slope == pytest.approx(rate, rel=0.02)
+
+
+@pytest.mark.parametrize("masses, stable", [((1.0, 1.0, 1.0), False),
+                                            ((1.0, 1e-3, 1e-4), True),
+                                            ((1.0, 0.04, 1e-3), False)])
+def test_lagranges_triangle_follows_routhss_criterion(masses, stable):
+    """Newtonian gravity (G = 1): the equilateral solution exists for any masses with
+    Omega^2 r^3 = G M, and is linearly stable iff 27 (m1 m2 + m2 m3 + m3 m1) < M^2."""
+    m = np.array(masses)
+    system = System(m, 2, make_potential("gravity", {"G": 1.0}, "pair"))
+    eq = relative_equilibrium(system, TRIANGLE, rotation_rate=1.0)
+    r = distances(eq.positions)
+    np.testing.assert_allclose(r, r[0], rtol=1e-12)
+    assert eq.rotation_rate ** 2 * r[0] ** 3 == pytest.approx(m.sum(), rel=1e-12)
+    routh = 27 * (m[0] * m[1] + m[1] * m[2] + m[2] * m[0]) < m.sum() ** 2
+    assert routh == stable and eq.stable == stable
+
+
+def test_the_lennard_jones_trimer_at_rest():
+    """Equilibria of U (J = 0): the equilateral triangle at E = -3 eps, stable, with the
+    spring-triangle modes sqrt(3k) and, twice, sqrt(3k/2) over 2 pi (k = U''(r_m) = 72 eps /
+    r_m^2); and the linear chain, unstable."""
+    system = System(np.ones(3), 2, make_potential("lennard_jones",
+                                                  {"epsilon": 1.0, "sigma": 1.0}, "pair"))
+    tri = relative_equilibrium(system, 0.66 * TRIANGLE, angular_momentum=0.0)
+    line = relative_equilibrium(system, [[-1.2, 0.0], [0.0, 0.05], [1.1, 0.0]],
+                                angular_momentum=0.0)
+    assert tri.energy == pytest.approx(-3.0, rel=1e-13) and tri.stable
+    k = 72.0 / 2 ** (1 / 3)
+    np.testing.assert_allclose(tri.frequencies, np.sqrt([1.5 * k, 1.5 * k, 3 * k])
+                               / (2 * math.pi), rtol=1e-9)
+    r = np.sort(distances(line.positions))
+    assert r[2] == pytest.approx(r[0] + r[1], rel=1e-12) and not line.stable
+    assert -2.04 < line.energy < -2.02
+
+
+def test_equilibria_command(tmp_path, capsys):
+    """`python -m survey equilibria` reads a survey's [system] and one [initial] start, and
+    prints the rotating triangle and the rotating line with their stability (--json for
+    scripts); a bad key is named before any work."""
+    cfg = tmp_path / "eq.toml"
+    cfg.write_text('[initial]\nfamily = "equilateral"\ndelta = 0.0\n[equilibria]\nstarts = 20\n')
+    assert main(["equilibria", str(cfg), "--json"]) == 0
+    found = json.loads(capsys.readouterr().out)["equilibria"]
+    assert [e["stable"] for e in found] == [False, True]
+    assert found[1]["energy"] == pytest.approx(108.0) and \
+        found[1]["angular_momentum"] == pytest.approx(36.0)
+    assert main(["equilibria", str(cfg)]) == 0
+    assert "linearly stable" in capsys.readouterr().out
+    cfg.write_text('[initial]\nfamily = "equilateral"\n[equilibria]\nstart = 6\n')
+    assert main(["equilibria", str(cfg)]) == 2
+    assert "[equilibria].start: unknown key (did you mean 'starts'?)" in \
+        capsys.readouterr().err
