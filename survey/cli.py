@@ -157,7 +157,7 @@ def _reproduce(args):
     is 1."""
     import shutil
 
-    from .pipeline import orbits
+    from .pipeline import orbits, special
     from .pipeline.config import load_config
     results = Path(args.results)
     staging = results / ".staging"
@@ -167,6 +167,9 @@ def _reproduce(args):
         paths = [p for p in paths if p.stem in args.only]
     for path in paths:
         print(f"== {path}")
+        if special.special_table(path):
+            print(f"made {special.write_report(path, staging)}")
+            continue
         if orbits.is_orbit_workflow(path):
             for out in orbit_workflow(path, staging):
                 print(f"made {out}")

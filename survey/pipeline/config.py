@@ -540,6 +540,10 @@ def _axis(where: str, value) -> np.ndarray | None:
 def validate(raw: dict, text: str, where: str = "<config>", check_output: bool = True) -> Config:
     """Check every table and key; fill defaults; build the grid. Raises ConfigError."""
     unknown = sorted(set(raw) - set(SCHEMA))
+    special = [name for name in unknown if name in ("equilibria", "periodic")]
+    if special:
+        raise ConfigError(f"[{special[0]}]", f"is read by `python -m survey {special[0]}`, "
+                                              "not by a survey; run that command on this file")
     if unknown:
         raise ConfigError(f"[{unknown[0]}]", "unknown table" + _suggest(unknown[0], SCHEMA)
                           + f"; tables are {', '.join(SCHEMA)}")

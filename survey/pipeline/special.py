@@ -119,8 +119,8 @@ def equilibria_text(system: System, table: dict, found: list[RelativeEquilibrium
             e.frequencies, e.krein[e.krein != 0])) or "none"
         unstable = [z for z in e.eigenvalues if z.real > 0 and
                     abs(z.real) > 1e-7 * max(np.abs(e.eigenvalues).max(), 1.0)]
-        lines += ["", f"{k + 1}. E = {e.energy:.12g}, J = {e.angular_momentum:.12g}, "
-                      f"Omega = {e.rotation_rate:.12g}: "
+        lines += ["", f"{k + 1}. E = {e.energy:.10g}, J = {e.angular_momentum:.10g}, "
+                      f"Omega = {e.rotation_rate:.10g}: "
                       + ("linearly stable" if e.stable else "unstable"),
                   "   mutual distances " + ", ".join(f"r{a}{b} = {r:.10g}" for a, b, r in
                                                      zip(i, j, dist)),
@@ -165,12 +165,13 @@ def periodic_json(orbit: PeriodicOrbit) -> dict:
 
 
 def periodic_text(system: System, orbit: PeriodicOrbit) -> str:
-    turn = f", returning rotated by {orbit.rotation:.12g} rad" if orbit.rotation else ""
+    turn = f", returning rotated by {orbit.rotation:.10g} rad" if orbit.rotation else ""
+    spin = orbit.angular_momentum if abs(orbit.angular_momentum) > 1e-12 else 0.0
     lines = [f"Periodic orbit of {system.n_bodies} bodies ({system.describe()}): period "
-             f"{orbit.period:.15g}{turn}; E = {orbit.energy:.12g}, J = "
-             f"{orbit.angular_momentum:.12g}.",
+             f"{orbit.period:.11g}{turn}; E = {orbit.energy:.10g}, J = {spin:.10g}.",
              "Newton shooting, return error |y(T) - y(0)| / |y(0)| before each step and "
-             "after the last: " + ", ".join(f"{r:.1e}" for r in orbit.residuals) + ".",
+             "after the last: " + ", ".join(f"{r:.1e}" if r >= 1e-12 else "< 1e-12"
+                                            for r in orbit.residuals) + ".",
              "Non-trivial Floquet multipliers (|mu|, angle/pi): " + ", ".join(
                  f"{abs(z):.9f} {np.angle(z) / np.pi:+.6f}" for z in orbit.multipliers)
              + f": {orbit.kind}" + (", linearly stable." if orbit.stable else
@@ -184,3 +185,33 @@ def print_periodic(path, as_json_text: bool = False) -> int:
     print(json.dumps(periodic_json(orbit), indent=1) if as_json_text else
           periodic_text(system, orbit))
     return 0
+
+
+def special_table(path) -> str | None:
+    """'equilibria' or 'periodic' if the config file has that table (a special-solution
+    workflow), else None."""
+    try:
+        raw = tomllib.loads(Path(path).read_text())
+    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError):
+        return None
+    return next((name for name in ("equilibria", "periodic") if name in raw), None)
+
+
+def write_report(path, folder) -> Path:
+    """NAME.md in `folder` for a special-solution workflow: what it is (its config) and
+    what was found, in the words the command prints."""
+    path = Path(path)
+    if special_table(path) == "equilibria":
+        system, table, found = find_equilibria(path)
+        text = equilibria_text(system, table, found)
+    else:
+        system, _, orbit = find_periodic(path)
+        text = periodic_text(system, orbit)
+    command = f"python -m survey {special_table(path)} {path.as_posix()}"
+    out = Path(folder) / f"{path.stem}.md"
+    body = (f"# {path.stem}\n\n`{command}` (written by `python -m survey reproduce`):\n\n"
+            f"```\n{text}\n```\n\nThe workflow:\n\n```toml\n{path.read_text().strip()}\n```\n")
+    tmp = out.with_name(f".{out.name}.tmp")
+    tmp.write_text(body)
+    tmp.replace(out)
+    return out

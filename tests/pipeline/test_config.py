@@ -30,6 +30,7 @@ BAD = [
     ("[check]\nperturbations = -2", "[check].perturbations: must be >= -1"),
     ("[check]\nsed = 1", "[check].sed: unknown key (did you mean 'seed'?)"),
     ("[indicators]\nwhich = []\n[check]", "[check]: compares the indicators of two ensembles"),
+    ("[periodic]\nperiod = 6.0", "[periodic]: is read by `python -m survey periodic`, not by a survey"),
     ("[tori]\nextend = 1", "[tori].extend: 1 would decide a verdict in doubt again at the same horizon"),
     ("[tori]\nextend = -2", "[tori].extend: must be >= 0"),
     ("[tori]\nextend_rounds = 9", "[tori].extend_rounds: must be <= 4"),
