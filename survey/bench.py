@@ -785,3 +785,44 @@ def fixed_costs(folder="results/bench", repeats=3, out=print):
         f"its first word on the terminal after {first:.2f}")
     best.update(command=command, cold=cold, first_word=first)
     return best
+
+
+def newton_step(repeats=5, out=print):
+    """What one step of the periodic-orbit shooting costs against the orbit with its full
+    tangent block (2n vectors, in the error control) over the period: the figure-eight
+    under gravity and the areal homographic orbit, best of `repeats` interleaved runs. A
+    step is that integration plus the linear algebra; the target is about 1x."""
+    from .numerics import periodic
+    from .physics.families import initial_state
+    from .physics.terms import make_potential
+    gravity = System(np.ones(3), 2, make_potential("gravity", {"G": 1.0}, "pair"))
+    x1, v3 = np.array([0.97000436, -0.24308753]), np.array([-0.93240737, -0.86473146])
+    areal = System.create(potential="areal_barrier")
+    cases = [("figure-eight (gravity)", gravity,
+              gravity.state([x1, -x1, [0.0, 0.0]], [-v3 / 2, -v3 / 2, v3]), 6.33, False),
+             ("areal homographic (rotating)", areal,
+              initial_state(areal, "equilateral", side=3 ** 0.5, delta=0.0, energy=8.0),
+              1.5, True)]
+    out("")
+    out(f"Newton shooting: one step against the orbit with its full tangent block (best of "
+        f"{repeats}; target about 1x)")
+    out(f"{'orbit':30s} {'runs':>5s} {'per run ms':>11s} {'orbit+2n ms':>11s} {'ratio':>6s}")
+    rows = []
+    for label, system, y0, guess, rotating in cases:
+        found = periodic.periodic_orbit(system, y0, guess, rotating)
+        # integrations: one per step, the last check, and for a rotating orbit the first
+        # guess of its angle
+        steps = found.residuals.size + int(rotating)
+        best = [math.inf, math.inf]
+        for _ in range(repeats):
+            for k, go in enumerate((
+                    lambda: periodic.periodic_orbit(system, y0, guess, rotating),
+                    lambda: periodic._monodromy(system, found.state, found.period, 1e-13))):
+                t = time.perf_counter()
+                go()
+                best[k] = min(best[k], time.perf_counter() - t)
+        per_step = best[0] / steps
+        rows.append((label, steps, per_step, best[1]))
+        out(f"{label:30s} {steps:5d} {1e3 * per_step:11.2f} {1e3 * best[1]:11.2f} "
+            f"{per_step / best[1]:5.2f}x")
+    return rows

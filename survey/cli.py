@@ -14,7 +14,7 @@ COMPILING_COMMANDS = ("run", "reproduce", "verify", "orbit", "bench", "equilibri
 # the embedded default survey (`python -m survey run`)
 DEFAULT_CONFIG = Path(__file__).parent / "default.toml"
 BENCH_PARTS = ["scan", "cell", "fixed", "integrator", "step", "indicators", "tori", "terms",
-               "survey", "memory"]
+               "survey", "memory", "newton"]
 
 
 def _bench(args):
@@ -30,7 +30,8 @@ def _bench(args):
              "tori": lambda: bench.torus_overhead(t_final=t),
              "terms": lambda: bench.interaction_terms(t_final=t),
              "survey": bench.survey_scaling,
-             "memory": bench.survey_memory}
+             "memory": bench.survey_memory,
+             "newton": bench.newton_step}
     for name in BENCH_PARTS:
         if name in (args.only or BENCH_PARTS):
             parts[name]()
