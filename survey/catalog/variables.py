@@ -42,6 +42,7 @@ class CellResult(NamedTuple):
     t_end: float = np.nan
     energy: Any = np.nan
     angular_momentum: Any = np.nan
+    scale_free_energy: float = np.nan     # E |J|^(-2k/(k+2)) of a potential of degree k
     energy_error: float = np.nan
     angular_momentum_error: float = np.nan
     indicators: Any = None                 # numerics.indicators.ChaosIndicators
@@ -151,6 +152,11 @@ VARIABLES = [
     Var("energy", "energy H at t = 0", lambda r: r.energy, symbol="$E$"),
     Var("angular_momentum", "total angular momentum at t = 0 (z component in 2-D)",
         lambda r: r.angular_momentum, symbol="$J$"),
+    Var("scale_free_energy", "E |J|^(-2k/(k+2)) for a potential homogeneous of degree k: "
+                             "the one combination of E and J the shapes' dynamics depends "
+                             "on (q -> s q, p -> s^(k/2) p, t -> s^(1-k/2) t)",
+        lambda r: r.scale_free_energy, when=lambda c: c.system().homogeneity not in (None, -2.0),
+        symbol=r"$E\,|J|^{-2k/(k+2)}$"),
     Var("energy_error", "max |E(t)/E(0) - 1| over the history times and the end",
         lambda r: r.energy_error, symbol=r"$|\Delta E/E|$"),
     Var("angular_momentum_error", "max |J(t) - J(0)| / max(|J(0)|, 1) over the same times",

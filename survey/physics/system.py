@@ -26,6 +26,7 @@ from .forces import (
     vec,
 )
 from .geometry import cross
+from .portable import power, vnorm
 from .jit import helper, kernel, leaf
 from .terms import (
     AREA,
@@ -152,6 +153,26 @@ class System:
 
     def centre_of_mass(self, y):
         return centre_of_mass(self.masses, self.split(y)[0])
+
+    @property
+    def homogeneity(self) -> float | None:
+        """The degree k of a potential homogeneous in the positions (every term of the same
+        degree), or None."""
+        degrees = {t.degree for t in self.terms}
+        return degrees.pop() if len(degrees) == 1 else None
+
+    def scale_free_energy(self, y) -> float:
+        """E |J|^(-2k/(k+2)) for a potential homogeneous of degree k (k != -2; else NaN, as
+        where J = 0): q -> s q, p -> s^(k/2) p, t -> s^(1-k/2) t maps orbits to orbits with
+        E -> s^k E and J -> s^(1+k/2) J, so the shapes' dynamics depends on E and J only
+        through this combination -- an energy axis at other J is not a new parameter.
+        Powers by portable.power: the same bits on every machine."""
+        k = self.homogeneity
+        J = self.angular_momentum(y)
+        J = float(abs(J)) if self.dim == 2 else float(vnorm(np.asarray(J, dtype=float)))
+        if k is None or k == -2.0 or not J > 0.0:
+            return math.nan
+        return float(self.energy(y)) * float(power(J, -2.0 * k / (k + 2.0)))
 
     def moment_of_inertia(self, y):
         """Moment of inertia about the centre of mass, sum m_i |r_i - R|^2."""

@@ -174,6 +174,21 @@ class Potential:
             p = np.array([p[0], -1.0])
         return p
 
+    @property
+    def degree(self) -> float | None:
+        """k if the term is homogeneous in the positions, U(s q) = s^k U(q), else None (a
+        logarithm, a screening length, a barrier or a well sets a scale)."""
+        if self.profile != POWER and self.measure != TRIANGLE:
+            return None
+        if self.measure == TRIANGLE:
+            return -9.0                         # (r_ij r_jk r_ki)^-3
+        if self.name == "gravity":
+            return -1.0
+        k = float(self.params[self.param_names.index("exponent")])
+        if k == 0.0:
+            return None                         # coupling ln x
+        return 2.0 * k if self.measure == AREA else k
+
     def describe(self) -> str:
         values = ", ".join(f"{k}={v:g}" for k, v in zip(self.param_names, self.params))
         weighted = ("" if term(self.name, self.kind).weighted or not self.mass_weighted

@@ -237,7 +237,8 @@ def _run(task: CellTask, system, events, starts, factor: int) -> list[CellResult
         results.append(CellResult(
             status=status, wall_time=0.0, n_steps=out.n_steps,
             n_rhs=out.n_rhs, start=y0, t_end=out.t, energy=system.energy(y0),
-            angular_momentum=system.angular_momentum(y0), energy_error=errors[0],
+            angular_momentum=system.angular_momentum(y0),
+            scale_free_energy=system.scale_free_energy(y0), energy_error=errors[0],
             angular_momentum_error=errors[1], indicators=ind_k, tori=evidence,
             n_crossings=out.n_crossings,
             crossing_time=out.crossings.t, crossing_state=out.crossings.y,

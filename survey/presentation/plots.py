@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.colors import BoundaryNorm, ListedColormap
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 from ..analysis.classify import stored_table
@@ -215,6 +216,7 @@ def regime_map(ds) -> Figure:
     counts = [(r, int(np.sum(regime == r))) for r in Regime]
     handles = [Patch(color=REGIME_COLOURS[r], label=f"{r.name.lower()} ({n})")
                for r, n in counts if n]
+    handles += _scale_free_lines(ds, ax, x, y)
     if doubt.any():
         handles.append(Patch(**UNCONFIRMED, label=f"not confirmed at the horizon before "
                                                   f"({int(doubt.sum())})"))
@@ -226,6 +228,21 @@ def regime_map(ds) -> Figure:
     hist.yaxis.tick_right()
     ax.set_title("regime of each cell", fontsize="medium")
     return fig
+
+
+def _scale_free_lines(ds, ax, x, y) -> list:
+    """On a map over energy of a homogeneous potential: dashed lines of equal
+    scale_free_energy, along which cells are one dynamics rescaled; their legend entry."""
+    if V.scale_free_energy not in ds or "energy" not in grid_axes(ds):
+        return []
+    eps = ds[V.scale_free_energy].values
+    if np.sum(np.isfinite(eps)) < 4 or np.nanmin(eps) == np.nanmax(eps):
+        return []
+    lines = ax.contour(x, y, eps.T, levels=6, colors="0.25", linewidths=0.7,
+                       linestyles="dashed")
+    ax.clabel(lines, fmt="%.3g", fontsize="x-small")
+    return [Line2D([], [], color="0.25", lw=0.7, ls="--",
+                   label="equal E |J|^(-2k/(k+2)):\none dynamics, rescaled")]
 
 
 def indicator_map(ds, name, cmap="viridis", clip=None, log=False, overlay=False) -> Figure:

@@ -82,6 +82,7 @@ def markdown(ds, figure_names=(), check=None) -> str:
             f"{integ.get('rtol', defaults.RTOL):g}, atol = {integ.get('atol', defaults.ATOL):g}; "
             f"chaos indicators {', '.join(which)}; torus analysis every "
             f"{tori.get('sample_interval', defaults.SAMPLE_INTERVAL):g} time units.",
+            *_scale_free(ds, axes),
             f"{PROVENANCE_LINE}{ds.attrs.get('version_survey', '?')}, commit "
             f"`{ds.attrs.get('git_commit', '?')}`; {ds.attrs.get('history', '')}.", ""]
 
@@ -114,6 +115,24 @@ def markdown(ds, figure_names=(), check=None) -> str:
     if figure_names:
         out += ["## Figures", ""] + [f"![{name}]({name})" for name in figure_names] + [""]
     return "\n".join(out)
+
+
+def _scale_free(ds, axes) -> list[str]:
+    """For a potential homogeneous of degree k, what the energy axis means: the dynamics of
+    a start depends on E and J only through E |J|^(-2k/(k+2))."""
+    if V.scale_free_energy not in ds or not np.isfinite(ds[V.scale_free_energy].values).any():
+        return []
+    eps = ds[V.scale_free_energy].values
+    line = (f"- Scale: the potential is homogeneous (degree k), so q -> s q, p -> s^(k/2) p, "
+            f"t -> s^(1-k/2) t maps orbits to orbits and a start's dynamics depends on E "
+            f"and J only through E |J|^(-2k/(k+2)) (`scale_free_energy`, here "
+            f"{np.nanmin(eps):.4g} to {np.nanmax(eps):.4g})")
+    if "energy" in axes:
+        line += ("; along each value of the other axes the energy axis is that one "
+                 "parameter: cells on a dashed line of the regime map are one dynamics "
+                 "rescaled, and the map is a one-parameter family per row, not two "
+                 "independent axes")
+    return [line + "."]
 
 
 def _horizons(ds, regime, steady, T) -> list[str]:

@@ -14,6 +14,7 @@ from survey.catalog.errors import ConfigError
 from survey.catalog.regimes import Regime
 from survey.cli import main, orbit_workflow
 from survey.pipeline import orbits
+from survey.pipeline.special import special_table
 from survey.pipeline.config import _to_toml, load_config
 from survey.pipeline.sweep import run_survey
 from survey.presentation import orbit_plots, plots, report
@@ -176,7 +177,7 @@ def miniature(path: Path, tmp: Path) -> dict:
 
 
 SURVEYS = [p for p in sorted((ROOT / "workflows").glob("*.toml"))
-           if not orbits.is_orbit_workflow(p)]
+           if not orbits.is_orbit_workflow(p) and not special_table(p)]
 
 
 @pytest.mark.parametrize("path", SURVEYS, ids=[p.stem for p in SURVEYS])
