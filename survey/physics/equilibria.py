@@ -260,12 +260,17 @@ def relative_equilibrium(system: System, start, angular_momentum: float | None =
     return found._replace(energy=float(system.energy(found.state(system))))
 
 
-def _rotations(xi, d):
-    """Orthonormal rows spanning the infinitesimal rotations of reduced positions xi."""
-    k = xi.size // d
+def _generators(d: int, k: int) -> list[np.ndarray]:
+    """The infinitesimal rotations of k vectors in d dimensions, as matrices on their
+    concatenation (one in the plane, three in space)."""
     gens = [np.array([[0.0, -1.0], [1.0, 0.0]])] if d == 2 else \
         [np.cross(np.eye(3)[a], -np.eye(3)) for a in range(3)]
-    return orthonormal(np.array([np.kron(np.eye(k), g) @ xi for g in gens]))
+    return [np.kron(np.eye(k), g) for g in gens]
+
+
+def _rotations(xi, d):
+    """Orthonormal rows spanning the infinitesimal rotations of reduced positions xi."""
+    return orthonormal(np.array([g @ xi for g in _generators(d, xi.size // d)]))
 
 
 def _newton(hess, grad, xi, d):
@@ -293,18 +298,13 @@ def linear_stability(system: System, positions, rotation_rate: float):
     xi = T.T @ (q.ravel() / w)
     _, H, _ = _reduced_potential(system, T, w, xi)
     n = xi.size
-    k = n // d
-    if d == 2:
-        gens = [np.array([[0.0, -1.0], [1.0, 0.0]])]
-    else:
-        gens = [np.cross(np.eye(3)[a], -np.eye(3)) for a in range(3)]
-    rot = np.kron(np.eye(k), np.array([[0.0, 1.0], [-1.0, 0.0]])) if d == 2 else np.zeros((n, n))
+    gens = _generators(d, n // d)
+    rot = gens[0].T if d == 2 else np.zeros((n, n))     # xi x eta = xi . rot eta
     S = np.block([[H, -rotation_rate * rot], [-rotation_rate * rot.T, np.eye(n)]])
     J = np.block([[np.zeros((n, n)), np.eye(n)], [-np.eye(n), np.zeros((n, n))]])
     A = J @ S
     eta = rotation_rate * rot.T @ xi            # the rotating frame's momenta at rest
-    zrot = [np.concatenate([np.kron(np.eye(k), g) @ xi, np.kron(np.eye(k), g) @ eta])
-            for g in gens]
+    zrot = [np.concatenate([g @ xi, g @ eta]) for g in gens]
     zrot = [z for z in zrot if np.linalg.norm(z) > 1e-12 * np.linalg.norm(xi)]
     W = nontrivial_subspace(A, zrot)
     AW = W.T @ A @ W

@@ -232,17 +232,22 @@ def regime_map(ds) -> Figure:
 
 def _scale_free_lines(ds, ax, x, y) -> list:
     """On a map over energy of a homogeneous potential: dashed lines of equal
-    scale_free_energy, along which cells are one dynamics rescaled; their legend entry."""
+    scale_free_energy, along which the cells' energy shells are one phase portrait rescaled
+    (their starts are different points of it); their legend entry."""
     if V.scale_free_energy not in ds or "energy" not in grid_axes(ds):
         return []
     eps = ds[V.scale_free_energy].values
     if np.sum(np.isfinite(eps)) < 4 or np.nanmin(eps) == np.nanmax(eps):
         return []
-    lines = ax.contour(x, y, eps.T, levels=6, colors="0.25", linewidths=0.7,
+    # levels at quantiles of the cells' values: lines where the cells are, not where the
+    # range is widest
+    levels = np.unique([float(f"{v:.2g}") for v in
+                        np.nanquantile(eps, np.linspace(0.08, 0.92, 7))])
+    lines = ax.contour(x, y, eps.T, levels=levels, colors="0.25", linewidths=0.7,
                        linestyles="dashed")
     ax.clabel(lines, fmt="%.3g", fontsize="x-small")
     return [Line2D([], [], color="0.25", lw=0.7, ls="--",
-                   label="equal E |J|^(-2k/(k+2)):\none dynamics, rescaled")]
+                   label="equal E |J|^(-2k/(k+2)):\nshells with one phase\nportrait, rescaled")]
 
 
 def indicator_map(ds, name, cmap="viridis", clip=None, log=False, overlay=False) -> Figure:

@@ -124,14 +124,15 @@ def _scale_free(ds, axes) -> list[str]:
         return []
     eps = ds[V.scale_free_energy].values
     line = (f"- Scale: the potential is homogeneous (degree k), so q -> s q, p -> s^(k/2) p, "
-            f"t -> s^(1-k/2) t maps orbits to orbits and a start's dynamics depends on E "
-            f"and J only through E |J|^(-2k/(k+2)) (`scale_free_energy`, here "
-            f"{np.nanmin(eps):.4g} to {np.nanmax(eps):.4g})")
+            f"t -> s^(1-k/2) t maps orbits to orbits: the energy shells (E, J) and (s^k E, "
+            f"s^(1+k/2) J) have one phase portrait, rescaled, and a start's dynamics depends "
+            f"on E and J only through E |J|^(-2k/(k+2)) and its place on that portrait "
+            f"(`scale_free_energy`, here {np.nanmin(eps):.4g} to {np.nanmax(eps):.4g})")
     if "energy" in axes:
-        line += ("; along each value of the other axes the energy axis is that one "
-                 "parameter: cells on a dashed line of the regime map are one dynamics "
-                 "rescaled, and the map is a one-parameter family per row, not two "
-                 "independent axes")
+        line += ("; so the energy axis also stands for the starts' size (another size at "
+                 "one energy gives no new orbits), and cells on one dashed line of the "
+                 "regime map lie on shells with the same phase portrait (at different "
+                 "starts)")
     return [line + "."]
 
 
