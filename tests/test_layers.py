@@ -171,6 +171,8 @@ NOT_VARIABLES = {
     ("pipeline/config.py", "resonance_order"): "the [tori] threshold",
     ("pipeline/cells.py", "resonance_order"): "the [tori] threshold",
     ("pipeline/archive.py", "status"): "the git command",
+    ("presentation/plots.py", "energy"): "the [initial] energy axis of a map",
+    ("presentation/report.py", "energy"): "the [initial] energy axis of a map",
     ("pipeline/special.py", "energy"): "an [equilibria] / [periodic] key and a JSON field",
     ("pipeline/special.py", "angular_momentum"): "an [equilibria] key and a JSON field",
     ("pipeline/special.py", "initial_state"): "a JSON field of `periodic --json`",

@@ -140,13 +140,19 @@ def print_equilibria(path, as_json_text: bool = False) -> int:
     return 0
 
 
-def find_periodic(path) -> tuple[System, dict, PeriodicOrbit]:
+def load_periodic(path) -> tuple[System, np.ndarray, dict]:
+    """(system, start state, the [periodic] table)."""
     system, start, table = _load(path, "periodic", PERIODIC)
     if table["period"] is None:
         raise ConfigError("[periodic].period", "is required: a guess of the period")
     if table["rotating"] and system.dim != 2:
         raise ConfigError("[periodic].rotating", "relative periodic orbits are found in the "
                                                  "plane ([system] dim = 2)")
+    return system, start, table
+
+
+def find_periodic(path) -> tuple[System, dict, PeriodicOrbit]:
+    system, start, table = load_periodic(path)
     try:
         orbit = periodic_orbit(system, start, table["period"], table["rotating"],
                                table["energy"], table["tol"])

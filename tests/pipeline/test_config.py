@@ -199,11 +199,15 @@ def test_the_readme_tables_are_the_declarations():
 def test_shipped_workflows_and_the_embedded_default_validate():
     import pathlib
     root = pathlib.Path(__file__).parents[2]
-    from survey.pipeline import orbits
+    from survey.pipeline import orbits, special
     paths = sorted((root / "workflows").glob("*.toml")) + [root / "survey" / "default.toml"]
     assert len(paths) >= 4
     for path in paths:
-        if orbits.is_orbit_workflow(path):
+        if special.special_table(path) == "equilibria":
+            assert special.load_equilibria(path)
+        elif special.special_table(path) == "periodic":
+            assert special.load_periodic(path)
+        elif orbits.is_orbit_workflow(path):
             assert orbits.load_workflow(path)
         else:
             assert load_config(path).n_cells >= 1
