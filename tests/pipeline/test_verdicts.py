@@ -78,7 +78,8 @@ def test_the_onset_cells_that_turn_chaotic_by_4t_are_never_regular_and_stable(tm
 def test_the_equilateral_familys_frequencies_are_three_continuous_curves(tmp_path):
     """Along delta in [0.25, 4] the labelled shape frequencies vary continuously (no jump
     between neighbours, no sign) and start at the rotating triangle's linearised normal
-    modes 2 Omega, Omega (1 +- 1/sqrt 2) over 2 pi (Omega = 3)."""
+    modes 2 Omega, Omega (1 +- 1/sqrt 2) over 2 pi (Omega = 3) -- the closed form, and the
+    modes `relative_equilibrium` finds for the delta = 0 start."""
     ds = run({"survey": {"name": "eq", "output": str(tmp_path / "eq.nc")},
               "initial": {"family": "equilateral",
                           "delta": {"start": 0.25, "stop": 4.0, "num": 16}},
@@ -92,6 +93,16 @@ def test_the_equilateral_familys_frequencies_are_three_continuous_curves(tmp_pat
     omega = 3.0
     modes = np.array([2 * omega, omega * (1 + 2 ** -0.5), omega * (1 - 2 ** -0.5)]) / (2 * np.pi)
     np.testing.assert_allclose(nu[0], modes, rtol=2e-3)
+    # and to the normal modes survey computes for the relative equilibrium at delta = 0
+    from survey.physics.equilibria import relative_equilibrium
+    from survey.physics.families import initial_state
+    from survey.physics.system import System
+    system = System.create()
+    start = initial_state(system, "equilateral", delta=0.0)
+    eq = relative_equilibrium(system, system.split(start)[0],
+                              angular_momentum=float(system.angular_momentum(start)))
+    np.testing.assert_allclose(np.sort(nu[0]), eq.frequencies, rtol=2e-3)
+    np.testing.assert_allclose(eq.frequencies, np.sort(modes), rtol=1e-10)
 
 
 def test_a_check_run_states_the_claims_at_another_seed_and_ensemble(tmp_path, capsys):
