@@ -279,7 +279,8 @@ def _survey(config, command, summary=False, write_report=True, **kw) -> Path:
 
 def _equilibria(args):
     from .pipeline.special import print_equilibria
-    return print_equilibria(args.config, args.json)
+    return print_equilibria(args.config, args.json, args.output,
+                            "python -m survey " + " ".join(sys.argv[1:]))
 
 
 def _periodic(args):
@@ -342,6 +343,7 @@ def build_parser():
                                           "with their linear stability; table [equilibria]")
     e.add_argument("config", help="TOML file: [system], one [initial] start, [equilibria]")
     e.add_argument("--json", action="store_true", help="print the numbers as JSON")
+    e.add_argument("--output", help="with [equilibria] parameter: write the family (NetCDF)")
     e.set_defaults(func=_equilibria)
     po = sub.add_parser("periodic", help="the periodic orbit (or relative periodic orbit) "
                                          "through a config's [initial] start, by Newton "

@@ -380,3 +380,45 @@ def _same(a: RelativeEquilibrium, b: RelativeEquilibrium) -> bool:
     da, db = _distances(a.positions), _distances(b.positions)
     return abs(a.energy - b.energy) <= 1e-7 * scale and \
         bool(np.all(np.abs(da - db) <= 1e-7 * np.max(da)))
+
+
+class Bifurcation(NamedTuple):
+    """Where a family's linear stability changes, located by bisection in its parameter."""
+
+    parameter: float
+    kind: str                 # what the unstable side has: a complex quartet (a Krein
+    #                           collision: Hamiltonian-Hopf) or a real pair
+
+
+def equilibrium_family(systems, start, values, angular_momentum: float | None = None,
+                       rotation_rate: float | None = None, tol: float = 1e-12):
+    """A family of relative equilibria along a parameter: `systems(p)` the System at each
+    value p of `values` (monotone), each member solved from the one before (natural-
+    parameter continuation; the first from positions `start`). Where the stability changes
+    between neighbours the change is bisected to `tol` relative. Returns (members,
+    bifurcations): [(p, RelativeEquilibrium)], [Bifurcation]."""
+    members = []
+    q = start
+    for p in values:
+        eq = relative_equilibrium(systems(p), q, angular_momentum, rotation_rate)
+        members.append((float(p), eq))
+        q = eq.positions
+    found = []
+    for (p0, a), (p1, b) in zip(members, members[1:]):
+        if a.stable == b.stable:
+            continue
+        lo, hi, q = p0, p1, a.positions
+        while abs(hi - lo) > tol * max(abs(lo), abs(hi), 1.0):
+            mid = 0.5 * (lo + hi)
+            eq = relative_equilibrium(systems(mid), q, angular_momentum, rotation_rate)
+            if eq.stable == a.stable:
+                lo, q = mid, eq.positions
+            else:
+                hi = mid
+        unstable = b if a.stable else a
+        lam = unstable.eigenvalues
+        off = np.abs(lam.real) > AXIS_TOLERANCE * _size(lam)
+        quartet = np.any(off & (np.abs(lam.imag) > AXIS_TOLERANCE * _size(lam)))
+        found.append(Bifurcation(0.5 * (lo + hi), "complex quartet (Krein collision)"
+                                 if quartet else "real pair"))
+    return members, found

@@ -19,7 +19,7 @@ from ..numerics.periodic import PeriodicOrbit, periodic_orbit
 from ..physics.equilibria import RelativeEquilibrium, relative_equilibria
 from ..physics.system import System
 from .cells import build_starts
-from .config import Key, _check, _decode, _suggest, validate
+from .config import Key, _check, _decode, _suggest, _to_toml, validate
 
 EQUILIBRIA = {
     "angular_momentum": Key("float", None, "angular momentum J of the rotation (in the "
@@ -29,6 +29,11 @@ EQUILIBRIA = {
     "starts": Key("int", 0, "seeded random configurations tried besides the start (the "
                             "start's size, normal about its centre)", low=0, high=10000),
     "seed": Key("int", 0, "seed of those configurations", low=0),
+    "parameter": Key("str", "", "continue the start's equilibrium in this parameter: "
+                                "mass_K (body K, from 0) or a potential parameter by its grid-"
+                                "axis name (<potential>_<parameter>); '' for none"),
+    "to": Key("float", None, "the parameter's last value (from its value in [system])"),
+    "steps": Key("int", 20, "members of the family after the first", low=1, high=100000),
 }
 
 
@@ -89,6 +94,107 @@ def load_equilibria(path) -> tuple[System, np.ndarray, dict]:
     return system, system.split(start)[0], table
 
 
+def _family_systems(config_system: dict, parameter: str):
+    """(p0, p -> System): the parameter's value in [system] and the System at another."""
+    from .build import build_system, term_axis_names
+    if parameter.startswith("mass_"):
+        masses = list(config_system["masses"] or [1.0] * config_system["bodies"])
+        k = parameter[5:]
+        if not k.isdigit() or int(k) >= len(masses):
+            raise ConfigError("[equilibria].parameter", f"{parameter!r}: give mass_K with K a "
+                                                        f"body from 0 to {len(masses) - 1}")
+        k = int(k)
+
+        def with_mass(p):
+            table = {**config_system, "masses": masses[:k] + [p] + masses[k + 1:]}
+            return build_system(table)
+        return float(masses[k]), with_mass
+    names = {name: (i, key) for i, axes in enumerate(term_axis_names(config_system))
+             for key, name in axes.items()}
+    if parameter not in names:
+        raise ConfigError("[equilibria].parameter", f"{parameter!r} is neither mass_K nor a "
+                                                    "parameter of the system's terms ("
+                          + ", ".join(sorted(names)) + ")")
+    p0 = build_system(config_system).terms[names[parameter][0]]
+    value = dict(zip(p0.param_names, p0.params))[names[parameter][1]]
+    return float(value), lambda p: build_system(config_system, {parameter: p})
+
+
+def continue_equilibria(path):
+    """The family of the start's relative equilibrium along [equilibria] parameter, from its
+    value in [system] to `to` in `steps` steps: (system table, table, members,
+    bifurcations)."""
+    from ..physics.equilibria import equilibrium_family
+    system, start, table = load_equilibria(path)
+    raw = tomllib.loads(Path(path).read_text())
+    raw.pop("equilibria", None)
+    config_system = validate(raw, _to_toml(raw), str(path), check_output=False).tables["system"]
+    if table["to"] is None:
+        raise ConfigError("[equilibria].to", "is required with a parameter: its last value")
+    p0, systems = _family_systems(config_system, table["parameter"])
+    try:
+        members, found = equilibrium_family(
+            systems, start, np.linspace(p0, table["to"], table["steps"] + 1),
+            table["angular_momentum"], table["rotation_rate"])
+    except ValueError as exc:
+        raise SurveyError(f"{path}: the family breaks off: {exc}") from None
+    return table, members, found
+
+
+def family_text(table: dict, members, found) -> str:
+    name = table["parameter"]
+    lines = [f"Family along {name} ({len(members)} members):", "",
+             f"| {name} | E | J | Omega | stable | largest growth rate |",
+             "| --- | --- | --- | --- | --- | --- |"]
+    for p, e in members:
+        rate = max([z.real for z in e.eigenvalues], default=0.0)
+        lines.append(f"| {p:.6g} | {e.energy:.8g} | {e.angular_momentum:.8g} | "
+                     f"{e.rotation_rate:.8g} | {'yes' if e.stable else 'no'} | "
+                     f"{rate if not e.stable else 0.0:.4g} |")
+    lines += [""] + ([f"Stability changes at {name} = {b.parameter:.10g}: {b.kind} on the "
+                      "unstable side." for b in found] or ["The stability does not change."])
+    return "\n".join(lines)
+
+
+def write_family(path, table: dict, members, found, command: str) -> Path:
+    """The family as a labelled xarray Dataset in NetCDF (written atomically): per member
+    the parameter, E, J, Omega, the positions, the reduced eigenvalues and the stability;
+    the bifurcations and the config text as attributes."""
+    import xarray as xr
+
+    from .archive import git_commit, machine, versions
+    out = Path(path)
+    n = max(e.eigenvalues.size for _, e in members)
+    lam = np.full((len(members), n), np.nan + 0j)
+    for i, (_, e) in enumerate(members):
+        lam[i, :e.eigenvalues.size] = e.eigenvalues
+    ds = xr.Dataset(
+        {"energy": ("member", [e.energy for _, e in members], {"long_name": "energy"}),
+         "angular_momentum": ("member", [e.angular_momentum for _, e in members],
+                              {"long_name": "angular momentum"}),
+         "rotation_rate": ("member", [e.rotation_rate for _, e in members],
+                           {"long_name": "rotation rate Omega"}),
+         "positions": (("member", "body", "axis"), np.array([e.positions for _, e in members]),
+                       {"long_name": "positions at t = 0, centre of mass at the origin"}),
+         "eigenvalue_real": (("member", "eigenvalue"), lam.real,
+                             {"long_name": "reduced linearisation's eigenvalues, real part"}),
+         "eigenvalue_imag": (("member", "eigenvalue"), lam.imag,
+                             {"long_name": "reduced linearisation's eigenvalues, imaginary "
+                                           "part"}),
+         "stable": ("member", np.array([e.stable for _, e in members], dtype=np.int8),
+                    {"long_name": "1 where every reduced eigenvalue is on the imaginary axis"})},
+        coords={table["parameter"]: ("member", [p for p, _ in members])},
+        attrs={"title": f"relative equilibria along {table['parameter']}",
+               "bifurcations": "; ".join(f"{b.parameter!r}: {b.kind}" for b in found),
+               "history": command, "git_commit": git_commit(), "machine": machine(),
+               **{f"version_{k}": v for k, v in versions().items()}})
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(f".{out.name}.partial")
+    ds.to_netcdf(tmp, engine="netcdf4")
+    tmp.replace(out)
+    return out
+
+
 def find_equilibria(path) -> tuple[System, dict, list[RelativeEquilibrium]]:
     system, start, table = load_equilibria(path)
     found = relative_equilibria(system, start, table["angular_momentum"],
@@ -133,7 +239,21 @@ def equilibria_text(system: System, table: dict, found: list[RelativeEquilibrium
     return "\n".join(lines)
 
 
-def print_equilibria(path, as_json_text: bool = False) -> int:
+def print_equilibria(path, as_json_text: bool = False, output=None,
+                     command: str = "python -m survey equilibria") -> int:
+    """The command: the equilibria found, or with [equilibria] parameter the family of the
+    start's one and where its stability changes (and --output, its archive)."""
+    if load_equilibria(path)[2]["parameter"]:
+        table, members, found = continue_equilibria(path)
+        if output:
+            print(f"wrote {write_family(output, table, members, found, command)}")
+        print(json.dumps({"family": equilibria_json([e for _, e in members])["equilibria"],
+                          table["parameter"]: [p for p, _ in members],
+                          "bifurcations": [b._asdict() for b in found]}, indent=1)
+              if as_json_text else family_text(table, members, found))
+        return 0
+    if output:
+        raise ConfigError("--output", "writes a family: give [equilibria] parameter and to")
     system, table, found = find_equilibria(path)
     print(json.dumps(equilibria_json(found), indent=1) if as_json_text else
           equilibria_text(system, table, found))
@@ -207,7 +327,9 @@ def write_report(path, folder) -> Path:
     """NAME.md in `folder` for a special-solution workflow: what it is (its config) and
     what was found, in the words the command prints."""
     path = Path(path)
-    if special_table(path) == "equilibria":
+    if special_table(path) == "equilibria" and load_equilibria(path)[2]["parameter"]:
+        text = family_text(*continue_equilibria(path))
+    elif special_table(path) == "equilibria":
         system, table, found = find_equilibria(path)
         text = equilibria_text(system, table, found)
     else:

@@ -9,7 +9,7 @@ import pytest
 
 from survey import integrate
 from survey.cli import main
-from survey.physics.equilibria import relative_equilibrium
+from survey.physics.equilibria import equilibrium_family, relative_equilibrium
 from survey.physics.system import System
 from survey.physics.terms import make_potential
 
@@ -125,4 +125,62 @@ def test_equilibria_command(tmp_path, capsys):
     cfg.write_text('[initial]\nfamily = "equilateral"\n[equilibria]\nstart = 6\n')
     assert main(["equilibria", str(cfg)]) == 2
     assert "[equilibria].start: unknown key (did you mean 'starts'?)" in \
+        capsys.readouterr().err
+
+
+def test_lagranges_family_loses_stability_where_routh_says():
+    """Continued in the second mass mu (masses 1, mu, 1e-4, rotation rate 1), Lagrange's
+    triangle is stable below Routh's root of 27 (mu + m3 + mu m3) = (1 + mu + m3)^2 and
+    unstable above it, where two elliptic modes of opposite Krein sign collide: the
+    bisection finds the root to 1e-9."""
+    m3 = 1e-4
+
+    def systems(mu):
+        return System(np.array([1.0, mu, m3]), 2, make_potential("gravity", {"G": 1.0},
+                                                                  "pair"))
+    members, found = equilibrium_family(systems, TRIANGLE, np.linspace(0.01, 0.06, 6),
+                                        rotation_rate=1.0)
+    # 27 (mu + m3 + mu m3) = (1 + mu + m3)^2: mu^2 + (2 (1 + m3) - 27 (1 + m3)) mu
+    # + (1 + m3)^2 - 27 m3 = 0, the smaller root
+    b = -25.0 * (1 + m3)
+    c = (1 + m3) ** 2 - 27 * m3
+    root = (-b - math.sqrt(b * b - 4 * c)) / 2
+    assert [eq.stable for _, eq in members] == [p < root for p, _ in members]
+    assert len(found) == 1
+    assert found[0].parameter == pytest.approx(root, abs=1e-9)
+    assert found[0].kind.startswith("complex quartet")
+    before = [eq for p, eq in members if p < root][-1]
+    assert sorted(before.krein[before.krein != 0]) == [-1, 1, 1]
+
+
+def test_equilibria_command_continues_a_family(tmp_path, capsys):
+    """[equilibria] parameter/to/steps: the family of the start's equilibrium, its table,
+    the stability change, and with --output a NetCDF family archive; a parameter the system
+    does not have is named."""
+    import xarray as xr
+    cfg = tmp_path / "routh.toml"
+    cfg.write_text('''
+[system]
+masses = [1.0, 0.01, 0.0001]
+interactions = [{kind = "pair", potential = "gravity", params = {G = 1.0}}]
+[initial]
+family = "explicit"
+positions = [[1.0, 0.0], [-0.5, 0.8660254037844386], [-0.5, -0.8660254037844386]]
+[equilibria]
+rotation_rate = 1.0
+parameter = "mass_1"
+to = 0.06
+steps = 5
+''')
+    out = tmp_path / "family.nc"
+    assert main(["equilibria", str(cfg), "--output", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "Stability changes at mass_1 = 0.03995987" in text and "Krein collision" in text
+    with xr.open_dataset(out) as ds:
+        assert ds.sizes["member"] == 6 and list(ds["stable"].values) == [1, 1, 1, 0, 0, 0]
+        np.testing.assert_allclose(ds["mass_1"].values, np.linspace(0.01, 0.06, 6))
+        assert ds.attrs["bifurcations"].startswith("0.03995987")
+    cfg.write_text(cfg.read_text().replace('"mass_1"', '"gravity_H"'))
+    assert main(["equilibria", str(cfg)]) == 2
+    assert "[equilibria].parameter: 'gravity_H' is neither mass_K nor a parameter" in \
         capsys.readouterr().err
