@@ -30,7 +30,8 @@ class PeriodicOrbit(NamedTuple):
     rotation: float           # angle the orbit returns rotated by (0: periodic)
     energy: float
     angular_momentum: float
-    return_error: float       # |y(T) - R y(0)| / |y(0)| with the final state
+    return_error: float       # |y(T) - R y(0)| / |y(0)| with the final state (or the
+    #                           pinned energy's and J's relative miss, if larger)
     residuals: np.ndarray     # the same before each Newton step, then after the last
     multipliers: np.ndarray   # non-trivial Floquet multipliers (complex), by angle
     monodromy: np.ndarray     # R^-1 dy(T)/dy(0) (n, n)
@@ -104,9 +105,10 @@ def periodic_orbit(system: System, guess, period: float, rotating: bool = False,
                    max_iter: int = 25) -> PeriodicOrbit:
     """The periodic orbit (relative periodic with `rotating`, planar systems, at the
     guess's angular momentum) near the state `guess` with period near `period`, by Newton
-    shooting at the guess's energy (or `energy`), its centre of mass at rest at the origin. Stops when the return
-    error is at the integrator's tolerance and no longer falls; raises ValueError if it
-    does not get there."""
+    shooting at the guess's energy (or `energy`), its centre of mass at rest at the origin.
+    Stops when the return error -- and the miss of the pinned energy (and J) -- is at the
+    integrator's tolerance and no longer falls; raises ValueError if it does not get
+    there."""
     if rotating and system.dim != 2:
         raise ValueError("relative periodic orbits are found in the plane (dim = 2)")
     n, d = system.n, system.dim
@@ -135,7 +137,12 @@ def periodic_orbit(system: System, guess, period: float, rotating: bool = False,
         yT, phi = _monodromy(system, y, T, tol)
         R = _rotation(system, theta) if rotating else np.eye(n)
         r = yT - R @ y
-        error = float(np.linalg.norm(r) / np.linalg.norm(y))
+        # the return error, and the pinned energy's (and a rotating orbit's J's) miss
+        pinned = abs(float(system.energy(y)) - energy) / max(abs(energy), 1.0)
+        if rotating:
+            pinned = max(pinned, abs(float(system.angular_momentum(y)) - spin)
+                         / max(abs(spin), 1.0))
+        error = max(float(np.linalg.norm(r) / np.linalg.norm(y)), pinned)
         residuals.append(error)
         if error <= 10 * tol or (error >= 0.5 * best and best <= 1e3 * tol):
             break
@@ -188,3 +195,4 @@ def periodic_orbit(system: System, guess, period: float, rotating: bool = False,
     return PeriodicOrbit(y, T, theta, energy,
                          float(system.angular_momentum(y)) if d == 2 else 0.0, residuals[-1],
                          np.array(residuals), mu, M)
+

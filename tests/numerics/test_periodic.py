@@ -123,3 +123,15 @@ period = 6.33
     cfg.write_text(cfg.read_text().replace("period = 6.33", "perod = 6.33"))
     assert main(["periodic", str(cfg)]) == 2
     assert "[periodic].perod: unknown key (did you mean 'period'?)" in capsys.readouterr().err
+
+
+def test_a_given_energy_is_met_even_from_a_periodic_guess():
+    """Shot from a converged orbit at another energy, the result has that energy (a guess
+    that already returns must not end the iteration)."""
+    system = System.create(potential="areal_barrier")
+    y0 = initial_state(system, "equilateral", side=math.sqrt(3), delta=0.0, energy=8.0)
+    orbit = periodic_orbit(system, y0, 1.5, rotating=True)
+    near = periodic_orbit(system, orbit.state, orbit.period, rotating=True, energy=7.9)
+    assert float(system.energy(near.state)) == pytest.approx(7.9, rel=1e-12)
+    assert near.return_error < 1e-12 and near.period != orbit.period
+    assert near.angular_momentum == pytest.approx(orbit.angular_momentum, rel=1e-12)
