@@ -16,7 +16,11 @@ import numpy as np
 
 from ..catalog.errors import ConfigError, SurveyError
 from ..numerics.periodic import PeriodicOrbit, periodic_orbit
-from ..physics.equilibria import RelativeEquilibrium, relative_equilibria
+from ..physics.equilibria import (
+    RelativeEquilibrium,
+    relative_equilibria,
+    relative_equilibrium,
+)
 from ..physics.system import System
 from .cells import build_starts
 from .config import Key, _check, _decode, _suggest, _to_toml, validate
@@ -342,4 +346,39 @@ def write_report(path, folder) -> Path:
     tmp = out.with_name(f".{out.name}.tmp")
     tmp.write_text(body)
     tmp.replace(out)
+    return out
+
+
+def equilibrium_cells(ds, most: int = 8) -> list[dict]:
+    """The relative equilibria at an archive's `equilibrium` cells (at most `most`), each
+    solved again from the cell's start at its J, with its stability and normal modes: what
+    the report sets beside the family's frequencies. Cells where the solver finds none are
+    left out."""
+    from ..catalog.regimes import Regime
+    from ..catalog.variables import V
+    from .config import parse_config
+    if V.regime not in ds or V.initial_state not in ds:
+        return []
+    cells = np.argwhere(ds[V.regime].values == Regime.EQUILIBRIUM)[:most]
+    if not cells.size:
+        return []
+    config = parse_config(ds.attrs["config"], check_output=False)
+    axes = list(ds[V.status].dims)
+    out = []
+    for idx in map(tuple, cells):
+        system = config.system(int(np.ravel_multi_index(idx, config.shape)) if idx else 0)
+        start = ds[V.initial_state].values[idx]
+        spin = float(ds[V.angular_momentum].values[idx]) if system.dim == 2 else 0.0
+        try:
+            eq = relative_equilibrium(system, system.split(start)[0], angular_momentum=spin)
+        except (ValueError, np.linalg.LinAlgError):
+            continue
+        out.append({"cell": ", ".join(f"{a}={float(ds[a].values[i]):g}"
+                                      for a, i in zip(axes, idx)), "index": idx,
+                    "rotation_rate": eq.rotation_rate, "stable": eq.stable,
+                    "frequencies": eq.frequencies.tolist(),
+                    "krein": [int(k) for k in eq.krein if k],
+                    "rates": sorted((float(z.real) for z in eq.eigenvalues if z.real > 1e-7
+                                     * max(float(np.abs(eq.eigenvalues).max()), 1.0)),
+                                    reverse=True)})
     return out

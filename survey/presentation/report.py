@@ -29,15 +29,17 @@ def without_provenance(text: str) -> str:
                      if not line.startswith(PROVENANCE_LINE))
 
 
-def write(ds, folder, stem: str | None = None, figures: bool = True, check=None) -> Path:
+def write(ds, folder, stem: str | None = None, figures: bool = True, check=None,
+          special=()) -> Path:
     """Write STEM_report.md and its figures into `folder`; returns the report's path.
     check: the archive of the survey's [check] run (another seed and ensemble size), whose
-    claims the report states beside its own."""
+    claims the report states beside its own. special: the relative equilibria at its
+    equilibrium cells (pipeline.special.equilibrium_cells), set beside the family."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     stem = stem or Path(ds.encoding.get("source", "survey")).stem
     figs = plots.save(plots.figures(ds), folder, stem) if figures else []
-    text = markdown(ds, [p.name for p in figs], check)
+    text = markdown(ds, [p.name for p in figs], check, special)
     path = folder / f"{stem}_report.md"
     tmp = path.with_name(f".{path.name}.tmp")
     tmp.write_text(text)
@@ -45,7 +47,7 @@ def write(ds, folder, stem: str | None = None, figures: bool = True, check=None)
     return path
 
 
-def markdown(ds, figure_names=(), check=None) -> str:
+def markdown(ds, figure_names=(), check=None, special=()) -> str:
     config = tomllib.loads(ds.attrs.get("config", ""))
     axes = list(ds[V.status].dims)
     regime = ds[V.regime].values
@@ -109,6 +111,7 @@ def markdown(ds, figure_names=(), check=None) -> str:
     out += _onsets(ds, axes, regime, check)
     out += _second_run(ds, check, regime)
     out += _tori_table(ds, axes, regime)
+    out += _special(ds, special, regime)
     out += _agreement(ds, th)
     out += _thresholds(th)
     out += _quality(ds)
@@ -445,6 +448,40 @@ def _tori_table(ds, axes, regime, rows: int = 15) -> list[str]:
             np.zeros(len(freq))
         out += _twist(ds[axes[0]].values, freq, noise, names, axes[0])
     return out
+
+
+def _special(ds, special, regime) -> list[str]:
+    """The relative equilibria at the family's equilibrium cells with their normal modes,
+    beside the labelled shape frequencies of the nearest regular cell along a single axis
+    (where the family's tori start)."""
+    if not special:
+        return []
+    out = ["## Special solutions in this family", "",
+           "Each equilibrium cell solved again as a relative equilibrium at its J "
+           "(`python -m survey equilibria`): its stability in the reduced space and its "
+           "normal modes in the rotating frame (cycles per unit time; Krein sign)."]
+    axes = list(ds[V.status].dims)
+    for s in special:
+        modes = ", ".join(f"{f:.6g} ({'+' if k > 0 else '-'})"
+                          for f, k in zip(s["frequencies"], s["krein"])) or "none"
+        line = (f"- {s['cell']}: rotating at Omega = {s['rotation_rate']:.6g}, "
+                + ("linearly stable" if s["stable"] else "unstable (growth rates "
+                   + ", ".join(f"{r:.4g}" for r in s["rates"]) + ")")
+                + f"; normal modes {modes}")
+        if len(axes) == 1 and V.frequency_labelled in ds:
+            names = [str(n) for n in ds["fundamental_name"].values]
+            shape = [c for c, n in enumerate(names) if n.startswith("shape")]
+            nu_all = np.abs(ds[V.frequency_labelled].values[:, shape])
+            regular = np.flatnonzero(np.isin(regime, REGULAR)
+                                     & np.all(np.isfinite(nu_all), axis=1))
+            if regular.size:
+                near = regular[np.argmin(np.abs(regular - s["index"][0]))]
+                nu = nu_all[near]
+                line += (f". The nearest regular cell, {axes[0]} = "
+                         f"{float(ds[axes[0]].values[near]):g}, has shape frequencies "
+                         + ", ".join(f"{v:.6g}" for v in sorted(nu)))
+        out.append(line + ".")
+    return out + [""]
 
 
 def _relabel(m, raw, labelled):

@@ -73,3 +73,23 @@ def test_special_solutions_get_their_regime(tmp_path, text, regime):
         nu = np.abs(ds.frequency.values.ravel())
         shape = np.sort(nu[np.isfinite(nu)][:-1])
         np.testing.assert_allclose(shape, [2 / 6.32591398, 3 / 6.32591398], rtol=1e-6)
+
+
+def test_the_report_sets_the_equilibrium_beside_the_family(tmp_path):
+    """A scan from delta = 0: the report solves the equilibrium cell again as a relative
+    equilibrium -- stable, the closed-form modes -- and quotes the nearest regular cell's
+    shape frequencies beside them (they agree to ~1e-4 at delta = 0.1)."""
+    from survey.pipeline.special import equilibrium_cells
+    from survey.presentation import report
+    cfg = tmp_path / "scan.toml"
+    cfg.write_text(ROTATING.format(out=tmp_path / "scan.nc").replace(
+        "delta = 0.0", "delta = [0.0, 0.1]"))
+    ds = run(cfg, workers=1, progress=False)
+    special = equilibrium_cells(ds)
+    assert [s["cell"] for s in special] == ["delta=0"] and special[0]["stable"]
+    modes = 3.0 * np.array([1 - 2 ** -0.5, 1 + 2 ** -0.5, 2.0]) / (2 * np.pi)
+    np.testing.assert_allclose(special[0]["frequencies"], modes, rtol=1e-10)
+    text = report.markdown(ds, special=special)
+    assert "## Special solutions in this family" in text
+    assert "delta=0: rotating at Omega = 3, linearly stable; normal modes 0.139846 (-)" in text
+    assert "The nearest regular cell, delta = 0.1, has shape frequencies 0.1398" in text
