@@ -150,6 +150,19 @@ class RelativeEquilibrium(NamedTuple):
         on_axis = (lam.imag > 0) & (np.abs(lam.real) <= AXIS_TOLERANCE * _size(lam))
         return np.sort(lam.imag[on_axis]) / (2 * np.pi)
 
+    @property
+    def unstable(self) -> np.ndarray:
+        """The eigenvalues off the imaginary axis with a positive real part: the modes that
+        grow, fastest first."""
+        lam = self.eigenvalues
+        grow = lam[lam.real > AXIS_TOLERANCE * _size(lam)]
+        return grow[np.argsort(-grow.real)]
+
+    @property
+    def rates(self) -> list[float]:
+        """How fast nearby motions leave: the real parts of `unstable`."""
+        return [float(z.real) for z in self.unstable]
+
     def state(self, system: System) -> np.ndarray:
         """The inertial-frame state at t = 0: positions, momenta m Omega e_z x q."""
         q = self.positions

@@ -537,6 +537,22 @@ def _axis(where: str, value) -> np.ndarray | None:
     return arr
 
 
+def check_table(table: str, keys: dict[str, Key], given) -> dict:
+    """One table's values checked against its Keys, defaults filled in; an unknown key is
+    named with the nearest known one ([initial] also holds family parameters, checked
+    later)."""
+    if not isinstance(given, dict):
+        raise ConfigError(f"[{table}]", "must be a table")
+    if table == "initial":
+        given = {k: v for k, v in given.items() if k in keys}
+    extra = sorted(set(given) - set(keys))
+    if extra:
+        raise ConfigError(f"[{table}].{extra[0]}", "unknown key" + _suggest(extra[0], keys)
+                          + f"; keys of [{table}] are {', '.join(keys)}")
+    return {key: (given[key] if spec.kind == "axis" else _check(table, key, spec, given[key]))
+            if key in given else spec.default for key, spec in keys.items()}
+
+
 def validate(raw: dict, text: str, where: str = "<config>", check_output: bool = True) -> Config:
     """Check every table and key; fill defaults; build the grid. Raises ConfigError."""
     unknown = sorted(set(raw) - set(SCHEMA))
@@ -550,25 +566,7 @@ def validate(raw: dict, text: str, where: str = "<config>", check_output: bool =
     tables: dict[str, dict] = {}
     initial_raw = raw.get("initial", {})
     for table, keys in SCHEMA.items():
-        given = raw.get(table, {})
-        if not isinstance(given, dict):
-            raise ConfigError(f"[{table}]", "must be a table")
-        if table == "initial":
-            given = {k: v for k, v in given.items() if k in keys}
-        else:
-            extra = sorted(set(given) - set(keys))
-            if extra:
-                raise ConfigError(f"[{table}].{extra[0]}", "unknown key"
-                                  + _suggest(extra[0], keys)
-                                  + f"; keys of [{table}] are {', '.join(keys)}")
-        body = {}
-        for key, spec in keys.items():
-            if key in given:
-                body[key] = _check(table, key, spec, given[key]) if spec.kind != "axis" \
-                    else given[key]
-            else:
-                body[key] = spec.default
-        tables[table] = body
+        tables[table] = check_table(table, keys, raw.get(table, {}))
     tables["section_enabled"] = "section" in raw
     tables["check_enabled"] = "check" in raw
     _validate_names(tables)

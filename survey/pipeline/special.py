@@ -23,7 +23,7 @@ from ..physics.equilibria import (
 )
 from ..physics.system import System
 from .cells import build_starts
-from .config import Key, _check, _decode, _suggest, _to_toml, validate
+from .config import Key, _decode, check_table, validate
 
 EQUILIBRIA = {
     "angular_momentum": Key("float", None, "angular momentum J of the rotation (in the "
@@ -51,8 +51,8 @@ PERIODIC = {
 
 
 def _load(path, name: str, keys: dict):
-    """(system, start state, the [name] table with defaults filled in) from a config
-    file; ConfigError naming the key for anything wrong."""
+    """(config without the [name] table, start state, the [name] table with defaults
+    filled in) from a config file; ConfigError naming the key for anything wrong."""
     path = Path(path)
     try:
         text = _decode(path.read_bytes(), str(path))
@@ -62,15 +62,7 @@ def _load(path, name: str, keys: dict):
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(str(path), f"not valid TOML ({exc}); fix the syntax") from None
-    given = raw.pop(name, {})
-    if not isinstance(given, dict):
-        raise ConfigError(f"[{name}]", "must be a table")
-    extra = sorted(set(given) - set(keys))
-    if extra:
-        raise ConfigError(f"[{name}].{extra[0]}", "unknown key" + _suggest(extra[0], keys)
-                          + f"; keys of [{name}] are {', '.join(keys)}")
-    table = {k: _check(name, k, spec, given[k]) if k in given else spec.default
-             for k, spec in keys.items()}
+    table = check_table(name, keys, raw.pop(name, {}))
     config = validate(raw, text, str(path), check_output=False)
     if config.n_cells != 1:
         raise ConfigError("[initial]", f"has a grid of {config.n_cells} starts; give the one "
@@ -78,12 +70,13 @@ def _load(path, name: str, keys: dict):
     start = build_starts(config)[0]
     if np.isnan(start[0]):
         raise ConfigError("[initial]", "the start is inaccessible at this energy")
-    return config.system(), start, table
+    return config, start, table
 
 
 def load_equilibria(path) -> tuple[System, np.ndarray, dict]:
     """(system, start positions (N, d), the [equilibria] table)."""
-    system, start, table = _load(path, "equilibria", EQUILIBRIA)
+    config, start, table = _load(path, "equilibria", EQUILIBRIA)
+    system = config.system()
     if table["angular_momentum"] is not None and table["rotation_rate"] is not None:
         raise ConfigError("[equilibria]", "give angular_momentum or rotation_rate, not both")
     spin = table["angular_momentum"] if table["angular_momentum"] is not None \
@@ -130,9 +123,7 @@ def continue_equilibria(path):
     bifurcations)."""
     from ..physics.equilibria import equilibrium_family
     system, start, table = load_equilibria(path)
-    raw = tomllib.loads(Path(path).read_text())
-    raw.pop("equilibria", None)
-    config_system = validate(raw, _to_toml(raw), str(path), check_output=False).tables["system"]
+    config_system = _load(path, "equilibria", EQUILIBRIA)[0].tables["system"]
     if table["to"] is None:
         raise ConfigError("[equilibria].to", "is required with a parameter: its last value")
     p0, systems = _family_systems(config_system, table["parameter"])
@@ -151,10 +142,9 @@ def family_text(table: dict, members, found) -> str:
              f"| {name} | E | J | Omega | stable | largest growth rate |",
              "| --- | --- | --- | --- | --- | --- |"]
     for p, e in members:
-        rate = max([z.real for z in e.eigenvalues], default=0.0)
         lines.append(f"| {p:.6g} | {e.energy:.8g} | {e.angular_momentum:.8g} | "
                      f"{e.rotation_rate:.8g} | {'yes' if e.stable else 'no'} | "
-                     f"{rate if not e.stable else 0.0:.4g} |")
+                     f"{max(e.rates, default=0.0):.4g} |")
     lines += [""] + ([f"Stability changes at {name} = {b.parameter:.10g}: {b.kind} on the "
                       "unstable side." for b in found] or ["The stability does not change."])
     return "\n".join(lines)
@@ -227,8 +217,6 @@ def equilibria_text(system: System, table: dict, found: list[RelativeEquilibrium
         dist = np.linalg.norm(e.positions[i] - e.positions[j], axis=1)
         modes = ", ".join(f"{f:.10g} ({'+' if s > 0 else '-'})" for f, s in zip(
             e.frequencies, e.krein[e.krein != 0])) or "none"
-        unstable = [z for z in e.eigenvalues if z.real > 0 and
-                    abs(z.real) > 1e-7 * max(np.abs(e.eigenvalues).max(), 1.0)]
         lines += ["", f"{k + 1}. E = {e.energy:.10g}, J = {e.angular_momentum:.10g}, "
                       f"Omega = {e.rotation_rate:.10g}: "
                       + ("linearly stable" if e.stable else "unstable"),
@@ -236,10 +224,10 @@ def equilibria_text(system: System, table: dict, found: list[RelativeEquilibrium
                                                      zip(i, j, dist)),
                   f"   normal modes in the rotating frame (cycles per unit time, Krein "
                   f"sign): {modes}"]
-        if unstable:
+        if e.unstable.size:
             lines.append("   growth rates: " + ", ".join(
                 f"{z.real:.10g}" + (f" +- {abs(z.imag):.6g} i" if abs(z.imag) > 1e-12 else "")
-                for z in unstable))
+                for z in e.unstable))
     return "\n".join(lines)
 
 
@@ -266,7 +254,8 @@ def print_equilibria(path, as_json_text: bool = False, output=None,
 
 def load_periodic(path) -> tuple[System, np.ndarray, dict]:
     """(system, start state, the [periodic] table)."""
-    system, start, table = _load(path, "periodic", PERIODIC)
+    config, start, table = _load(path, "periodic", PERIODIC)
+    system = config.system()
     if table["period"] is None:
         raise ConfigError("[periodic].period", "is required: a guess of the period")
     if table["rotating"] and system.dim != 2:
@@ -378,7 +367,5 @@ def equilibrium_cells(ds, most: int = 8) -> list[dict]:
                     "rotation_rate": eq.rotation_rate, "stable": eq.stable,
                     "frequencies": eq.frequencies.tolist(),
                     "krein": [int(k) for k in eq.krein if k],
-                    "rates": sorted((float(z.real) for z in eq.eigenvalues if z.real > 1e-7
-                                     * max(float(np.abs(eq.eigenvalues).max()), 1.0)),
-                                    reverse=True)})
+                    "rates": eq.rates})
     return out
