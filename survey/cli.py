@@ -289,7 +289,8 @@ def _equilibria(args):
 
 def _periodic(args):
     from .pipeline.special import print_periodic
-    return print_periodic(args.config, args.json)
+    return print_periodic(args.config, args.json, args.output,
+                          "python -m survey " + " ".join(sys.argv[1:]))
 
 
 def _verify(args):
@@ -355,6 +356,7 @@ def build_parser():
                                          "[periodic]")
     po.add_argument("config", help="TOML file: [system], one [initial] start, [periodic]")
     po.add_argument("--json", action="store_true", help="print the numbers as JSON")
+    po.add_argument("--output", help="with [periodic] parameter: write the family (NetCDF)")
     po.set_defaults(func=_periodic)
     v = sub.add_parser("verify", help="recompute a sample of an archive's cells from its "
                                       "stored config and compare bit for bit")

@@ -1,5 +1,6 @@
 """results/ is what a reviewer reads first: every archive in it was written by the current
 code from the workflow file whose text it stores, with its report and figures beside it."""
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -35,6 +36,8 @@ def test_every_survey_workflow_has_its_archive_report_and_figures():
         if special_table(path):
             assert (RESULTS / f"{path.stem}.md").exists(), path.stem
             assert f"{path.stem}" in (RESULTS / "README.md").read_text()
+            if "parameter" in tomllib.loads(path.read_text()).get("periodic", {}):
+                assert (RESULTS / f"{path.stem}.png").exists(), path.stem  # its diagram
             continue
         if orbits.is_orbit_workflow(path):
             for spec in orbits.load_workflow(path):

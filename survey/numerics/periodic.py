@@ -1,4 +1,4 @@
-"""Periodic orbits by Newton shooting, and their Floquet multipliers.
+"""Periodic orbits by Newton shooting, their Floquet multipliers, and their families.
 
 A periodic orbit y(T) = y(0) -- or a relative periodic orbit, which returns rotated by an
 angle theta (periodic in a rotating frame; three bodies breathing while they turn) -- is
@@ -7,17 +7,23 @@ Hamiltonian system with symmetries pinned rather than left to least squares: the
 along the orbit (the correction is orthogonal to the flow), the energy (held at the
 guess's or a given value), the angular momentum of a relative periodic orbit (the
 guess's; a periodic one's is its own: another J turns it), the centre of mass and total
-momentum (zero), and the orientation (no correction along a rotation). The Jacobian is the monodromy matrix from
-the variational equations -- the orbit with its full tangent block, every vector in the
-error control -- so the iteration converges quadratically.
+momentum (zero), and the orientation (no correction along a rotation). The Jacobian is the
+monodromy matrix from the variational equations -- the orbit with its full tangent block,
+every vector in the error control -- so the iteration converges quadratically.
+
+A family is followed by pseudo-arclength continuation in the energy or a parameter of the
+system, the same equations bordered by the parameter's column and the arclength; where the
+parameter turns (a fold) or multipliers leave or join the unit circle (through +1, -1 or
+in a Krein collision), the point is bisected along the arclength. A Lyapunov family starts
+from a normal mode of an elliptic relative equilibrium.
 """
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Callable, NamedTuple
 
 import numpy as np
 
-from ..physics.equilibria import nontrivial_subspace
+from ..physics.equilibria import Bifurcation, RelativeEquilibrium, nontrivial_subspace
 from ..physics.system import System, rhs
 from .integrate import integrate
 
@@ -42,6 +48,11 @@ class PeriodicOrbit(NamedTuple):
         return bool(np.all(np.abs(np.abs(self.multipliers) - 1.0) <= UNIT_CIRCLE))
 
     @property
+    def on_circle(self) -> int:
+        """How many non-trivial multipliers lie on the unit circle."""
+        return int(np.sum(np.abs(np.abs(self.multipliers) - 1.0) <= UNIT_CIRCLE))
+
+    @property
     def kind(self) -> str:
         """elliptic (all on the unit circle), hyperbolic (a real pair off it, mu > 0),
         inverse hyperbolic (mu < 0) or complex unstable (a quartet off it)."""
@@ -59,6 +70,22 @@ class PeriodicOrbit(NamedTuple):
         orbits leave it."""
         mu = self.multipliers
         return np.sort(np.log(np.abs(mu[np.abs(mu) > 1.0 + UNIT_CIRCLE])))[::-1] / self.period
+
+    @property
+    def indices(self) -> np.ndarray:
+        """Henon's stability index b = (mu + 1/mu) / 2, one per reciprocal pair (complex
+        for a quartet), ascending: |b| <= 1 on the unit circle, b = 1 and b = -1 where a pair
+        passes through +1 (tangent, fold or branch) or -1 (period doubling)."""
+        b = (self.multipliers + 1.0 / self.multipliers) / 2.0
+        b = b[np.lexsort((b.imag, b.real))]
+        return b[::2]
+
+    @property
+    def residues(self) -> np.ndarray:
+        """Greene's residue R = (2 - mu - 1/mu) / 4 = (1 - b) / 2 per pair: 0 < R < 1
+        elliptic, R < 0 hyperbolic, R > 1 inverse hyperbolic. For a two-degree-of-freedom
+        subsystem (the isosceles plane) its pair's R is the classical residue."""
+        return (1.0 - self.indices) / 2.0
 
 
 def _rotation(system: System, theta: float) -> np.ndarray:
@@ -90,14 +117,106 @@ def _gradients(system: System, y):
     return grad_h, np.concatenate([-G @ p, G @ q])
 
 
-def _monodromy(system: System, y, period, tol):
-    """(y(T), dy(T)/dy(0)) from the orbit with its full tangent block."""
-    out = integrate(system, y, period, tangents=np.eye(system.n), rtol=tol, atol=tol,
-                    control_tangents=True, renorm_interval=2.0 * abs(period) + 1.0)
+def _centre(system: System) -> np.ndarray:
+    """Rows whose product with a state is its centre of mass and total momentum."""
+    n, d = system.n, system.dim
+    nq = n // 2
+    m = np.repeat(system.masses, d)
+    rows = np.zeros((2 * d, n))
+    for k in range(d):
+        rows[k, k:nq:d] = m[k::d] / m.sum()
+        rows[d + k, nq + k::d] = 1.0
+    return rows
+
+
+def _return(system, y, period, tol, tangents=True):
+    """(y(T), dy(T)/dy(0)) from the orbit with its full tangent block (or y(T) alone)."""
+    out = integrate(system, y, period, tangents=np.eye(system.n) if tangents else None,
+                    rtol=tol, atol=tol, control_tangents=tangents,
+                    renorm_interval=2.0 * abs(period) + 1.0)
     if not out.ok:
         raise ValueError(f"the orbit from the guess did not reach t = {period:g} "
                          f"({out.status.name.lower()})")
-    return out.y, out.deviations.T
+    return (out.y, out.deviations.T) if tangents else out.y
+
+
+class _Shooting(NamedTuple):
+    """What the shooting equations hold fixed: the orbit returns rotated (`rotating`) or
+    not; its energy (None: the energy is the continuation parameter) and, rotating, J."""
+
+    rotating: bool
+    energy: float | None
+    spin: float
+    tol: float
+
+    def equations(self, system: System, y, T, theta, p=None, tangents=True):
+        """(F, A, error, Phi): the residuals -- return, phase, energy, orientation, J,
+        centre -- their Jacobian in (y, T[, theta]) and the relative error; Phi the
+        monodromy. The phase and orientation rows are local (the correction is orthogonal
+        to the flow and to a rotation), so their residual is zero."""
+        n, d = system.n, system.dim
+        energy = p if self.energy is None else self.energy
+        R = _rotation(system, theta) if self.rotating else np.eye(n)
+        if tangents:
+            yT, phi = _return(system, y, T, self.tol)
+        else:
+            yT, phi = _return(system, y, T, self.tol, tangents=False), None
+        r = yT - R @ y
+        e = float(system.energy(y))
+        F = [r, [0.0, e - energy]]
+        errors = [np.linalg.norm(r) / np.linalg.norm(y), abs(e - energy) / max(abs(energy), 1.0)]
+        if d == 2:
+            F.append([0.0])
+            if self.rotating:
+                j = float(system.angular_momentum(y))
+                F.append([j - self.spin])
+                errors.append(abs(j - self.spin) / max(abs(self.spin), 1.0))
+        C = _centre(system)
+        F.append(C @ y)
+        F = np.concatenate(F)
+        if not tangents:
+            return F, None, max(errors), None
+        f0, fT = _flow(system, y), _flow(system, yT)
+        grad_h, grad_l = _gradients(system, y)
+        cols = [phi - R, fT[:, None]]
+        if self.rotating:
+            cols.append((-_generator(system) @ R @ y)[:, None])
+        top = np.hstack(cols)
+        rows = [f0, grad_h]
+        if d == 2:
+            rows.append(_generator(system) @ y)
+            if self.rotating:
+                rows.append(grad_l)
+        rows += list(C)
+        pad = np.zeros((len(rows), top.shape[1] - n))
+        A = np.vstack([top, np.hstack([np.array(rows), pad])])
+        return F, A, max(errors), phi
+
+    def orbit(self, system: System, y, T, theta, phi, residuals) -> PeriodicOrbit:
+        """The converged orbit with its non-trivial multipliers: the monodromy restricted
+        to the symplectic complement of the trivial pairs (the flow with the energy, a
+        rotation with J, the centre of mass with the momentum)."""
+        n, d = system.n, system.dim
+        nq = n // 2
+        R = _rotation(system, theta) if self.rotating else np.eye(n)
+        M = R.T @ phi
+        internal = np.linalg.svd(_centre(system))[2][2 * d:].T
+        J = np.block([[np.zeros((nq, nq)), np.eye(nq)], [-np.eye(nq), np.zeros((nq, nq))]])
+        known = [internal.T @ _flow(system, y)]
+        if d == 2:
+            known.append(internal.T @ _generator(system) @ y)
+        Mi = internal.T @ M @ internal
+        W = nontrivial_subspace(Mi - np.eye(Mi.shape[0]), known, internal.T @ J @ internal)
+        mu = np.linalg.eigvals(W.T @ Mi @ W)
+        mu = mu[np.lexsort((np.abs(mu), np.angle(mu)))]
+        return PeriodicOrbit(y, T, theta, float(system.energy(y)),
+                             float(system.angular_momentum(y)) if d == 2 else 0.0,
+                             residuals[-1], np.array(residuals), mu, M)
+
+
+def _converged(error, best, tol) -> bool:
+    """At the integrator's tolerance, or no longer falling near it."""
+    return error <= 10 * tol or (error >= 0.5 * best and best <= 1e3 * tol)
 
 
 def periodic_orbit(system: System, guess, period: float, rotating: bool = False,
@@ -113,61 +232,28 @@ def periodic_orbit(system: System, guess, period: float, rotating: bool = False,
         raise ValueError("relative periodic orbits are found in the plane (dim = 2)")
     n, d = system.n, system.dim
     nq = n // 2
-    m = np.repeat(system.masses, d)
     y = np.array(guess, dtype=float)
     q, p = y[:nq].reshape(-1, d), y[nq:].reshape(-1, d)
     q = q - np.sum(system.masses[:, None] * q, axis=0) / system.masses.sum()
     p = p - system.masses[:, None] * np.sum(p, axis=0) / system.masses.sum()
     y = np.concatenate([q.ravel(), p.ravel()])
     energy = float(system.energy(y)) if energy is None else float(energy)
-    spin = float(system.angular_momentum(y)) if d == 2 else 0.0   # pinned if rotating
+    shooting = _Shooting(rotating, energy, float(system.angular_momentum(y)) if d == 2
+                         else 0.0, tol)
     T, theta = float(period), 0.0
-    # the centre of mass and the total momentum, held at zero
-    centre = np.zeros((2 * d, n))
-    for k in range(d):
-        centre[k, k:nq:d] = m[k::d] / m.sum()
-        centre[d + k, nq + k::d] = 1.0
-    residuals = []
-    best = np.inf
     if rotating:    # the angle that best turns the guess's return onto its start
-        yT = _monodromy(system, y, T, tol)[0]
+        yT = _return(system, y, T, tol, tangents=False)
         z0, zT = y[0::2] + 1j * y[1::2], yT[0::2] + 1j * yT[1::2]
         theta = float(np.angle(np.sum(np.conj(z0) * zT)))
+    residuals = []
+    best = np.inf
     for _ in range(max_iter):
-        yT, phi = _monodromy(system, y, T, tol)
-        R = _rotation(system, theta) if rotating else np.eye(n)
-        r = yT - R @ y
-        # the return error, and the pinned energy's (and a rotating orbit's J's) miss
-        pinned = abs(float(system.energy(y)) - energy) / max(abs(energy), 1.0)
-        if rotating:
-            pinned = max(pinned, abs(float(system.angular_momentum(y)) - spin)
-                         / max(abs(spin), 1.0))
-        error = max(float(np.linalg.norm(r) / np.linalg.norm(y)), pinned)
+        F, A, error, phi = shooting.equations(system, y, T, theta)
         residuals.append(error)
-        if error <= 10 * tol or (error >= 0.5 * best and best <= 1e3 * tol):
+        if _converged(error, best, tol):
             break
         best = min(best, error)
-        f0, fT = _flow(system, y), _flow(system, yT)
-        grad_h, grad_l = _gradients(system, y)
-        cols = [phi - R, fT[:, None]]
-        if rotating:
-            cols.append((-_generator(system) @ R @ y)[:, None])
-        top = np.hstack(cols)
-        extra = top.shape[1] - n
-        rows = [np.hstack([f0, np.zeros(extra)]),                  # phase
-                np.hstack([grad_h, np.zeros(extra)])]              # energy
-        rhs_extra = [0.0, energy - float(system.energy(y))]
-        if d == 2:      # a periodic orbit's J is its own; a rotating one's is pinned
-            rows.append(np.hstack([_generator(system) @ y, np.zeros(extra)]))  # orientation
-            rhs_extra.append(0.0)
-            if rotating:
-                rows.append(np.hstack([grad_l, np.zeros(extra)]))  # angular momentum
-                rhs_extra.append(spin - float(system.angular_momentum(y)))
-        rows += [np.hstack([c, np.zeros(extra)]) for c in centre]
-        rhs_extra += [0.0] * len(centre)
-        A = np.vstack([top, np.array(rows)])
-        b = np.concatenate([-r, rhs_extra])
-        step = np.linalg.lstsq(A, b, rcond=1e-14)[0]
+        step = np.linalg.lstsq(A, -F, rcond=1e-14)[0]
         step *= min(1.0, 0.2 * T / max(abs(step[n]), 1e-300))   # T moves by 20% at most
         y = y + step[:n]
         T += step[n]
@@ -179,20 +265,197 @@ def periodic_orbit(system: System, guess, period: float, rotating: bool = False,
     if residuals[-1] > 1e4 * tol:
         raise ValueError(f"no periodic orbit near the guess: Newton shooting stalled at a "
                          f"return error of {residuals[-1]:.1e}")
-    R = _rotation(system, theta) if rotating else np.eye(n)
-    M = R.T @ phi
-    # the motions of the centre of mass are a symplectic pair of invariant planes; their
-    # complement, where the centre stays at rest at the origin, is `internal`
-    internal = np.linalg.svd(centre)[2][2 * d:].T
-    J = np.block([[np.zeros((nq, nq)), np.eye(nq)], [-np.eye(nq), np.zeros((nq, nq))]])
-    known = [internal.T @ _flow(system, y)]
-    if d == 2:
-        known.append(internal.T @ _generator(system) @ y)
-    Mi = internal.T @ M @ internal
-    W = nontrivial_subspace(Mi - np.eye(Mi.shape[0]), known, internal.T @ J @ internal)
-    mu = np.linalg.eigvals(W.T @ Mi @ W)
-    mu = mu[np.lexsort((np.abs(mu), np.angle(mu)))]
-    return PeriodicOrbit(y, T, theta, energy,
-                         float(system.angular_momentum(y)) if d == 2 else 0.0, residuals[-1],
-                         np.array(residuals), mu, M)
+    return shooting.orbit(system, y, T, theta, phi, residuals)
 
+
+def lyapunov_start(system: System, eq: RelativeEquilibrium, mode: int,
+                   amplitude: float = 1e-3):
+    """(state, period) to start the Lyapunov family of normal mode `mode` (1: the lowest
+    frequency of eq.frequencies) of an elliptic relative equilibrium: the equilibrium's
+    state displaced along the mode's eigenvector by `amplitude` times its size, and the
+    mode's period in the rotating frame. The linearisation is that of H - Omega L in the
+    frame rotating with it, which coincides with the inertial one at t = 0; the mode is
+    symplectically orthogonal to the rotation, so J moves only at second order."""
+    f = eq.frequencies
+    if not 1 <= mode <= f.size:
+        raise ValueError(f"mode {mode}: the equilibrium has {f.size} normal modes on the "
+                         f"imaginary axis (1 to {f.size})")
+    n, d = system.n, system.dim
+    nq = n // 2
+    q = eq.positions
+    hess = _hessian(system, q)
+    B = np.kron(np.eye(system.n_bodies), np.array([[0.0, 1.0], [-1.0, 0.0]])) if d == 2 \
+        else np.zeros((nq, nq))
+    S = np.block([[hess, -eq.rotation_rate * B],
+                  [-eq.rotation_rate * B.T, np.diag(1.0 / np.repeat(system.masses, d))]])
+    J = np.block([[np.zeros((nq, nq)), np.eye(nq)], [-np.eye(nq), np.zeros((nq, nq))]])
+    lam, vec = np.linalg.eig(J @ S)
+    k = int(np.argmin(np.abs(lam - 2j * np.pi * f[mode - 1])))
+    v = vec[:, k] * np.exp(-1j * np.angle(vec[np.argmax(np.abs(vec[:nq, k])), k]))
+    v = v.real
+    size = np.max(np.linalg.norm(q - q.mean(axis=0), axis=1))
+    v *= amplitude * size / np.max(np.abs(v[:nq]))
+    return eq.state(system) + v, 1.0 / f[mode - 1]
+
+
+def _hessian(system: System, q):
+    from ..physics.equilibria import forces
+    return forces(system, q, hessian=True)[1]
+
+
+class Family(NamedTuple):
+    """A family of periodic orbits along a parameter, and where it bifurcates."""
+
+    parameters: np.ndarray            # the parameter per member
+    members: list[PeriodicOrbit]
+    bifurcations: list[Bifurcation]   # folds and multipliers leaving or joining the circle
+    complete: bool                    # reached the end value
+
+
+def periodic_family(systems: Callable[[float], System], orbit: PeriodicOrbit, p0: float,
+                    to: float, steps: int = 20, rotating: bool = False,
+                    energy_parameter: bool = False, tol: float = 1e-13,
+                    bisect: float = 1e-9, max_members: int = 1000) -> Family:
+    """The family of `orbit` (a periodic orbit of systems(p0)) followed by pseudo-arclength
+    continuation from p0 to `to`: p the energy (`energy_parameter`; systems ignores it) or a
+    parameter of the system at fixed energy. Unknowns (y, T[, theta], p) scaled by |y|, T,
+    1 and |to - p0|; the arclength step advances the parameter by 1 / steps of the span
+    (the state by at most 10%), halved where the corrector fails, the tangent turns by
+    more than 10 degrees or a stability index moves by more than 0.1 (signs of a jump to
+    a crossing branch). Folds (the tangent's parameter component changes sign) and changes
+    of the number of multipliers on the unit circle are bisected along the arclength to
+    `bisect` of |to - p0|. Stops at `to` (a last member solved there; complete), or at
+    max_members, or where the family has turned back and run 2 |to - p0| past p0."""
+    n = orbit.state.size
+    extra = 2 if rotating else 1
+    shooting = _Shooting(rotating, None if energy_parameter else orbit.energy,
+                         orbit.angular_momentum, tol)
+    span = abs(to - p0)
+    if span == 0:
+        raise ValueError("the family's end value equals its start")
+    scale = np.concatenate([np.full(n, np.linalg.norm(orbit.state)), [orbit.period],
+                            [1.0] * (extra - 1), [span]])
+
+    def pack(o, p):
+        return np.concatenate([o.state, [o.period], [o.rotation] * (extra - 1), [p]]) / scale
+
+    def solve(x, t_row, target, max_iter=10):
+        """Newton on the bordered equations from scaled x with the extra row
+        t_row . x = target; (orbit, x, A) or None."""
+        residuals, best = [], np.inf
+        for _ in range(max_iter):
+            y, T, p = x[:n] * scale[:n], x[n] * scale[n], x[-1] * scale[-1]
+            theta = x[n + 1] if rotating else 0.0
+            try:
+                system = systems(p)
+                F, A, error, phi = shooting.equations(system, y, T, theta, p)
+                if energy_parameter:
+                    col = np.zeros(F.size)
+                    col[n + 1] = -1.0
+                else:
+                    h = 1e-7 * max(abs(p), 1.0)
+                    col = (shooting.equations(systems(p + h), y, T, theta, p,
+                                              tangents=False)[0] - F) / h
+            except ValueError:
+                return None
+            residuals.append(error)
+            if _converged(error, best, tol):
+                if error > 1e4 * tol:
+                    return None
+                o = shooting.orbit(system, y, T, theta, phi, residuals)
+                return o, x, np.hstack([A, col[:, None]]) * scale
+            if error > 10 * best:
+                return None
+            best = min(best, error)
+            As = np.hstack([A, col[:, None]]) * scale
+            full = np.vstack([As, t_row])
+            rhs_ = np.concatenate([-F, [target - t_row @ x]])
+            x = x + np.linalg.lstsq(full, rhs_, rcond=1e-14)[0]
+        return None
+
+    def tangent(As, previous):
+        t = np.linalg.svd(As)[2][-1]
+        return -t if t @ previous < 0 else t
+
+    direction = np.zeros(n + extra + 1)
+    direction[-1] = np.sign(to - p0)
+    first = solve(pack(orbit, p0), direction, direction @ pack(orbit, p0))
+    if first is None:
+        raise ValueError("the start does not converge as a member of the family")
+    o, x0, As = first
+    t = tangent(As, direction)
+    members = [(o, x0, t)]
+    ds = nominal = 1.0 / steps
+    complete = False
+    while len(members) < max_members and abs(members[-1][1][-1] - x0[-1]) <= 2.0:
+        o, x, t = members[-1]
+        found = solve(x + ds * t, t, t @ x + ds)
+        if found is None:
+            ds /= 2
+            if ds < 1e-4 * nominal:
+                break
+            continue
+        o2, x2, As2 = found
+        t2 = tangent(As2, t)
+        # a step whose chord or new tangent turns from the tangent by more than 10 degrees,
+        # or that moves a stability index by more than 0.1, may have jumped to another
+        # branch (they cross where multipliers pass +1): halve it
+        moved = np.max(np.abs(o2.indices - o.indices), initial=0.0) \
+            if o2.indices.size == o.indices.size else np.inf
+        chord = (x2 - x) / max(np.linalg.norm(x2 - x), 1e-300)
+        if (min(t2 @ t, chord @ t) < np.cos(np.radians(10.0)) or moved > 0.1) and \
+                ds > 1e-3 * nominal:
+            ds /= 2
+            continue
+        p_prev, p_new = x[-1] * scale[-1], x2[-1] * scale[-1]
+        if (p_new - to) * (p_prev - to) <= 0:     # passed the end: solve there
+            row = np.zeros(x.size)
+            row[-1] = 1.0
+            last = solve(x + (to / scale[-1] - x[-1]) / t[-1] * t
+                         if abs(t[-1]) > 0.1 else x2, row, to / scale[-1])
+            if last is not None:
+                members.append((last[0], last[1], tangent(last[2], t)))
+                complete = True
+            break
+        members.append((o2, x2, t2))
+        # the next step: the parameter advances by 1 / steps of the span where the family
+        # runs along it, the state by at most 10%
+        ds = min(nominal / max(abs(t2[-1]), 1e-3), 0.1, 2 * ds)
+
+    found = []
+    tests = {"fold": lambda o, t: bool(t[-1] > 0), "circle": lambda o, t: o.on_circle}
+    for (a, xa, ta), (b, xb, tb) in zip(members, members[1:]):
+        for kind, test in tests.items():
+            if test(a, ta) == test(b, tb):
+                continue
+            lo, hi = 0.0, ta @ (xb - xa)
+            ends = [xa, xb]     # the solutions nearest the point on either side
+            while hi - lo > bisect:
+                mid = 0.5 * (lo + hi)
+                got = solve(xa + mid * ta, ta, ta @ xa + mid)
+                if got is None:
+                    break
+                side = int(test(got[0], tangent(got[2], ta)) != test(a, ta))
+                ends[side] = got[1]
+                lo, hi = (mid, hi) if side == 0 else (lo, mid)
+            at = 0.5 * (ends[0] + ends[1]) * scale
+            found.append(Bifurcation(float(at[-1]), "fold" if kind == "fold" else
+                                     _crossing(a, b), float(at[n])))
+    return Family(np.array([x[-1] * scale[-1] for _, x, _ in members]),
+                  [o for o, _, _ in members], found, complete)
+
+
+def _crossing(a: PeriodicOrbit, b: PeriodicOrbit) -> str:
+    """How multipliers leave (or join) the unit circle between members a and b: the kind
+    of stability index off the band |b| <= 1 that one has more of than the other -- a
+    complex index (a quartet: a Krein collision), b > 1 (a pair through +1) or b < -1
+    (through -1: period doubling). The members, not the bisection's last orbits, decide:
+    right at the point the multipliers are a double eigenvalue, known to sqrt(eps)."""
+    def counts(o):
+        idx = o.indices
+        real = np.abs(idx.imag) <= UNIT_CIRCLE
+        return np.array([np.sum(~real), np.sum(real & (idx.real > 1)),
+                         np.sum(real & (idx.real < -1))])
+    more = np.abs(counts(a) - counts(b))
+    return ["Krein collision (complex quartet)", "through +1",
+            "period doubling (through -1)"][int(np.argmax(more))]

@@ -396,11 +396,14 @@ def _same(a: RelativeEquilibrium, b: RelativeEquilibrium) -> bool:
 
 
 class Bifurcation(NamedTuple):
-    """Where a family's linear stability changes, located by bisection in its parameter."""
+    """Where a family's linear stability changes (or, for periodic orbits, its parameter
+    turns back), located by bisection."""
 
     parameter: float
     kind: str                 # what the unstable side has: a complex quartet (a Krein
-    #                           collision: Hamiltonian-Hopf) or a real pair
+    #                           collision: Hamiltonian-Hopf) or a real pair; for a periodic
+    #                           family also a fold, or where multipliers leave the circle
+    period: float = float("nan")   # a periodic family's period there
 
 
 def equilibrium_family(systems, start, values, angular_momentum: float | None = None,

@@ -15,7 +15,13 @@ from pathlib import Path
 import numpy as np
 
 from ..catalog.errors import ConfigError, SurveyError
-from ..numerics.periodic import PeriodicOrbit, periodic_orbit
+from ..numerics.periodic import (
+    Family,
+    PeriodicOrbit,
+    lyapunov_start,
+    periodic_family,
+    periodic_orbit,
+)
 from ..physics.equilibria import (
     RelativeEquilibrium,
     relative_equilibria,
@@ -42,11 +48,23 @@ EQUILIBRIA = {
 
 
 PERIODIC = {
-    "period": Key("float", None, "the period's guess (required)", "time", above=0),
+    "period": Key("float", None, "the period's guess (required unless mode)", "time", above=0),
     "rotating": Key("bool", False, "a relative periodic orbit: it returns rotated (the plane)"),
     "energy": Key("float", None, "the energy to find it at (default: the start's)", "energy"),
     "tol": Key("float", 1e-13, "rtol = atol of the shooting's integrations", low=2.2e-15,
                high=1e-6),
+    "mode": Key("int", 0, "start the Lyapunov family of this normal mode (1: the lowest "
+                          "frequency) of the relative equilibrium found from the [initial] "
+                          "start's positions at its J; period and rotating follow; 0: none",
+                low=0, high=1000),
+    "amplitude": Key("float", 1e-3, "the mode's displacement, relative to the equilibrium's "
+                                    "size", above=0, high=0.5),
+    "parameter": Key("str", "", "continue the orbit in 'energy' (J held) or a parameter of "
+                                "the system at fixed energy: mass_K (body K, from 0) or a "
+                                "potential parameter by its grid-axis name; '' for none"),
+    "to": Key("float", None, "the parameter's last value"),
+    "steps": Key("int", 20, "arclength steps from the start to `to` where the family runs "
+                            "along the parameter (more where it bends)", low=1, high=100000),
 }
 
 
@@ -91,15 +109,15 @@ def load_equilibria(path) -> tuple[System, np.ndarray, dict]:
     return system, system.split(start)[0], table
 
 
-def _family_systems(config_system: dict, parameter: str):
+def _family_systems(config_system: dict, parameter: str, table: str = "equilibria"):
     """(p0, p -> System): the parameter's value in [system] and the System at another."""
     from .build import build_system, term_axis_names
     if parameter.startswith("mass_"):
         masses = list(config_system["masses"] or [1.0] * config_system["bodies"])
         k = parameter[5:]
         if not k.isdigit() or int(k) >= len(masses):
-            raise ConfigError("[equilibria].parameter", f"{parameter!r}: give mass_K with K a "
-                                                        f"body from 0 to {len(masses) - 1}")
+            raise ConfigError(f"[{table}].parameter", f"{parameter!r}: give mass_K with K a "
+                                                      f"body from 0 to {len(masses) - 1}")
         k = int(k)
 
         def with_mass(p):
@@ -109,9 +127,9 @@ def _family_systems(config_system: dict, parameter: str):
     names = {name: (i, key) for i, axes in enumerate(term_axis_names(config_system))
              for key, name in axes.items()}
     if parameter not in names:
-        raise ConfigError("[equilibria].parameter", f"{parameter!r} is neither mass_K nor a "
-                                                    "parameter of the system's terms ("
-                          + ", ".join(sorted(names)) + ")")
+        raise ConfigError(f"[{table}].parameter", f"{parameter!r} is neither "
+                          + ("energy, " if table == "periodic" else "") + "mass_K nor a "
+                          "parameter of the system's terms (" + ", ".join(sorted(names)) + ")")
     p0 = build_system(config_system).terms[names[parameter][0]]
     value = dict(zip(p0.param_names, p0.params))[names[parameter][1]]
     return float(value), lambda p: build_system(config_system, {parameter: p})
@@ -150,19 +168,15 @@ def family_text(table: dict, members, found) -> str:
     return "\n".join(lines)
 
 
-def write_family(path, table: dict, members, found, command: str) -> Path:
-    """The family as a labelled xarray Dataset in NetCDF (written atomically): per member
-    the parameter, E, J, Omega, the positions, the reduced eigenvalues and the stability;
-    the bifurcations and the config text as attributes."""
+def equilibrium_dataset(table: dict, members, found, config_text: str):
+    """A family of relative equilibria as a labelled xarray Dataset: per member the
+    parameter, E, J, Omega, the positions, the reduced eigenvalues and the stability."""
     import xarray as xr
-
-    from .archive import git_commit, machine, versions
-    out = Path(path)
     n = max(e.eigenvalues.size for _, e in members)
     lam = np.full((len(members), n), np.nan + 0j)
     for i, (_, e) in enumerate(members):
         lam[i, :e.eigenvalues.size] = e.eigenvalues
-    ds = xr.Dataset(
+    return xr.Dataset(
         {"energy": ("member", [e.energy for _, e in members], {"long_name": "energy"}),
          "angular_momentum": ("member", [e.angular_momentum for _, e in members],
                               {"long_name": "angular momentum"}),
@@ -176,12 +190,23 @@ def write_family(path, table: dict, members, found, command: str) -> Path:
                              {"long_name": "reduced linearisation's eigenvalues, imaginary "
                                            "part"}),
          "stable": ("member", np.array([e.stable for _, e in members], dtype=np.int8),
-                    {"long_name": "1 where every reduced eigenvalue is on the imaginary axis"})},
+                    {"long_name": "1 where every reduced eigenvalue is on the imaginary axis"}),
+         "bifurcation_parameter": ("bifurcation", [b.parameter for b in found],
+                                   {"long_name": f"{table['parameter']} where the stability "
+                                                 "changes"}),
+         "bifurcation_kind": ("bifurcation", np.array([b.kind for b in found], dtype=object))},
         coords={table["parameter"]: ("member", [p for p, _ in members])},
         attrs={"title": f"relative equilibria along {table['parameter']}",
-               "bifurcations": "; ".join(f"{b.parameter!r}: {b.kind}" for b in found),
-               "history": command, "git_commit": git_commit(), "machine": machine(),
-               **{f"version_{k}": v for k, v in versions().items()}})
+               "family": "equilibria", "config": config_text})
+
+
+def write_archive(ds, path, command: str) -> Path:
+    """A family's Dataset in NetCDF with its provenance (command, commit, machine,
+    versions), written atomically."""
+    from .archive import git_commit, machine, versions
+    out = Path(path)
+    ds = ds.assign_attrs(history=command, git_commit=git_commit(), machine=machine(),
+                         **{f"version_{k}": v for k, v in versions().items()})
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(f".{out.name}.partial")
     ds.to_netcdf(tmp, engine="netcdf4")
@@ -238,7 +263,8 @@ def print_equilibria(path, as_json_text: bool = False, output=None,
     if load_equilibria(path)[2]["parameter"]:
         table, members, found = continue_equilibria(path)
         if output:
-            print(f"wrote {write_family(output, table, members, found, command)}")
+            ds = equilibrium_dataset(table, members, found, Path(path).read_text())
+            print(f"wrote {write_archive(ds, output, command)}")
         print(json.dumps({"family": equilibria_json([e for _, e in members])["equilibria"],
                           table["parameter"]: [p for p, _ in members],
                           "bifurcations": [b._asdict() for b in found]}, indent=1)
@@ -252,20 +278,41 @@ def print_equilibria(path, as_json_text: bool = False, output=None,
     return 0
 
 
-def load_periodic(path) -> tuple[System, np.ndarray, dict]:
-    """(system, start state, the [periodic] table)."""
+def load_periodic(path):
+    """(config, system, start state, the [periodic] table with period and rotating filled
+    in). With `mode` the start is the Lyapunov family's first member: the relative
+    equilibrium from the [initial] start's positions at its J, displaced along the mode."""
     config, start, table = _load(path, "periodic", PERIODIC)
     system = config.system()
+    if table["mode"]:
+        spin = float(system.angular_momentum(start)) if system.dim == 2 else 0.0
+        try:
+            eq = relative_equilibrium(system, system.split(start)[0], angular_momentum=spin)
+            start, table["period"] = lyapunov_start(system, eq, table["mode"],
+                                                    table["amplitude"])
+        except ValueError as exc:
+            raise SurveyError(f"{path}: [periodic] mode = {table['mode']}: {exc}") from None
+        table["rotating"] = eq.rotation_rate != 0.0
+        table["krein"] = int(eq.krein[eq.eigenvalues.imag > 0][
+            np.argmin(np.abs(eq.eigenvalues[eq.eigenvalues.imag > 0].imag
+                             - 2 * np.pi / table["period"]))])
     if table["period"] is None:
-        raise ConfigError("[periodic].period", "is required: a guess of the period")
+        raise ConfigError("[periodic].period", "is required: a guess of the period (or a "
+                                               "normal mode to start from: mode)")
     if table["rotating"] and system.dim != 2:
         raise ConfigError("[periodic].rotating", "relative periodic orbits are found in the "
                                                  "plane ([system] dim = 2)")
-    return system, start, table
+    if table["parameter"] and table["to"] is None:
+        raise ConfigError("[periodic].to", "is required with a parameter: its last value")
+    if table["parameter"] == "energy" and table["energy"] is not None:
+        raise ConfigError("[periodic].energy", "the family runs in energy from the start's: "
+                                               "leave energy out, or continue in another "
+                                               "parameter")
+    return config, system, start, table
 
 
 def find_periodic(path) -> tuple[System, dict, PeriodicOrbit]:
-    system, start, table = load_periodic(path)
+    _, system, start, table = load_periodic(path)
     try:
         orbit = periodic_orbit(system, start, table["period"], table["rotating"],
                                table["energy"], table["tol"])
@@ -274,13 +321,42 @@ def find_periodic(path) -> tuple[System, dict, PeriodicOrbit]:
     return system, table, orbit
 
 
+def continue_periodic(path) -> tuple[System, dict, Family]:
+    """The family of the start's periodic orbit along [periodic] parameter to `to`."""
+    config, system, start, table = load_periodic(path)
+    _, _, orbit = find_periodic(path)
+    name = table["parameter"]
+    if name == "energy":
+        p0, systems = orbit.energy, lambda p: system
+        if table["mode"] and (table["to"] - p0) * table["krein"] < 0:
+            raise ConfigError("[periodic].to", f"mode {table['mode']}'s family leaves the "
+                              "equilibrium toward " + ("higher" if table["krein"] > 0 else
+                                                        "lower") + f" energy (its Krein sign "
+                              f"is {table['krein']:+d}): give to " +
+                              (">" if table["krein"] > 0 else "<") + f" {p0:.10g}")
+    else:
+        p0, systems = _family_systems(config.tables["system"], name, "periodic")
+    try:
+        family = periodic_family(systems, orbit, p0, table["to"], table["steps"],
+                                 table["rotating"], name == "energy", table["tol"])
+    except ValueError as exc:
+        raise SurveyError(f"{path}: the family does not start: {exc}") from None
+    return system, table, family
+
+
 def periodic_json(orbit: PeriodicOrbit) -> dict:
     return {"period": orbit.period, "rotation": orbit.rotation, "energy": orbit.energy,
             "angular_momentum": orbit.angular_momentum,
             "initial_state": orbit.state.tolist(), "return_error": orbit.return_error,
             "newton_residuals": orbit.residuals.tolist(),
             "multipliers": [[float(z.real), float(z.imag)] for z in orbit.multipliers],
-            "stable": orbit.stable, "kind": orbit.kind, "rates": orbit.rates.tolist()}
+            "stable": orbit.stable, "kind": orbit.kind, "rates": orbit.rates.tolist(),
+            "residues": [[float(z.real), float(z.imag)] for z in orbit.residues]}
+
+
+def _residues(orbit: PeriodicOrbit) -> str:
+    return ", ".join(f"{z.real:.9f}" if abs(z.imag) <= 1e-9 else f"{z.real:.6f} {z.imag:+.6f}i"
+                     for z in orbit.residues)
 
 
 def periodic_text(system: System, orbit: PeriodicOrbit) -> str:
@@ -295,11 +371,112 @@ def periodic_text(system: System, orbit: PeriodicOrbit) -> str:
                  f"{abs(z):.9f} {np.angle(z) / np.pi:+.6f}" for z in orbit.multipliers)
              + f": {orbit.kind}" + (", linearly stable." if orbit.stable else
                                     ", unstable; nearby orbits leave at rates " + ", ".join(
-                                        f"{r:.6g}" for r in orbit.rates) + " per unit time.")]
+                                        f"{r:.6g}" for r in orbit.rates) + " per unit time."),
+             f"Greene's residues R = (2 - mu - 1/mu) / 4, one per pair (0 < R < 1 elliptic): "
+             f"{_residues(orbit)}."]
     return "\n".join(lines)
 
 
-def print_periodic(path, as_json_text: bool = False) -> int:
+def periodic_family_text(system: System, table: dict, family: Family, rows: int = 40) -> str:
+    name = table["parameter"]
+    first = family.members[0]
+    start = (f"the Lyapunov family of normal mode {table['mode']} of the relative "
+             f"equilibrium" if table["mode"] else "the family of the start's orbit")
+    n = len(family.members)
+    shown = np.unique(np.round(np.linspace(0, n - 1, min(rows, n))).astype(int))
+    lines = [f"Periodic orbits of {system.n_bodies} bodies ({system.describe()}): {start}, "
+             f"followed in {name} by pseudo-arclength continuation"
+             + (f" at J = {first.angular_momentum:.10g}" if name == "energy" and
+                table["rotating"] else "")
+             + f": {n} members, " + ("reaching" if family.complete else "not reaching")
+             + f" {name} = {table['to']:g}" + ("" if family.complete else
+                                              " (it turns back, or breaks off)")
+             + ("" if len(shown) == n else f" (every {n / len(shown):.1f}th shown)") + ".", "",
+             f"| {name} | period | rotation | "
+             + ("" if name == "energy" else "E | ") + "kind | stability indices (mu + 1/mu)/2 |",
+             "| --- " * (5 if name == "energy" else 6) + "|"]
+    for i in shown:
+        o, p = family.members[i], family.parameters[i]
+        lines.append(f"| {p:.10g} | {o.period:.10g} | {o.rotation:.8g} | "
+                     + ("" if name == "energy" else f"{o.energy:.10g} | ") + f"{o.kind} | "
+                     + ", ".join(
+                         f"{b.real:.6f}" if abs(b.imag) <= 1e-9 else
+                         f"{b.real:.4f}{b.imag:+.4f}i" for b in o.indices) + " |")
+    lines += [""] + ([f"At {name} = {b.parameter:.10g}: {b.kind}." for b in
+                      family.bifurcations] or ["No fold, and no multiplier leaves or joins the "
+                                               "unit circle between members."])
+    return "\n".join(lines)
+
+
+def family_dataset(table: dict, family: Family, config_text: str):
+    """A periodic family as a labelled xarray Dataset: per member the parameter, period,
+    rotation, E, J, the initial state, the multipliers and stability indices, the kind."""
+    import xarray as xr
+    members = family.members
+    width = max(o.multipliers.size for o in members)
+    mu = np.full((len(members), width), np.nan + 0j)
+    b = np.full((len(members), width // 2), np.nan + 0j)
+    for i, o in enumerate(members):
+        mu[i, :o.multipliers.size] = o.multipliers
+        b[i, :o.indices.size] = o.indices
+    ds = xr.Dataset(
+        {"period": ("member", [o.period for o in members], {"long_name": "period"}),
+         "rotation": ("member", [o.rotation for o in members],
+                      {"long_name": "angle the orbit returns rotated by", "units": "rad"}),
+         "energy": ("member", [o.energy for o in members], {"long_name": "energy"}),
+         "angular_momentum": ("member", [o.angular_momentum for o in members],
+                              {"long_name": "angular momentum"}),
+         "return_error": ("member", [o.return_error for o in members],
+                          {"long_name": "relative return error of the converged orbit"}),
+         "initial_state": (("member", "component"), np.array([o.state for o in members]),
+                           {"long_name": "state at t = 0 (positions, then momenta)"}),
+         "multiplier_real": (("member", "multiplier"), mu.real,
+                             {"long_name": "non-trivial Floquet multipliers, real part"}),
+         "multiplier_imag": (("member", "multiplier"), mu.imag,
+                             {"long_name": "non-trivial Floquet multipliers, imaginary part"}),
+         "index_real": (("member", "pair"), b.real,
+                        {"long_name": "stability index (mu + 1/mu)/2, real part"}),
+         "index_imag": (("member", "pair"), b.imag,
+                        {"long_name": "stability index (mu + 1/mu)/2, imaginary part"}),
+         "stable": ("member", np.array([o.stable for o in members], dtype=np.int8),
+                    {"long_name": "1 where every non-trivial multiplier is on the unit "
+                                  "circle"}),
+         "kind": ("member", np.array([o.kind for o in members], dtype=object)),
+         "bifurcation_parameter": ("bifurcation", [f.parameter for f in family.bifurcations],
+                                   {"long_name": f"{table['parameter']} at a fold or where "
+                                                 "multipliers leave or join the unit circle"}),
+         "bifurcation_period": ("bifurcation", [f.period for f in family.bifurcations],
+                                {"long_name": "period there"}),
+         "bifurcation_kind": ("bifurcation", np.array([f.kind for f in family.bifurcations],
+                                                      dtype=object))},
+        attrs={"title": f"periodic orbits along {table['parameter']}",
+               "family": "periodic", "complete": int(family.complete),
+               "config": config_text})
+    # the parameter labels the members (in energy: the pinned value, not the measured one)
+    name = table["parameter"]
+    return ds.drop_vars(name, errors="ignore").assign_coords(
+        {name: ("member", family.parameters, {"long_name": name})})
+
+
+def print_periodic(path, as_json_text: bool = False, output=None,
+                   command: str = "python -m survey periodic") -> int:
+    """The command: the orbit found, or with [periodic] parameter its family (and
+    --output, the family's archive)."""
+    table = load_periodic(path)[3]
+    if table["parameter"]:
+        system, table, family = continue_periodic(path)
+        if output:
+            ds = family_dataset(table, family, Path(path).read_text())
+            print(f"wrote {write_archive(ds, output, command)}")
+        print(json.dumps({"family": [periodic_json(o) for o in family.members],
+                          table["parameter"]: family.parameters.tolist(),
+                          "complete": family.complete,
+                          "bifurcations": [f._asdict() for f in family.bifurcations]},
+                         indent=1) if as_json_text else
+              periodic_family_text(system, table, family))
+        return 0
+    if output:
+        raise ConfigError("--output", "writes a family: give [periodic] parameter and to")
     system, _, orbit = find_periodic(path)
     print(json.dumps(periodic_json(orbit), indent=1) if as_json_text else
           periodic_text(system, orbit))
@@ -318,23 +495,47 @@ def special_table(path) -> str | None:
 
 def write_report(path, folder) -> Path:
     """NAME.md in `folder` for a special-solution workflow: what it is (its config) and
-    what was found, in the words the command prints."""
+    what was found, in the words the command prints; for a periodic family also NAME.png,
+    its bifurcation diagram."""
     path = Path(path)
+    figure = None
     if special_table(path) == "equilibria" and load_equilibria(path)[2]["parameter"]:
         text = family_text(*continue_equilibria(path))
     elif special_table(path) == "equilibria":
         system, table, found = find_equilibria(path)
         text = equilibria_text(system, table, found)
+    elif load_periodic(path)[3]["parameter"]:
+        system, table, family = continue_periodic(path)
+        text = periodic_family_text(system, table, family)
+        figure = _family_figure(system, table, family, path, folder)
     else:
         system, _, orbit = find_periodic(path)
         text = periodic_text(system, orbit)
     command = f"python -m survey {special_table(path)} {path.as_posix()}"
     out = Path(folder) / f"{path.stem}.md"
     body = (f"# {path.stem}\n\n`{command}` (written by `python -m survey reproduce`):\n\n"
-            f"```\n{text}\n```\n\nThe workflow:\n\n```toml\n{path.read_text().strip()}\n```\n")
+            f"```\n{text}\n```\n\n"
+            + (f"![bifurcation diagram]({figure.name})\n\n" if figure else "")
+            + f"The workflow:\n\n```toml\n{path.read_text().strip()}\n```\n")
     tmp = out.with_name(f".{out.name}.tmp")
     tmp.write_text(body)
     tmp.replace(out)
+    return out
+
+
+def _family_figure(system, table, family, path, folder) -> Path:
+    """NAME.png: the family's bifurcation diagram."""
+    from ..presentation.plots import family_diagram
+    ds = family_dataset(table, family, path.read_text())
+    start = f"Lyapunov family of normal mode {table['mode']}" if table["mode"] else "family"
+    terms = " + ".join(f"{t.name} (" + ", ".join(f"{k} {v:g}" for k, v in zip(
+        t.param_names, t.params)) + ")" for t in system.terms)
+    spin = f" at J = {family.members[0].angular_momentum:.6g}" if table["rotating"] and \
+        table["parameter"] == "energy" else ""
+    fig = family_diagram(ds, f"{path.stem}: {start} in {table['parameter']}{spin}; "
+                             f"{system.n_bodies} bodies, {terms}")
+    out = Path(folder) / f"{path.stem}.png"
+    fig.savefig(out, dpi=130)
     return out
 
 

@@ -552,3 +552,53 @@ def frequency_map(ds, order: int = 5) -> Figure:
     ax.set_title(f"frequency map; lines: resonances m1 x + m2 y + m3 = 0, |m| <= {order}",
                  fontsize="medium")
     return fig
+
+
+def family_diagram(ds, title: str = "") -> Figure:
+    """The bifurcation diagram of a periodic family (pipeline.special.family_dataset):
+    period against the parameter in the members' order, stable stretches blue and unstable
+    red, folds and multiplier crossings marked; below, Henon's stability indices
+    b = (mu + 1/mu)/2, linearly stable where every |b| <= 1 (the grey band; a complex b, a
+    quartet off the circle, is drawn by its real part, dotted)."""
+    name = next(iter(ds.coords))
+    p, period = ds[name].values, ds["period"].values
+    stable = ds["stable"].values.astype(bool)
+    fig = Figure(figsize=(7.5, 6.5), layout="constrained")
+    top, bottom = fig.subplots(2, 1, sharex=True, height_ratios=(3, 2))
+    for i in range(p.size - 1):
+        colour = REGIME_COLOURS[Regime.TORUS] if stable[i] and stable[i + 1] else \
+            REGIME_COLOURS[Regime.CHAOTIC]
+        top.plot(p[i:i + 2], period[i:i + 2], color=colour, lw=1.8)
+    top.plot(p, period, ".", color="#7f7f7f", ms=2)
+    marks = {"fold": ("s", "k"), "through +1": ("^", "#2ca02c"),
+             "period doubling (through -1)": ("v", "#9467bd"),
+             "Krein collision (complex quartet)": ("D", "#ff7f0e")}
+    handles = [Line2D([], [], color=REGIME_COLOURS[Regime.TORUS], lw=1.8,
+                      label="linearly stable"),
+               Line2D([], [], color=REGIME_COLOURS[Regime.CHAOTIC], lw=1.8, label="unstable")]
+    for kind in dict.fromkeys(ds["bifurcation_kind"].values):
+        where = ds["bifurcation_kind"].values == kind
+        marker, colour = marks.get(kind, ("o", "k"))
+        top.plot(ds["bifurcation_parameter"].values[where],
+                 ds["bifurcation_period"].values[where], marker, color=colour, ms=7,
+                 mfc="none", mew=1.5)
+        handles.append(Line2D([], [], marker=marker, color=colour, ls="none", mfc="none",
+                              mew=1.5, label=f"{kind} ({where.sum()})"))
+    top.set_ylabel("period T")
+    top.legend(handles=handles, fontsize=8, loc="best")
+    top.set_title("\n".join(textwrap.wrap(title or ds.attrs.get("title", ""), 80)),
+                  fontsize=9)
+    b_re, b_im = ds["index_real"].values, ds["index_imag"].values
+    bottom.axhspan(-1.0, 1.0, color="#d9d9d9", alpha=0.6, lw=0)
+    for k in range(b_re.shape[1]):
+        real = np.where(np.abs(b_im[:, k]) <= 1e-9, b_re[:, k], np.nan)
+        quartet = np.where(np.abs(b_im[:, k]) > 1e-9, b_re[:, k], np.nan)
+        bottom.plot(p, real, lw=1.2, label=("smallest" if k == 0 else "largest" if k ==
+                                            b_re.shape[1] - 1 else f"{k + 1}th") + " b")
+        bottom.plot(p, quartet, ":", lw=1.2, color="k")
+    low, high = np.nanmin(b_re), np.nanmax(b_re)
+    bottom.set_ylim(max(low, -5.0) - 0.2, min(high, 5.0) + 0.2)
+    bottom.set_ylabel("stability index b")
+    bottom.set_xlabel(name if name != "energy" else "energy E")
+    bottom.legend(fontsize=8, loc="best")
+    return fig

@@ -179,7 +179,8 @@ steps = 5
     with xr.open_dataset(out) as ds:
         assert ds.sizes["member"] == 6 and list(ds["stable"].values) == [1, 1, 1, 0, 0, 0]
         np.testing.assert_allclose(ds["mass_1"].values, np.linspace(0.01, 0.06, 6))
-        assert ds.attrs["bifurcations"].startswith("0.03995987")
+        assert float(ds["bifurcation_parameter"][0]) == pytest.approx(0.03995987, abs=1e-8)
+        assert "Krein" in str(ds["bifurcation_kind"].values[0]) and "mass_1" in ds.attrs["config"]
     cfg.write_text(cfg.read_text().replace('"mass_1"', '"gravity_H"'))
     assert main(["equilibria", str(cfg)]) == 2
     assert "[equilibria].parameter: 'gravity_H' is neither mass_K nor a parameter" in \
