@@ -565,10 +565,10 @@ def family_diagram(ds, title: str = "") -> Figure:
     stable = ds["stable"].values.astype(bool)
     fig = Figure(figsize=(7.5, 6.5), layout="constrained")
     top, bottom = fig.subplots(2, 1, sharex=True, height_ratios=(3, 2))
-    for i in range(p.size - 1):
-        colour = REGIME_COLOURS[Regime.TORUS] if stable[i] and stable[i + 1] else \
-            REGIME_COLOURS[Regime.CHAOTIC]
-        top.plot(p[i:i + 2], period[i:i + 2], color=colour, lw=1.8)
+    for i in range(p.size - 1):     # stable stretches on top, where branches overlap
+        both = bool(stable[i] and stable[i + 1])
+        top.plot(p[i:i + 2], period[i:i + 2], lw=2.6 if both else 1.4, zorder=3 if both else 2,
+                 color=REGIME_COLOURS[Regime.TORUS if both else Regime.CHAOTIC])
     top.plot(p, period, ".", color="#7f7f7f", ms=2)
     marks = {"fold": ("s", "k"), "through +1": ("^", "#2ca02c"),
              "period doubling (through -1)": ("v", "#9467bd"),
@@ -585,6 +585,12 @@ def family_diagram(ds, title: str = "") -> Figure:
         handles.append(Line2D([], [], marker=marker, color=colour, ls="none", mfc="none",
                               mew=1.5, label=f"{kind} ({where.sum()})"))
     top.set_ylabel("period T")
+    top.ticklabel_format(axis="y", useOffset=False)
+    spread = float(np.ptp(period))
+    if spread <= 1e-9 * abs(period.mean()):     # an isochronous family: say so, flat
+        top.set_ylim(period.mean() * (1 - 1e-3), period.mean() * (1 + 1e-3))
+        top.text(0.5, 0.6, f"T = {period.mean():.12g}, constant to {spread:.0e}",
+                 transform=top.transAxes, ha="center", fontsize=9)
     top.legend(handles=handles, fontsize=8, loc="best")
     top.set_title("\n".join(textwrap.wrap(title or ds.attrs.get("title", ""), 80)),
                   fontsize=9)
