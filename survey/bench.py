@@ -817,7 +817,7 @@ def newton_step(repeats=5, out=print):
         for _ in range(repeats):
             for k, go in enumerate((
                     lambda: periodic.periodic_orbit(system, y0, guess, rotating),
-                    lambda: periodic._monodromy(system, found.state, found.period, 1e-13))):
+                    lambda: periodic._return(system, found.state, found.period, 1e-13))):
                 t = time.perf_counter()
                 go()
                 best[k] = min(best[k], time.perf_counter() - t)

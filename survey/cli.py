@@ -139,14 +139,14 @@ def _report(args):
     import contextlib
 
     from .pipeline.archive import open_archive
-    from .pipeline.special import equilibrium_cells
+    from .pipeline.special import special_cells
     from .presentation import report
     archive = Path(args.archive)
     check = archive.with_name(f"{archive.stem}_check.nc")    # its [check] run, if any
     with open_archive(archive) as ds, contextlib.ExitStack() as stack:
         other = stack.enter_context(open_archive(check)) if check.exists() else None
         path = report.write(ds, args.out or archive.parent, archive.stem, check=other,
-                            special=equilibrium_cells(ds))
+                            special=special_cells(ds))
     print(f"wrote {path} and its figures")
     return 0
 
@@ -253,7 +253,7 @@ def _survey(config, command, summary=False, write_report=True, **kw) -> Path:
     import xarray as xr
 
     from .analysis.classify import summary as summarise
-    from .pipeline.special import equilibrium_cells
+    from .pipeline.special import special_cells
     from .pipeline.sweep import run_survey
     from .presentation import report
     path = run_survey(config, command=command, **kw)
@@ -275,7 +275,7 @@ def _survey(config, command, summary=False, write_report=True, **kw) -> Path:
             print("\n".join(summarise(ds)))
         if write_report:
             written = report.write(ds, path.parent, path.stem, check=other,
-                                   special=equilibrium_cells(ds))
+                                   special=special_cells(ds))
             if summary:
                 print(f"report and figures: {written} (and {path.stem}_*.png beside it)")
     return path

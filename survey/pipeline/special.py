@@ -563,10 +563,91 @@ def equilibrium_cells(ds, most: int = 8) -> list[dict]:
             eq = relative_equilibrium(system, system.split(start)[0], angular_momentum=spin)
         except (ValueError, np.linalg.LinAlgError):
             continue
-        out.append({"cell": ", ".join(f"{a}={float(ds[a].values[i]):g}"
+        out.append({"kind": "equilibrium",
+                    "cell": ", ".join(f"{a}={float(ds[a].values[i]):g}"
                                       for a, i in zip(axes, idx)), "index": idx,
                     "rotation_rate": eq.rotation_rate, "stable": eq.stable,
                     "frequencies": eq.frequencies.tolist(),
                     "krein": [int(k) for k in eq.krein if k],
                     "rates": eq.rates})
     return out
+
+
+def homographic_period(system: System, y, horizon: float) -> float | None:
+    """The period of the size of a homographic start -- a central configuration moving
+    as a similarity (v_i = a q_i + b e_z x q_i, forces -lambda m_i q_i) keeps its shape
+    while it breathes and turns: a relative periodic orbit -- from the time between the
+    first two minima of its moment of inertia within `horizon`; None if the start is
+    not homographic (or not planar), is a rigid rotation (an equilibrium's business), or
+    does not breathe within the horizon."""
+    from ..numerics.integrate import integrate
+    from ..physics.equilibria import forces
+    if system.dim != 2:
+        return None
+    q, p = system.split(np.asarray(y, dtype=float))
+    m = system.masses[:, None]
+    q = q - np.sum(m * q, axis=0) / m.sum()
+    v = p / m - np.sum(p, axis=0) / m.sum()
+    gq = np.stack([-q[:, 1], q[:, 0]], axis=1)
+    size = np.sum(m * q * q)
+    a, b = np.sum(m * v * q) / size, np.sum(m * v * gq) / size
+    acc = forces(system, q).reshape(q.shape) / m
+    lam = -np.sum(m * acc * q) / size
+    norm = lambda x: np.sqrt(np.sum(m * x * x))
+    rigid = abs(a) <= 1e-9 * abs(b) and abs(lam - b * b) <= 1e-9 * lam
+    if not (norm(v) > 0 and norm(v - a * q - b * gq) <= 1e-10 * norm(v) and lam > 0
+            and norm(acc + lam * q) <= 1e-9 * norm(acc)) or rigid:
+        return None
+    times = np.linspace(0.0, horizon, 4001)
+    out = integrate(system, y, horizon, t_eval=times, rtol=1e-12, atol=1e-12)
+    if not out.ok:
+        return None
+    qs = system.split(out.samples)[0]
+    inertia = np.sum(system.masses[None, :, None] * (qs - np.sum(
+        system.masses[None, :, None] * qs, axis=1, keepdims=True) / m.sum()) ** 2, axis=(1, 2))
+    low = np.flatnonzero((inertia[1:-1] < inertia[:-2]) & (inertia[1:-1] <= inertia[2:])) + 1
+    return float(times[low[1]] - times[low[0]]) if low.size >= 2 else None
+
+
+def homographic_cells(ds, most: int = 8) -> list[dict]:
+    """The cells of an archive whose start is homographic (see homographic_period), each
+    shot as a relative periodic orbit at its energy (`python -m survey periodic`): period,
+    rotation, kind, how fast nearby orbits leave, beside the cell's own FTLE -- what the
+    report sets beside a map's column of such cells. Cells where shooting fails are left
+    out."""
+    from ..catalog.variables import V
+    from .config import parse_config
+    if V.initial_state not in ds or V.status not in ds:
+        return []
+    config = parse_config(ds.attrs["config"], check_output=False)
+    horizon = float(config.tables["integration"]["t_final"])
+    axes = list(ds[V.status].dims)
+    starts = ds[V.initial_state].values.reshape(-1, ds[V.initial_state].shape[-1])
+    out = []
+    for flat, y in enumerate(starts):
+        if len(out) == most or not np.all(np.isfinite(y)):
+            continue
+        system = config.system(flat)
+        period = homographic_period(system, y, min(horizon, 100.0))
+        if period is None:
+            continue
+        try:
+            orbit = periodic_orbit(system, y, period, rotating=True)
+        except ValueError:
+            continue
+        idx = np.unravel_index(flat, ds[V.status].shape) if axes else ()
+        ftle = float(ds[V.ftle].values[idx]) if V.ftle in ds else float("nan")
+        out.append({"kind": "periodic", "index": idx,
+                    "cell": ", ".join(f"{a}={float(ds[a].values[i]):g}"
+                                      for a, i in zip(axes, idx)),
+                    "period": orbit.period, "rotation": orbit.rotation,
+                    "orbit_kind": orbit.kind, "stable": orbit.stable,
+                    "rates": orbit.rates.tolist(), "ftle": ftle})
+    return out
+
+
+def special_cells(ds) -> list[dict]:
+    """The special solutions an archive's cells start on, for its report: relative
+    equilibria at its equilibrium cells, relative periodic orbits at its homographic
+    ones."""
+    return equilibrium_cells(ds) + homographic_cells(ds)

@@ -33,8 +33,8 @@ def write(ds, folder, stem: str | None = None, figures: bool = True, check=None,
           special=()) -> Path:
     """Write STEM_report.md and its figures into `folder`; returns the report's path.
     check: the archive of the survey's [check] run (another seed and ensemble size), whose
-    claims the report states beside its own. special: the relative equilibria at its
-    equilibrium cells (pipeline.special.equilibrium_cells), set beside the family."""
+    claims the report states beside its own. special: the special solutions its cells
+    start on (pipeline.special.special_cells), set beside the family."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     stem = stem or Path(ds.encoding.get("source", "survey")).stem
@@ -451,17 +451,23 @@ def _tori_table(ds, axes, regime, rows: int = 15) -> list[str]:
 
 
 def _special(ds, special, regime) -> list[str]:
-    """The relative equilibria at the family's equilibrium cells with their normal modes,
-    beside the labelled shape frequencies of the nearest regular cell along a single axis
-    (where the family's tori start)."""
+    """The special solutions the family's cells start on: relative equilibria at its
+    equilibrium cells with their normal modes, beside the labelled shape frequencies of the
+    nearest regular cell along a single axis (where the family's tori start); relative
+    periodic orbits at its homographic cells with the rate nearby orbits leave them, beside
+    the cell's FTLE."""
     if not special:
         return []
-    out = ["## Special solutions in this family", "",
-           "Each equilibrium cell solved again as a relative equilibrium at its J "
-           "(`python -m survey equilibria`): its stability in the reduced space and its "
-           "normal modes in the rotating frame (cycles per unit time; Krein sign)."]
+    out = ["## Special solutions in this family", ""]
+    equilibria = [s for s in special if s["kind"] == "equilibrium"]
+    periodic = [s for s in special if s["kind"] == "periodic"]
+    if equilibria:
+        out.append("Each equilibrium cell solved again as a relative equilibrium at its J "
+                   "(`python -m survey equilibria`): its stability in the reduced space and "
+                   "its normal modes in the rotating frame (cycles per unit time; Krein "
+                   "sign).")
     axes = list(ds[V.status].dims)
-    for s in special:
+    for s in equilibria:
         modes = ", ".join(f"{f:.6g} ({'+' if k > 0 else '-'})"
                           for f, k in zip(s["frequencies"], s["krein"])) or "none"
         line = (f"- {s['cell']}: rotating at Omega = {s['rotation_rate']:.6g}, "
@@ -481,6 +487,20 @@ def _special(ds, special, regime) -> list[str]:
                          f"{float(ds[axes[0]].values[near]):g}, has shape frequencies "
                          + ", ".join(f"{v:.6g}" for v in sorted(nu)))
         out.append(line + ".")
+    if periodic:
+        out += ([""] if equilibria else []) + [
+            "Each homographic cell (its triangle keeps its shape while it breathes and "
+            "turns) shot as a relative periodic orbit at its energy (`python -m survey "
+            "periodic`): its multipliers say how fast nearby orbits leave it; the cell's "
+            "FTLE, measured over the whole run, is that of the sea its orbit joins once "
+            "it has left."]
+    for s in periodic:
+        out.append(f"- {s['cell']}: period {s['period']:.6g}, turning {s['rotation']:.6g} "
+                   f"rad, {s['orbit_kind']}" + (", linearly stable" if s["stable"] else
+                                                 ": nearby orbits leave at " + ", ".join(
+                                                     f"{r:.4g}" for r in s["rates"])
+                                                 + " per unit time")
+                   + f"; the cell's FTLE {s['ftle']:.3g}.")
     return out + [""]
 
 

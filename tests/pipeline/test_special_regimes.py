@@ -93,3 +93,46 @@ def test_the_report_sets_the_equilibrium_beside_the_family(tmp_path):
     assert "## Special solutions in this family" in text
     assert "delta=0: rotating at Omega = 3, linearly stable; normal modes 0.139846 (-)" in text
     assert "The nearest regular cell, delta = 0.1, has shape frequencies 0.1398" in text
+
+
+def test_the_report_sets_the_homographic_orbit_beside_the_ftle_it_causes(tmp_path):
+    """The areal barrier's equilateral family at delta = 0 breathes while it turns (a
+    homographic start); the report shoots it as a relative periodic orbit and sets its
+    instability rate beside the cell's FTLE. The delta = 0.5 cell is not homographic."""
+    import math
+
+    from survey.numerics.periodic import periodic_orbit
+    from survey.physics.families import initial_state
+    from survey.physics.system import System
+    from survey.pipeline.special import homographic_period, special_cells
+    from survey.presentation import report
+    cfg = tmp_path / "areal.toml"
+    cfg.write_text(f"""
+[survey]
+output = "{tmp_path / 'areal.nc'}"
+[system]
+potential = "areal_barrier"
+[initial]
+family = "equilateral"
+side = 1.7320508075688772
+delta = [0.0, 0.5]
+energy = 8.0
+[integration]
+t_final = 100.0
+[indicators]
+perturbations = 2
+""")
+    ds = run(cfg, workers=1, progress=False)
+    special = special_cells(ds)
+    assert [(s["kind"], s["cell"]) for s in special] == [("periodic", "delta=0")]
+    system = System.create(potential="areal_barrier")
+    y0 = initial_state(system, "equilateral", side=math.sqrt(3), delta=0.0, energy=8.0)
+    orbit = periodic_orbit(system, y0, homographic_period(system, y0, 100.0), rotating=True)
+    assert special[0]["period"] == pytest.approx(orbit.period, rel=1e-10)
+    assert special[0]["rates"][0] == pytest.approx(orbit.rates[0], rel=1e-8)
+    assert special[0]["orbit_kind"] == "complex unstable"
+    text = report.markdown(ds, special=special)
+    assert (f"- delta=0: period {orbit.period:.6g}, turning {orbit.rotation:.6g} rad, complex "
+            f"unstable: nearby orbits leave at {orbit.rates[0]:.4g}") in text
+    assert homographic_period(system, initial_state(system, "equilateral", side=math.sqrt(3),
+                                                    delta=0.5, energy=8.0), 100.0) is None
