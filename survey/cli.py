@@ -295,10 +295,12 @@ def _periodic(args):
 
 def _verify(args):
     from .catalog.errors import ConfigError
+    from .pipeline.special import is_family, verify_family
     from .pipeline.sweep import verify
     if args.cells < 1:
         raise ConfigError("--cells", f"must be >= 1, got {args.cells}")
-    ok, lines = verify(args.archive, cells=args.cells)
+    ok, lines = verify_family(args.archive) if is_family(args.archive) else \
+        verify(args.archive, cells=args.cells)
     print("\n".join(lines))
     return 0 if ok else 1
 
@@ -359,7 +361,8 @@ def build_parser():
     po.add_argument("--output", help="with [periodic] parameter: write the family (NetCDF)")
     po.set_defaults(func=_periodic)
     v = sub.add_parser("verify", help="recompute a sample of an archive's cells from its "
-                                      "stored config and compare bit for bit")
+                                      "stored config and compare bit for bit (a family "
+                                      "archive: every member, to 1e-8)")
     v.add_argument("archive")
     v.add_argument("--cells", type=int, default=8)
     v.set_defaults(func=_verify)

@@ -202,10 +202,13 @@ def equilibrium_dataset(table: dict, members, found, config_text: str):
 
 def write_archive(ds, path, command: str) -> Path:
     """A family's Dataset in NetCDF with its provenance (command, commit, machine,
-    versions), written atomically."""
+    versions) and its config's sha256, written atomically."""
+    import hashlib
+
     from .archive import git_commit, machine, versions
     out = Path(path)
-    ds = ds.assign_attrs(history=command, git_commit=git_commit(), machine=machine(),
+    ds = ds.assign_attrs(config_sha256=hashlib.sha256(ds.attrs["config"].encode()).hexdigest(),
+                         history=command, git_commit=git_commit(), machine=machine(),
                          **{f"version_{k}": v for k, v in versions().items()})
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(f".{out.name}.partial")
@@ -651,3 +654,65 @@ def special_cells(ds) -> list[dict]:
     equilibria at its equilibrium cells, relative periodic orbits at its homographic
     ones."""
     return equilibrium_cells(ds) + homographic_cells(ds)
+
+
+FAMILY_TOLERANCE = 1e-8    # relative: how closely a family computed again must agree
+
+
+def is_family(path) -> bool:
+    """Whether an archive is a family (of `equilibria` or `periodic --output`)."""
+    from .archive import open_archive
+    with open_archive(path) as ds:
+        return "family" in ds.attrs
+
+
+def verify_family(path) -> tuple[bool, list[str]]:
+    """A family archive against its stored config: the family computed again and compared
+    member by member -- the parameter and every per-member number (period, rotation, E, J,
+    states, multipliers; or E, J, Omega, positions, eigenvalues) -- to FAMILY_TOLERANCE
+    relative to each variable's scale. Not bit for bit: Newton's linear algebra is
+    LAPACK's, whose last bits differ between machines, so a family is reproducible to the
+    solver's accuracy."""
+    import hashlib
+    import tempfile
+
+    from .archive import machine, open_archive
+    with open_archive(path) as ds:
+        stored = ds.load()
+    text, kind = stored.attrs["config"], stored.attrs["family"]
+    if hashlib.sha256(text.encode()).hexdigest() != stored.attrs["config_sha256"]:
+        return False, [f"{path}: config_sha256 does not match the stored config text (edited "
+                       "after the run)"]
+    with tempfile.TemporaryDirectory() as folder:
+        config = Path(folder) / "family.toml"
+        config.write_text(text)
+        if kind == "periodic":
+            _, table, family = continue_periodic(config)
+            fresh = family_dataset(table, family, text)
+        else:
+            table, members, found = continue_equilibria(config)
+            fresh = equilibrium_dataset(table, members, found, text)
+    made = f"(made on {stored.attrs.get('machine', 'an unrecorded machine')}, checked on " \
+           f"{machine()})"
+    if fresh.sizes["member"] != stored.sizes["member"]:
+        return False, [f"{path}: computed again the family has {fresh.sizes['member']} "
+                       f"members, the archive {stored.sizes['member']} {made}"]
+    lines = []
+    for name, var in fresh.variables.items():
+        if var.dtype.kind != "f" or name not in stored or stored[name].shape != var.shape:
+            continue
+        a, b = stored[name].values, var.values
+        scale = np.nanmax(np.abs(a), initial=0.0) or 1.0
+        worst = float(np.nanmax(np.abs(a - b), initial=0.0)) / scale
+        if worst > FAMILY_TOLERANCE or not np.array_equal(np.isnan(a), np.isnan(b)):
+            lines.append(f"{name}: differs by {worst:.1e} of its scale")
+    for name in ("bifurcation_kind", "kind"):
+        if name in fresh and list(fresh[name].values) != list(stored[name].values):
+            lines.append(f"{name}: {list(stored[name].values)} stored, "
+                         f"{list(fresh[name].values)} computed again")
+    if lines:
+        return False, [f"{path}: the family computed again differs {made}:"] + \
+            [f"  {line}" for line in lines]
+    return True, [f"{path}: {stored.sizes['member']} members and "
+                  f"{stored.sizes.get('bifurcation', 0)} bifurcations computed again agree "
+                  f"to {FAMILY_TOLERANCE:g} {made}"]

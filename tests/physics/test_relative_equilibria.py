@@ -181,6 +181,8 @@ steps = 5
         np.testing.assert_allclose(ds["mass_1"].values, np.linspace(0.01, 0.06, 6))
         assert float(ds["bifurcation_parameter"][0]) == pytest.approx(0.03995987, abs=1e-8)
         assert "Krein" in str(ds["bifurcation_kind"].values[0]) and "mass_1" in ds.attrs["config"]
+    assert main(["verify", str(out)]) == 0
+    assert "6 members and 1 bifurcations computed again agree" in capsys.readouterr().out
     cfg.write_text(cfg.read_text().replace('"mass_1"', '"gravity_H"'))
     assert main(["equilibria", str(cfg)]) == 2
     assert "[equilibria].parameter: 'gravity_H' is neither mass_K nor a parameter" in \
