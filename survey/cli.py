@@ -126,9 +126,10 @@ def orbit_workflow(path, folder) -> list:
 
 def _plot(args):
     from .pipeline.archive import open_archive
+    from .pipeline.special import special_cells
     from .presentation import plots
     with open_archive(args.archive) as ds:
-        figs = plots.figures(ds, args.var or None)
+        figs = plots.figures(ds, args.var or None, special_cells(ds))
         out = Path(args.out or Path(args.archive).parent)
         for path in plots.save(figs, out, Path(args.archive).stem):
             print(f"wrote {path}")

@@ -46,15 +46,17 @@ def grid_axes(ds) -> list[str]:
     return list(ds[V.status].dims)
 
 
-def figures(ds, variables=None) -> dict[str, Figure]:
+def figures(ds, variables=None, special=()) -> dict[str, Figure]:
     """The figures that fit the archive's grid: maps for two axes, scans for one, the
-    section, convergence histories and the frequency map where the data exist."""
+    section, convergence histories and the frequency map where the data exist. special:
+    the special solutions its cells start on (pipeline.special.special_cells), marked on
+    the regime map and the scans."""
     axes = grid_axes(ds)
     out = {}
     names = [m for m in MAPS if m[0] in ds and (variables is None or m[0] in variables)]
     if len(axes) == 2:
         if V.regime in ds and (variables is None or V.regime in variables):
-            out["map_regime"] = regime_map(ds)
+            out["map_regime"] = regime_map(ds, special)
         for name, style in names:       # a map with no value would be all mask
             if np.isfinite(ds[name].values).any():
                 out[f"map_{name}"] = indicator_map(ds, name, style.cmap, style.clip,
@@ -65,7 +67,8 @@ def figures(ds, variables=None) -> dict[str, Figure]:
             out["map_megno_section"] = indicator_map(ds, V.megno, style.cmap, style.clip,
                                                      style.log, overlay=True)
     elif len(axes) == 1:
-        out["scan"] = scan(ds, [n for n, _ in names] if variables is None else variables)
+        out["scan"] = scan(ds, [n for n, _ in names] if variables is None else variables,
+                           special)
     if V.crossing_sigma in ds and int(np.nansum(ds[V.n_crossings].values)) > 0:
         out["section"] = section(ds)
     if V.megno_history in ds and np.isfinite(ds[V.megno_history].values).any():
@@ -199,7 +202,27 @@ def _two_axis_figure(ds):
     return fig, ax, hist, ds[a].values, ds[b].values
 
 
-def regime_map(ds) -> Figure:
+def _special_marks(special) -> list[tuple[tuple, str, str]]:
+    """(cell index, marker, legend label) per special solution: a star for a relative
+    equilibrium, a circle for a homographic periodic orbit, with its stability."""
+    out = []
+    for s in special:
+        if s["kind"] == "equilibrium":
+            what = "relative equilibrium, " + ("linearly stable" if s["stable"] else "unstable")
+            out.append((s["index"], "*", what))
+        else:
+            out.append((s["index"], "o", f"homographic periodic orbit, {s['orbit_kind']}"))
+    return out
+
+
+def _mark_handles(marks) -> list:
+    labels = list(dict.fromkeys((m, text) for _, m, text in marks))
+    return [Line2D([], [], marker=m, ls="none", mfc="none", mec="k", mew=1.3, ms=9,
+                   label=f"{text} ({sum(1 for _, mm, t in marks if (mm, t) == (m, text))})")
+            for m, text in labels]
+
+
+def regime_map(ds, special=()) -> Figure:
     fig, ax, hist, x, y = _two_axis_figure(ds)
     regime = ds[V.regime].values
     colours = [REGIME_COLOURS[r] for r in Regime]
@@ -217,6 +240,11 @@ def regime_map(ds) -> Figure:
     handles = [Patch(color=REGIME_COLOURS[r], label=f"{r.name.lower()} ({n})")
                for r, n in counts if n]
     handles += _scale_free_lines(ds, ax, x, y)
+    marks = _special_marks(special)
+    for (i, j), marker, _ in marks:     # black on a white halo: seen on any colour
+        ax.plot(x[i], y[j], marker, ms=9, mfc="none", mec="w", mew=3.0)
+        ax.plot(x[i], y[j], marker, ms=9, mfc="none", mec="k", mew=1.3)
+    handles += _mark_handles(marks)
     if doubt.any():
         handles.append(Patch(**UNCONFIRMED, label=f"not confirmed at the horizon before "
                                                   f"({int(doubt.sum())})"))
@@ -296,10 +324,11 @@ def indicator_map(ds, name, cmap="viridis", clip=None, log=False, overlay=False)
     return fig
 
 
-def scan(ds, names) -> Figure:
+def scan(ds, names, special=()) -> Figure:
     """Indicators along a one-axis grid, each cell's orbit with the 5-95% range of its
     ensemble (the orbit and its perturbed starts) as a bar, and the regime shaded behind
-    (the paper's LyapunovSides and LyapunovScanEquil)."""
+    (the paper's LyapunovSides and LyapunovScanEquil); the special solutions' cells
+    marked."""
     a = grid_axes(ds)[0]
     values = ds[a].values
     steps = np.diff(values)
@@ -326,6 +355,8 @@ def scan(ds, names) -> Figure:
                 ax.axvspan(edges[i], edges[i + 1], **UNCONFIRMED, alpha=0.35)
         y = np.where(_unfinished(ds), np.nan, ds[name].values.astype(float))
         ax.plot(x, y, "o-", ms=2.5, lw=0.8, color="k")
+        for (i,), marker, _ in _special_marks(special):
+            ax.plot(x[i], y[i], marker, ms=10, mfc="none", mec="k", mew=1.3, zorder=4)
         band = _ensemble_range(ds, name)
         if band is not None:
             low, high, note = band
@@ -361,6 +392,7 @@ def scan(ds, names) -> Figure:
                    for r in present]
         if doubt.any():
             handles.append(Patch(**UNCONFIRMED, label=f"not confirmed ({int(doubt.sum())})"))
+        handles += _mark_handles(_special_marks(special))
         fig.legend(handles=handles, loc="outside lower center", fontsize="small",
                    ncol=min(len(handles), 4), frameon=False,
                    title="regime (cells); paler where fewer lines of evidence vote for it")

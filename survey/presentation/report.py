@@ -38,7 +38,7 @@ def write(ds, folder, stem: str | None = None, figures: bool = True, check=None,
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     stem = stem or Path(ds.encoding.get("source", "survey")).stem
-    figs = plots.save(plots.figures(ds), folder, stem) if figures else []
+    figs = plots.save(plots.figures(ds, special=special), folder, stem) if figures else []
     text = markdown(ds, [p.name for p in figs], check, special)
     path = folder / f"{stem}_report.md"
     tmp = path.with_name(f".{path.name}.tmp")

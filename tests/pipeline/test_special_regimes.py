@@ -93,6 +93,9 @@ def test_the_report_sets_the_equilibrium_beside_the_family(tmp_path):
     assert "## Special solutions in this family" in text
     assert "delta=0: rotating at Omega = 3, linearly stable; normal modes 0.139846 (-)" in text
     assert "The nearest regular cell, delta = 0.1, has shape frequencies 0.1398" in text
+    from survey.presentation import plots
+    legend = [t.get_text() for t in plots.figures(ds, special=special)["scan"].legends[0].texts]
+    assert "relative equilibrium, linearly stable (1)" in legend
 
 
 def test_the_report_sets_the_homographic_orbit_beside_the_ftle_it_causes(tmp_path):
@@ -134,5 +137,8 @@ perturbations = 2
     text = report.markdown(ds, special=special)
     assert (f"- delta=0: period {orbit.period:.6g}, turning {orbit.rotation:.6g} rad, complex "
             f"unstable: nearby orbits leave at {orbit.rates[0]:.4g}") in text
+    from survey.presentation import plots
+    legend = [t.get_text() for t in plots.figures(ds, special=special)["scan"].legends[0].texts]
+    assert "homographic periodic orbit, complex unstable (1)" in legend
     assert homographic_period(system, initial_state(system, "equilateral", side=math.sqrt(3),
                                                     delta=0.5, energy=8.0), 100.0) is None
