@@ -296,9 +296,15 @@ def indicator_map(ds, name, cmap="viridis", clip=None, log=False, overlay=False)
     handles = _mask_layer(ax, ds, x, y)
     if overlay:
         a, b = grid_axes(ds)
-        ax.scatter(ds[f"crossing_{a}"].values.ravel(), ds[f"crossing_{b}"].values.ravel(),
-                   s=0.4, lw=0, color="black", alpha=0.35, rasterized=True)
-        handles.append(Patch(color="black", alpha=0.5, label="section crossings"))
+        keep, slab = _slice_slab(ds, (a, b))
+        ax.scatter(ds[f"crossing_{a}"].values.ravel()[keep],
+                   ds[f"crossing_{b}"].values.ravel()[keep],
+                   s=2.0, lw=0, color="black", alpha=0.6, rasterized=True)
+        handles.append(Patch(color="black", alpha=0.6, label="section crossings in the "
+                                                             "slice's slab"))
+        ax.set_xlabel(ax.get_xlabel() + "\n" + textwrap.fill(
+            f"the grid is a 2-D slice of the 4-D section; drawn: the crossings in its slab "
+            f"{slab}", 75), fontsize="small")
         ax.set_xlim(x.min(), x.max())
         ax.set_ylim(y.min(), y.max())
     where = f"clipped to [{lo:g}, {hi:g}]" if clip else f"range [{lo:.3g}, {hi:.3g}]"
@@ -322,6 +328,29 @@ def indicator_map(ds, name, cmap="viridis", clip=None, log=False, overlay=False)
     hist.yaxis.set_label_position("right")
     hist.yaxis.tick_right()
     return fig
+
+
+SLAB = 0.025     # half-width of a slice's slab, as a share of each coordinate's range
+
+
+def _slice_slab(ds, axes):
+    """A grid over two coordinates of a section fixes the others (the `section` family's
+    [initial] values): the grid is a 2-D slice of the section, and only crossings within
+    the slab |q - q0| <= SLAB (range of q's crossings) of each fixed q belong on it.
+    Returns (mask over the flattened crossings, the slab's description with counts)."""
+    from ..pipeline.config import parse_config
+    given = parse_config(ds.attrs["config"], check_output=False).fixed
+    fixed = {q: float(given[q]) for q in ("sigma", "p_sigma", "eta", "p_eta")
+             if q not in axes and q in given and f"crossing_{q}" in ds}
+    keep = np.isfinite(ds[f"crossing_{axes[0]}"].values.ravel())
+    total = int(keep.sum())
+    parts = []
+    for q, q0 in fixed.items():
+        values = ds[f"crossing_{q}"].values.ravel()
+        width = SLAB * float(np.nanmax(values) - np.nanmin(values))
+        keep &= np.abs(values - q0) <= width
+        parts.append(f"|{q} - {q0:g}| <= {width:.2g}")
+    return keep, "(" + ", ".join(parts) + f"; {int(keep.sum())} of {total})"
 
 
 def scan(ds, names, special=()) -> Figure:
@@ -480,7 +509,17 @@ def section(ds, x="sigma", y="p_sigma", colour_by=V.regime) -> Figure:
     ax.set_xlabel(label(x))
     ax.set_ylabel(label(y))
     section_name = ds.attrs.get("section", "")
-    ax.set_title(f"surface of section {section_name}".strip(), fontsize="medium")
+    shells = {(round(float(e), 9), round(float(j), 9)) for e, j in zip(
+        ds[V.energy].values.ravel(), ds[V.angular_momentum].values.ravel())
+        if np.isfinite(e)} if V.energy in ds and V.angular_momentum in ds else set()
+    # what the picture is: a projection of the 4-D section of three bodies in the plane,
+    # and, where the grid varies E or J, several shells on top of each other
+    note = (f"every crossing projected onto ({x}, {y}): the section of the reduced "
+            f"3-degree-of-freedom flow is 4-D, so a torus need not draw a curve")
+    if len(shells) > 1:
+        note += f"; {len(shells)} different (E, J) shells overlaid"
+    ax.set_title(f"surface of section {section_name}".strip() + "\n" +
+                 textwrap.fill(note, 70), fontsize="small")
     return fig
 
 

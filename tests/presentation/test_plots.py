@@ -89,6 +89,9 @@ def test_section_convergence_and_frequency_map(grid1):
     section = figs["section"].axes[0]
     assert section.get_xlabel() == r"$\sigma$" and section.get_ylabel() == r"$p_\sigma$"
     assert all(c.get_rasterized() for c in section.collections)
+    # it says what it is: a projection of the 4-D section, here of nine shells at once
+    assert "every crossing projected onto (sigma, p_sigma)" in section.get_title()
+    assert "9 different (E, J) shells overlaid" in section.get_title()
     assert len(figs["convergence"].axes) == 3
     lines = figs["convergence"].axes[0].get_lines()
     assert len(lines) >= 2 and any("ln t / t" in ln.get_label() or "ln t" in ln.get_label()
@@ -419,3 +422,31 @@ def test_an_unevenly_spaced_scan_is_drawn_cell_by_cell(grid1):
     assert ax.get_xticklabels()[-1].get_text() == "5"
     even = plots.scan(grid1, ["ftle"]).axes[-1]
     assert "unevenly" not in even.get_xlabel()
+
+
+def test_a_slice_grid_draws_only_the_crossings_in_its_slab(tmp_path):
+    """A grid over (sigma, p_sigma) at eta = 3, p_eta = 0 is a 2-D slice of the 4-D
+    section: its MEGNO map's overlay keeps only the crossings within 2.5% of each fixed
+    coordinate's range of it, and says so with the counts; the section figure of the one
+    shell says it is a projection, and no more."""
+    cfg = {"survey": {"name": "slice", "output": str(tmp_path / "slice.nc")},
+           "initial": {"family": "section", "energy": 84.45577136594005,
+                       "angular_momentum": 24.401923788646684, "sigma": [2.0, 3.0, 4.0],
+                       "p_sigma": [-1.0, 1.0], "eta": 3.0, "p_eta": 0.0},
+           "integration": {"t_final": 200.0}, "section": {"coordinate": "phi"},
+           "indicators": {"perturbations": 0}}
+    ds = xr.open_dataset(run_survey(cfg))
+    figs = plots.figures(ds)
+    ax = figs["map_megno_section"].axes[0]
+    keep, _ = plots._slice_slab(ds, ("sigma", "p_sigma"))
+    total = int(np.isfinite(ds.crossing_sigma.values).sum())
+    assert 0 < keep.sum() < total
+    assert len(ax.collections[-1].get_offsets()) == keep.sum()
+    for q, q0 in (("eta", 3.0), ("p_eta", 0.0)):
+        values = ds[f"crossing_{q}"].values.ravel()
+        width = plots.SLAB * (np.nanmax(values) - np.nanmin(values))
+        assert np.all(np.abs(values[keep] - q0) <= width)
+    assert "the grid is a 2-D slice of the 4-D section" in ax.get_xlabel()
+    assert f"{int(keep.sum())} of {total})" in ax.get_xlabel().replace("\n", " ")
+    title = figs["section"].axes[0].get_title()
+    assert "projected onto (sigma, p_sigma)" in title and "shells" not in title
