@@ -23,8 +23,14 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
-from ..physics.equilibria import Bifurcation, RelativeEquilibrium, nontrivial_subspace
+from ..physics.equilibria import (
+    Bifurcation,
+    RelativeEquilibrium,
+    forces,
+    nontrivial_subspace,
+)
 from ..physics.system import System, rhs
+from .continuation import follow, locate
 from .integrate import integrate
 
 UNIT_CIRCLE = 1e-6          # ||mu| - 1| below which a multiplier is on the unit circle
@@ -283,7 +289,7 @@ def lyapunov_start(system: System, eq: RelativeEquilibrium, mode: int,
     n, d = system.n, system.dim
     nq = n // 2
     q = eq.positions
-    hess = _hessian(system, q)
+    hess = forces(system, q, hessian=True)[1]
     B = np.kron(np.eye(system.n_bodies), np.array([[0.0, 1.0], [-1.0, 0.0]])) if d == 2 \
         else np.zeros((nq, nq))
     S = np.block([[hess, -eq.rotation_rate * B],
@@ -296,11 +302,6 @@ def lyapunov_start(system: System, eq: RelativeEquilibrium, mode: int,
     size = np.max(np.linalg.norm(q - q.mean(axis=0), axis=1))
     v *= amplitude * size / np.max(np.abs(v[:nq]))
     return eq.state(system) + v, 1.0 / f[mode - 1]
-
-
-def _hessian(system: System, q):
-    from ..physics.equilibria import forces
-    return forces(system, q, hessian=True)[1]
 
 
 class Family(NamedTuple):
@@ -317,15 +318,11 @@ def periodic_family(systems: Callable[[float], System], orbit: PeriodicOrbit, p0
                     energy_parameter: bool = False, tol: float = 1e-13,
                     bisect: float = 1e-9, max_members: int = 1000) -> Family:
     """The family of `orbit` (a periodic orbit of systems(p0)) followed by pseudo-arclength
-    continuation from p0 to `to`: p the energy (`energy_parameter`; systems ignores it) or a
-    parameter of the system at fixed energy. Unknowns (y, T[, theta], p) scaled by |y|, T,
-    1 and |to - p0|; the arclength step advances the parameter by 1 / steps of the span
-    (the state by at most 10%), halved where the corrector fails, the tangent turns by
-    more than 10 degrees or a stability index moves by more than 0.1 (signs of a jump to
-    a crossing branch). Folds (the tangent's parameter component changes sign) and changes
-    of the number of multipliers on the unit circle are bisected along the arclength to
-    `bisect` of |to - p0|. Stops at `to` (a last member solved there; complete), or at
-    max_members, or where the family has turned back and run 2 |to - p0| past p0."""
+    continuation (numerics.continuation) from p0 to `to`: p the energy (`energy_parameter`;
+    systems ignores it) or a parameter of the system at fixed energy. Unknowns (y, T[,
+    theta], p) scaled by |y|, T, 1 and |to - p0|; a step that moves a stability index by
+    more than 0.1 is halved. Folds and changes of the number of multipliers on the unit
+    circle are bisected along the arclength to `bisect` of |to - p0| and named."""
     n = orbit.state.size
     extra = 2 if rotating else 1
     shooting = _Shooting(rotating, None if energy_parameter else orbit.energy,
@@ -373,76 +370,16 @@ def periodic_family(systems: Callable[[float], System], orbit: PeriodicOrbit, p0
             x = x + np.linalg.lstsq(full, rhs_, rcond=1e-14)[0]
         return None
 
-    def tangent(As, previous):
-        t = np.linalg.svd(As)[2][-1]
-        return -t if t @ previous < 0 else t
-
-    direction = np.zeros(n + extra + 1)
-    direction[-1] = np.sign(to - p0)
-    first = solve(pack(orbit, p0), direction, direction @ pack(orbit, p0))
-    if first is None:
-        raise ValueError("the start does not converge as a member of the family")
-    o, x0, As = first
-    t = tangent(As, direction)
-    members = [(o, x0, t)]
-    ds = nominal = 1.0 / steps
-    complete = False
-    while len(members) < max_members and abs(members[-1][1][-1] - x0[-1]) <= 2.0:
-        o, x, t = members[-1]
-        found = solve(x + ds * t, t, t @ x + ds)
-        if found is None:
-            ds /= 2
-            if ds < 1e-4 * nominal:
-                break
-            continue
-        o2, x2, As2 = found
-        t2 = tangent(As2, t)
-        # a step whose chord or new tangent turns from the tangent by more than 10 degrees,
-        # or that moves a stability index by more than 0.1, may have jumped to another
-        # branch (they cross where multipliers pass +1): halve it
-        moved = np.max(np.abs(o2.indices - o.indices), initial=0.0) \
-            if o2.indices.size == o.indices.size else np.inf
-        chord = (x2 - x) / max(np.linalg.norm(x2 - x), 1e-300)
-        if (min(t2 @ t, chord @ t) < np.cos(np.radians(10.0)) or moved > 0.1) and \
-                ds > 1e-3 * nominal:
-            ds /= 2
-            continue
-        p_prev, p_new = x[-1] * scale[-1], x2[-1] * scale[-1]
-        if (p_new - to) * (p_prev - to) <= 0:     # passed the end: solve there
-            row = np.zeros(x.size)
-            row[-1] = 1.0
-            last = solve(x + (to / scale[-1] - x[-1]) / t[-1] * t
-                         if abs(t[-1]) > 0.1 else x2, row, to / scale[-1])
-            if last is not None:
-                members.append((last[0], last[1], tangent(last[2], t)))
-                complete = True
-            break
-        members.append((o2, x2, t2))
-        # the next step: the parameter advances by 1 / steps of the span where the family
-        # runs along it, the state by at most 10%
-        ds = min(nominal / max(abs(t2[-1]), 1e-3), 0.1, 2 * ds)
-
-    found = []
+    members, complete = follow(solve, pack(orbit, p0), to / scale[-1], steps,
+                               lambda o: o.indices, max_members)
     tests = {"fold": lambda o, t: bool(t[-1] > 0), "circle": lambda o, t: o.on_circle}
-    for (a, xa, ta), (b, xb, tb) in zip(members, members[1:]):
-        for kind, test in tests.items():
-            if test(a, ta) == test(b, tb):
-                continue
-            lo, hi = 0.0, ta @ (xb - xa)
-            ends = [xa, xb]     # the solutions nearest the point on either side
-            while hi - lo > bisect:
-                mid = 0.5 * (lo + hi)
-                got = solve(xa + mid * ta, ta, ta @ xa + mid)
-                if got is None:
-                    break
-                side = int(test(got[0], tangent(got[2], ta)) != test(a, ta))
-                ends[side] = got[1]
-                lo, hi = (mid, hi) if side == 0 else (lo, mid)
-            at = 0.5 * (ends[0] + ends[1]) * scale
-            found.append(Bifurcation(float(at[-1]), "fold" if kind == "fold" else
-                                     _crossing(a, b), float(at[n])))
-    return Family(np.array([x[-1] * scale[-1] for _, x, _ in members]),
-                  [o for o, _, _ in members], found, complete)
+    found = [Bifurcation(float(at.x[-1] * scale[-1]), "fold" if at.test == "fold" else
+                         _crossing(at.before, at.after), float(at.x[n] * scale[n]))
+             for at in locate(members, solve, tests, bisect)]
+    values = np.array([x[-1] * scale[-1] for _, x, _ in members])
+    if complete:
+        values[-1] = to               # solved there; the scaling's rounding aside
+    return Family(values, [o for o, _, _ in members], found, complete)
 
 
 def _crossing(a: PeriodicOrbit, b: PeriodicOrbit) -> str:

@@ -159,6 +159,12 @@ class RelativeEquilibrium(NamedTuple):
         return grow[np.argsort(-grow.real)]
 
     @property
+    def on_axis(self) -> int:
+        """How many reduced eigenvalues lie on the imaginary axis."""
+        lam = self.eigenvalues
+        return int(np.sum(np.abs(lam.real) <= AXIS_TOLERANCE * _size(lam)))
+
+    @property
     def rates(self) -> list[float]:
         """How fast nearby motions leave: the real parts of `unstable`."""
         return [float(z.real) for z in self.unstable]
@@ -179,7 +185,7 @@ def _size(lam) -> float:
     return float(np.max(np.abs(lam), initial=0.0)) or 1.0
 
 
-def _frame(masses: np.ndarray, d: int):
+def frame(masses: np.ndarray, d: int):
     """(T, w): T ((N d) x ((N - 1) d)) maps reduced mass-weighted coordinates xi to
     sqrt(m) q; w = 1 / sqrt(m) per coordinate of q."""
     s = np.sqrt(masses)
@@ -194,6 +200,25 @@ def _reduced_potential(system: System, T, w, xi):
     q = (w * (T @ xi)).reshape(system.n_bodies, system.dim)
     force, hess = forces(system, q, hessian=True)
     return -T.T @ (w * force), T.T @ (w[:, None] * hess * w[None, :]) @ T, q
+
+
+def amended(system: System, T, w, xi, angular_momentum: float | None,
+            rotation_rate: float | None):
+    """(gradient, Hessian, scale) in reduced coordinates xi of the amended potential
+    U + J^2 / (2 I) (given angular_momentum) or U - Omega^2 I / 2 (else; Omega = 0: U).
+    scale: the Hessian times the smallest mutual distance (mass-weighted), a force that
+    moves the closest bodies by their distance -- what the gradient is measured against."""
+    g, H, q = _reduced_potential(system, T, w, xi)
+    r2 = float(xi @ xi)
+    eye = np.eye(xi.size)
+    if angular_momentum is not None:
+        c = angular_momentum ** 2 / r2 ** 2
+        grad, hess = g - c * xi, H - c * eye + 4.0 * c / r2 * np.outer(xi, xi)
+    else:
+        omega2 = (rotation_rate or 0.0) ** 2
+        grad, hess = g - omega2 * xi, H - omega2 * eye
+    scale = np.linalg.norm(hess, 2) * np.min(_distances(q)) * np.sqrt(system.masses.min())
+    return grad, hess, scale
 
 
 def relative_equilibrium(system: System, start, angular_momentum: float | None = None,
@@ -211,25 +236,13 @@ def relative_equilibrium(system: System, start, angular_momentum: float | None =
     if system.dim == 3 and spin:
         raise ValueError("rotating relative equilibria are found in the plane (dim = 2); "
                          "in 3-D only equilibria at rest (J = 0)")
-    T, w = _frame(system.masses, system.dim)
+    T, w = frame(system.masses, system.dim)
     q0 = np.asarray(start, dtype=float).reshape(system.n_bodies, system.dim)
     q0 = q0 - centre_of_mass(system.masses, q0)
     xi = T.T @ (q0.ravel() / w)
 
     def gradient(xi):
-        g, H, q = _reduced_potential(system, T, w, xi)
-        r2 = float(xi @ xi)
-        eye = np.eye(xi.size)
-        if angular_momentum is not None:
-            c = angular_momentum ** 2 / r2 ** 2
-            grad, hess = g - c * xi, H - c * eye + 4.0 * c / r2 * np.outer(xi, xi)
-        else:
-            omega2 = (rotation_rate or 0.0) ** 2
-            grad, hess = g - omega2 * xi, H - omega2 * eye
-        # the gradient's scale: the Hessian times the smallest mutual distance (mass-
-        # weighted), a force that moves the closest bodies by their distance
-        scale = np.linalg.norm(hess, 2) * np.min(_distances(q)) * np.sqrt(system.masses.min())
-        return grad, hess, scale
+        return amended(system, T, w, xi, angular_momentum, rotation_rate)
 
     grad, hess, scale = gradient(xi)
     step = np.full(xi.size, np.inf)
@@ -281,7 +294,7 @@ def _generators(d: int, k: int) -> list[np.ndarray]:
     return [np.kron(np.eye(k), g) for g in gens]
 
 
-def _rotations(xi, d):
+def rotations(xi, d):
     """Orthonormal rows spanning the infinitesimal rotations of reduced positions xi."""
     return orthonormal(np.array([g @ xi for g in _generators(d, xi.size // d)]))
 
@@ -290,7 +303,7 @@ def _newton(hess, grad, xi, d):
     """The Newton step with the rotations (exact zero directions) held fixed: least squares
     on the Hessian with the rotations' directions given its own scale, so only a further
     degeneracy (the size of an isochronous family at a given rate) is cut."""
-    R = _rotations(xi, d)
+    R = rotations(xi, d)
     P = np.eye(xi.size) - R.T @ R
     M = P @ hess @ P + np.linalg.norm(hess, 2) * R.T @ R
     return -np.linalg.lstsq(M, P @ grad, rcond=1e-14)[0]
@@ -305,7 +318,7 @@ def linear_stability(system: System, positions, rotation_rate: float):
     Krein sign of an elliptic eigenvalue i w (w > 0) with eigenvector v is the sign of
     v* S v: modes of opposite sign that collide can leave the axis, of one sign cannot."""
     d = system.dim
-    T, w = _frame(system.masses, d)
+    T, w = frame(system.masses, d)
     q = np.asarray(positions, dtype=float).reshape(system.n_bodies, d)
     q = q - centre_of_mass(system.masses, q)
     xi = T.T @ (q.ravel() / w)
@@ -404,37 +417,3 @@ class Bifurcation(NamedTuple):
     #                           collision: Hamiltonian-Hopf) or a real pair; for a periodic
     #                           family also a fold, or where multipliers leave the circle
     period: float = float("nan")   # a periodic family's period there
-
-
-def equilibrium_family(systems, start, values, angular_momentum: float | None = None,
-                       rotation_rate: float | None = None, tol: float = 1e-12):
-    """A family of relative equilibria along a parameter: `systems(p)` the System at each
-    value p of `values` (monotone), each member solved from the one before (natural-
-    parameter continuation; the first from positions `start`). Where the stability changes
-    between neighbours the change is bisected to `tol` relative. Returns (members,
-    bifurcations): [(p, RelativeEquilibrium)], [Bifurcation]."""
-    members = []
-    q = start
-    for p in values:
-        eq = relative_equilibrium(systems(p), q, angular_momentum, rotation_rate)
-        members.append((float(p), eq))
-        q = eq.positions
-    found = []
-    for (p0, a), (p1, b) in zip(members, members[1:]):
-        if a.stable == b.stable:
-            continue
-        lo, hi, q = p0, p1, a.positions
-        while abs(hi - lo) > tol * max(abs(lo), abs(hi), 1.0):
-            mid = 0.5 * (lo + hi)
-            eq = relative_equilibrium(systems(mid), q, angular_momentum, rotation_rate)
-            if eq.stable == a.stable:
-                lo, q = mid, eq.positions
-            else:
-                hi = mid
-        unstable = b if a.stable else a
-        lam = unstable.eigenvalues
-        off = np.abs(lam.real) > AXIS_TOLERANCE * _size(lam)
-        quartet = np.any(off & (np.abs(lam.imag) > AXIS_TOLERANCE * _size(lam)))
-        found.append(Bifurcation(0.5 * (lo + hi), "complex quartet (Krein collision)"
-                                 if quartet else "real pair"))
-    return members, found

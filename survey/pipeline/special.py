@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..catalog.errors import ConfigError, SurveyError
+from ..numerics.integrate import integrate
 from ..numerics.periodic import (
     Family,
     PeriodicOrbit,
@@ -24,6 +25,7 @@ from ..numerics.periodic import (
 )
 from ..physics.equilibria import (
     RelativeEquilibrium,
+    forces,
     relative_equilibria,
     relative_equilibrium,
 )
@@ -43,7 +45,8 @@ EQUILIBRIA = {
                                 "mass_K (body K, from 0) or a potential parameter by its grid-"
                                 "axis name (<potential>_<parameter>); '' for none"),
     "to": Key("float", None, "the parameter's last value (from its value in [system])"),
-    "steps": Key("int", 20, "members of the family after the first", low=1, high=100000),
+    "steps": Key("int", 20, "arclength steps from the start to `to` where the family runs "
+                            "along the parameter (more where it bends)", low=1, high=100000),
 }
 
 
@@ -137,33 +140,36 @@ def _family_systems(config_system: dict, parameter: str, table: str = "equilibri
 
 def continue_equilibria(path):
     """The family of the start's relative equilibrium along [equilibria] parameter, from its
-    value in [system] to `to` in `steps` steps: (system table, table, members,
-    bifurcations)."""
-    from ..physics.equilibria import equilibrium_family
+    value in [system] to `to` (pseudo-arclength, about `steps` members where it runs along
+    the parameter): (table, members, bifurcations, complete)."""
+    from ..numerics.continuation import equilibrium_family
     system, start, table = load_equilibria(path)
     config_system = _load(path, "equilibria", EQUILIBRIA)[0].tables["system"]
     if table["to"] is None:
         raise ConfigError("[equilibria].to", "is required with a parameter: its last value")
     p0, systems = _family_systems(config_system, table["parameter"])
     try:
-        members, found = equilibrium_family(
-            systems, start, np.linspace(p0, table["to"], table["steps"] + 1),
-            table["angular_momentum"], table["rotation_rate"])
+        members, found, complete = equilibrium_family(
+            systems, start, p0, table["to"], table["steps"], table["angular_momentum"],
+            table["rotation_rate"])
     except ValueError as exc:
-        raise SurveyError(f"{path}: the family breaks off: {exc}") from None
-    return table, members, found
+        raise SurveyError(f"{path}: the family does not start: {exc}") from None
+    return table, members, found, complete
 
 
-def family_text(table: dict, members, found) -> str:
+def family_text(table: dict, members, found, complete: bool) -> str:
     name = table["parameter"]
-    lines = [f"Family along {name} ({len(members)} members):", "",
+    lines = [f"Family along {name} ({len(members)} members, " + ("reaching" if complete else
+                                                                 "not reaching")
+             + f" {name} = {table['to']:g}):", "",
              f"| {name} | E | J | Omega | stable | largest growth rate |",
              "| --- | --- | --- | --- | --- | --- |"]
     for p, e in members:
         lines.append(f"| {p:.6g} | {e.energy:.8g} | {e.angular_momentum:.8g} | "
                      f"{e.rotation_rate:.8g} | {'yes' if e.stable else 'no'} | "
                      f"{max(e.rates, default=0.0):.4g} |")
-    lines += [""] + ([f"Stability changes at {name} = {b.parameter:.10g}: {b.kind} on the "
+    lines += [""] + ([f"At {name} = {b.parameter:.10g}: a fold." if b.kind == "fold" else
+                      f"Stability changes at {name} = {b.parameter:.10g}: {b.kind} on the "
                       "unstable side." for b in found] or ["The stability does not change."])
     return "\n".join(lines)
 
@@ -264,14 +270,15 @@ def print_equilibria(path, as_json_text: bool = False, output=None,
     """The command: the equilibria found, or with [equilibria] parameter the family of the
     start's one and where its stability changes (and --output, its archive)."""
     if load_equilibria(path)[2]["parameter"]:
-        table, members, found = continue_equilibria(path)
+        table, members, found, complete = continue_equilibria(path)
         if output:
             ds = equilibrium_dataset(table, members, found, Path(path).read_text())
             print(f"wrote {write_archive(ds, output, command)}")
         print(json.dumps({"family": equilibria_json([e for _, e in members])["equilibria"],
                           table["parameter"]: [p for p, _ in members],
+                          "complete": complete,
                           "bifurcations": [b._asdict() for b in found]}, indent=1)
-              if as_json_text else family_text(table, members, found))
+              if as_json_text else family_text(table, members, found, complete))
         return 0
     if output:
         raise ConfigError("--output", "writes a family: give [equilibria] parameter and to")
@@ -583,8 +590,6 @@ def homographic_period(system: System, y, horizon: float) -> float | None:
     first two minima of its moment of inertia within `horizon`; None if the start is
     not homographic (or not planar), is a rigid rotation (an equilibrium's business), or
     does not breathe within the horizon."""
-    from ..numerics.integrate import integrate
-    from ..physics.equilibria import forces
     if system.dim != 2:
         return None
     q, p = system.split(np.asarray(y, dtype=float))
@@ -690,7 +695,7 @@ def verify_family(path) -> tuple[bool, list[str]]:
             _, table, family = continue_periodic(config)
             fresh = family_dataset(table, family, text)
         else:
-            table, members, found = continue_equilibria(config)
+            table, members, found, _ = continue_equilibria(config)
             fresh = equilibrium_dataset(table, members, found, text)
     made = f"(made on {stored.attrs.get('machine', 'an unrecorded machine')}, checked on " \
            f"{machine()})"

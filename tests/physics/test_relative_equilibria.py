@@ -9,7 +9,8 @@ import pytest
 
 from survey import integrate
 from survey.cli import main
-from survey.physics.equilibria import equilibrium_family, relative_equilibrium
+from survey.numerics.continuation import equilibrium_family
+from survey.physics.equilibria import relative_equilibrium
 from survey.physics.system import System
 from survey.physics.terms import make_potential
 
@@ -132,14 +133,15 @@ def test_lagranges_family_loses_stability_where_routh_says():
     """Continued in the second mass mu (masses 1, mu, 1e-4, rotation rate 1), Lagrange's
     triangle is stable below Routh's root of 27 (mu + m3 + mu m3) = (1 + mu + m3)^2 and
     unstable above it, where two elliptic modes of opposite Krein sign collide: the
-    bisection finds the root to 1e-9."""
+    bisection finds the root to 1e-9 (pseudo-arclength continuation in mu)."""
     m3 = 1e-4
 
     def systems(mu):
         return System(np.array([1.0, mu, m3]), 2, make_potential("gravity", {"G": 1.0},
                                                                   "pair"))
-    members, found = equilibrium_family(systems, TRIANGLE, np.linspace(0.01, 0.06, 6),
-                                        rotation_rate=1.0)
+    members, found, complete = equilibrium_family(systems, TRIANGLE, 0.01, 0.06, steps=5,
+                                                  rotation_rate=1.0)
+    assert complete and members[-1][0] == 0.06 and np.all(np.diff([p for p, _ in members]) > 0)
     # 27 (mu + m3 + mu m3) = (1 + mu + m3)^2: mu^2 + (2 (1 + m3) - 27 (1 + m3)) mu
     # + (1 + m3)^2 - 27 m3 = 0, the smaller root
     b = -25.0 * (1 + m3)
@@ -177,12 +179,15 @@ steps = 5
     text = capsys.readouterr().out
     assert "Stability changes at mass_1 = 0.03995987" in text and "Krein collision" in text
     with xr.open_dataset(out) as ds:
-        assert ds.sizes["member"] == 6 and list(ds["stable"].values) == [1, 1, 1, 0, 0, 0]
-        np.testing.assert_allclose(ds["mass_1"].values, np.linspace(0.01, 0.06, 6))
+        mu, stable = ds["mass_1"].values, ds["stable"].values
+        assert mu[0] == 0.01 and mu[-1] == 0.06 and np.all(np.diff(mu) > 0)
+        assert list(stable) == [int(m < 0.03995987) for m in mu]
         assert float(ds["bifurcation_parameter"][0]) == pytest.approx(0.03995987, abs=1e-8)
         assert "Krein" in str(ds["bifurcation_kind"].values[0]) and "mass_1" in ds.attrs["config"]
+        members = ds.sizes["member"]
     assert main(["verify", str(out)]) == 0
-    assert "6 members and 1 bifurcations computed again agree" in capsys.readouterr().out
+    assert f"{members} members and 1 bifurcations computed again agree" in \
+        capsys.readouterr().out
     cfg.write_text(cfg.read_text().replace('"mass_1"', '"gravity_H"'))
     assert main(["equilibria", str(cfg)]) == 2
     assert "[equilibria].parameter: 'gravity_H' is neither mass_K nor a parameter" in \
