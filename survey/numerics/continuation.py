@@ -15,6 +15,15 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
+from ..physics.equilibria import (
+    AXIS_TOLERANCE,
+    Bifurcation,
+    amended,
+    frame,
+    relative_equilibrium,
+    rotations,
+)
+
 TURN = np.cos(np.radians(10.0))   # a step whose tangent or chord turns more is halved
 
 
@@ -119,14 +128,6 @@ def equilibrium_family(systems: Callable, start, p0: float, to: float, steps: in
     reduced eigenvalues on the imaginary axis are bisected and named (a complex quartet: a
     Krein collision; a real pair). Returns (members [(p, RelativeEquilibrium)],
     bifurcations [Bifurcation], complete)."""
-    from ..physics.equilibria import (
-        AXIS_TOLERANCE,
-        Bifurcation,
-        amended,
-        frame,
-        relative_equilibrium,
-        rotations,
-    )
     first = relative_equilibrium(systems(p0), start, angular_momentum, rotation_rate)
     d = first.positions.shape[1]
     T, w = frame(systems(p0).masses, d)
