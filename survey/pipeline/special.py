@@ -33,6 +33,12 @@ from ..physics.system import System
 from .cells import build_starts
 from .config import Key, _decode, check_table, validate
 
+FAMILY = {      # a family's end, for [equilibria] and [periodic] with a parameter
+    "to": Key("float", None, "the parameter's last value"),
+    "steps": Key("int", 20, "arclength steps from the start to `to` where the family runs "
+                            "along the parameter (more where it bends)", low=1, high=100000),
+}
+
 EQUILIBRIA = {
     "angular_momentum": Key("float", None, "angular momentum J of the rotation (in the "
                                            "plane); default: the [initial] start's"),
@@ -44,9 +50,7 @@ EQUILIBRIA = {
     "parameter": Key("str", "", "continue the start's equilibrium in this parameter: "
                                 "mass_K (body K, from 0) or a potential parameter by its grid-"
                                 "axis name (<potential>_<parameter>); '' for none"),
-    "to": Key("float", None, "the parameter's last value (from its value in [system])"),
-    "steps": Key("int", 20, "arclength steps from the start to `to` where the family runs "
-                            "along the parameter (more where it bends)", low=1, high=100000),
+    **FAMILY,
 }
 
 
@@ -65,9 +69,7 @@ PERIODIC = {
     "parameter": Key("str", "", "continue the orbit in 'energy' (J held) or a parameter of "
                                 "the system at fixed energy: mass_K (body K, from 0) or a "
                                 "potential parameter by its grid-axis name; '' for none"),
-    "to": Key("float", None, "the parameter's last value"),
-    "steps": Key("int", 20, "arclength steps from the start to `to` where the family runs "
-                            "along the parameter (more where it bends)", low=1, high=100000),
+    **FAMILY,
 }
 
 
