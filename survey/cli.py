@@ -126,10 +126,10 @@ def orbit_workflow(path, folder) -> list:
 
 def _plot(args):
     from .pipeline.archive import open_archive
-    from .pipeline.special import special_cells
+    from .pipeline.special import section_slice, special_cells
     from .presentation import plots
     with open_archive(args.archive) as ds:
-        figs = plots.figures(ds, args.var or None, special_cells(ds))
+        figs = plots.figures(ds, args.var or None, special_cells(ds), section_slice(ds))
         out = Path(args.out or Path(args.archive).parent)
         for path in plots.save(figs, out, Path(args.archive).stem):
             print(f"wrote {path}")
@@ -140,14 +140,14 @@ def _report(args):
     import contextlib
 
     from .pipeline.archive import open_archive
-    from .pipeline.special import special_cells
+    from .pipeline.special import section_slice, special_cells
     from .presentation import report
     archive = Path(args.archive)
     check = archive.with_name(f"{archive.stem}_check.nc")    # its [check] run, if any
     with open_archive(archive) as ds, contextlib.ExitStack() as stack:
         other = stack.enter_context(open_archive(check)) if check.exists() else None
         path = report.write(ds, args.out or archive.parent, archive.stem, check=other,
-                            special=special_cells(ds))
+                            special=special_cells(ds), slice_at=section_slice(ds))
     print(f"wrote {path} and its figures")
     return 0
 
@@ -163,6 +163,7 @@ def _reproduce(args):
 
     from .pipeline import orbits, special
     from .pipeline.config import load_config
+    from .presentation import plots
     results = Path(args.results)
     staging = results / ".staging"
     staging.mkdir(parents=True, exist_ok=True)
@@ -172,7 +173,7 @@ def _reproduce(args):
     for path in paths:
         print(f"== {path}")
         if special.special_table(path):
-            print(f"made {special.write_report(path, staging)}")
+            print(f"made {special.write_report(path, staging, plots.family_diagram)}")
             continue
         if orbits.is_orbit_workflow(path):
             for out in orbit_workflow(path, staging):
@@ -254,7 +255,7 @@ def _survey(config, command, summary=False, write_report=True, **kw) -> Path:
     import xarray as xr
 
     from .analysis.classify import summary as summarise
-    from .pipeline.special import special_cells
+    from .pipeline.special import section_slice, special_cells
     from .pipeline.sweep import run_survey
     from .presentation import report
     path = run_survey(config, command=command, **kw)
@@ -276,7 +277,7 @@ def _survey(config, command, summary=False, write_report=True, **kw) -> Path:
             print("\n".join(summarise(ds)))
         if write_report:
             written = report.write(ds, path.parent, path.stem, check=other,
-                                   special=special_cells(ds))
+                                   special=special_cells(ds), slice_at=section_slice(ds))
             if summary:
                 print(f"report and figures: {written} (and {path.stem}_*.png beside it)")
     return path

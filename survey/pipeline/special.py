@@ -505,10 +505,10 @@ def special_table(path) -> str | None:
     return next((name for name in ("equilibria", "periodic") if name in raw), None)
 
 
-def write_report(path, folder) -> Path:
+def write_report(path, folder, draw=None) -> Path:
     """NAME.md in `folder` for a special-solution workflow: what it is (its config) and
     what was found, in the words the command prints; for a periodic family also NAME.png,
-    its bifurcation diagram."""
+    its bifurcation diagram drawn by `draw(dataset, title)`."""
     path = Path(path)
     figure = None
     if special_table(path) == "equilibria" and load_equilibria(path)[2]["parameter"]:
@@ -519,7 +519,10 @@ def write_report(path, folder) -> Path:
     elif load_periodic(path)[3]["parameter"]:
         system, table, family = continue_periodic(path)
         text = periodic_family_text(system, table, family)
-        figure = _family_figure(system, table, family, path, folder)
+        if draw is not None:     # the family's diagram (presentation.plots.family_diagram)
+            figure = Path(folder) / f"{path.stem}.png"
+            draw(family_dataset(table, family, path.read_text()),
+                 _family_title(path, system, table, family)).savefig(figure, dpi=130)
     else:
         system, _, orbit = find_periodic(path)
         text = periodic_text(system, orbit)
@@ -535,20 +538,16 @@ def write_report(path, folder) -> Path:
     return out
 
 
-def _family_figure(system, table, family, path, folder) -> Path:
-    """NAME.png: the family's bifurcation diagram."""
-    from ..presentation.plots import family_diagram
-    ds = family_dataset(table, family, path.read_text())
+def _family_title(path, system, table, family) -> str:
+    """What a periodic family's diagram is of: the workflow, the start, the parameter
+    (and the J it is held at), the bodies and their terms."""
     start = f"Lyapunov family of normal mode {table['mode']}" if table["mode"] else "family"
     terms = " + ".join(f"{t.name} (" + ", ".join(f"{k} {v:g}" for k, v in zip(
         t.param_names, t.params)) + ")" for t in system.terms)
     spin = f" at J = {family.members[0].angular_momentum:.6g}" if table["rotating"] and \
         table["parameter"] == "energy" else ""
-    fig = family_diagram(ds, f"{path.stem}: {start} in {table['parameter']}{spin}; "
-                             f"{system.n_bodies} bodies, {terms}")
-    out = Path(folder) / f"{path.stem}.png"
-    fig.savefig(out, dpi=130)
-    return out
+    return (f"{Path(path).stem}: {start} in {table['parameter']}{spin}; "
+            f"{system.n_bodies} bodies, {terms}")
 
 
 def equilibrium_cells(ds, most: int = 8) -> list[dict]:
@@ -652,7 +651,7 @@ def homographic_cells(ds, most: int = 8) -> list[dict]:
                                       for a, i in zip(axes, idx)),
                     "period": orbit.period, "rotation": orbit.rotation,
                     "orbit_kind": orbit.kind, "stable": orbit.stable,
-                    "rates": orbit.rates.tolist(), "ftle": ftle})
+                    "rates": orbit.rates.tolist(), V.ftle: ftle})
     return out
 
 
@@ -723,3 +722,12 @@ def verify_family(path) -> tuple[bool, list[str]]:
     return True, [f"{path}: {stored.sizes['member']} members and "
                   f"{stored.sizes.get('bifurcation', 0)} bifurcations computed again agree "
                   f"to {FAMILY_TOLERANCE:g} {made}"]
+
+
+def section_slice(ds) -> dict:
+    """The section coordinates (sigma, p_sigma, eta, p_eta) an archive's config fixes while
+    its grid varies the others: the slice of the section a `section` grid is."""
+    from .config import parse_config
+    fixed = parse_config(ds.attrs["config"], check_output=False).fixed
+    return {q: float(fixed[q]) for q in ("sigma", "p_sigma", "eta", "p_eta")
+            if q in fixed and f"crossing_{q}" in ds}

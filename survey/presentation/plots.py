@@ -46,11 +46,12 @@ def grid_axes(ds) -> list[str]:
     return list(ds[V.status].dims)
 
 
-def figures(ds, variables=None, special=()) -> dict[str, Figure]:
+def figures(ds, variables=None, special=(), slice_at=None) -> dict[str, Figure]:
     """The figures that fit the archive's grid: maps for two axes, scans for one, the
     section, convergence histories and the frequency map where the data exist. special:
     the special solutions its cells start on (pipeline.special.special_cells), marked on
-    the regime map and the scans."""
+    the regime map and the scans; slice_at: the section coordinates a grid over the others
+    fixes (pipeline.special.section_slice), for its overlay of crossings."""
     axes = grid_axes(ds)
     out = {}
     names = [m for m in MAPS if m[0] in ds and (variables is None or m[0] in variables)]
@@ -65,7 +66,8 @@ def figures(ds, variables=None, special=()) -> dict[str, Figure]:
                 and np.isfinite(ds[V.megno].values).any():
             style = OWNER[V.megno].map
             out["map_megno_section"] = indicator_map(ds, V.megno, style.cmap, style.clip,
-                                                     style.log, overlay=True)
+                                                     style.log, overlay=True,
+                                                     slice_at=slice_at or {})
     elif len(axes) == 1:
         out["scan"] = scan(ds, [n for n, _ in names] if variables is None else variables,
                            special)
@@ -278,9 +280,11 @@ def _scale_free_lines(ds, ax, x, y) -> list:
                    label="equal E |J|^(-2k/(k+2)):\nshells with one phase\nportrait, rescaled")]
 
 
-def indicator_map(ds, name, cmap="viridis", clip=None, log=False, overlay=False) -> Figure:
+def indicator_map(ds, name, cmap="viridis", clip=None, log=False, overlay=False,
+                  slice_at=None) -> Figure:
     """An indicator over the two grid axes with its histogram; `overlay`: when the axes are
-    section coordinates, the section crossings of every cell drawn on top."""
+    section coordinates, the section crossings in the slab of the slice the grid is (the
+    other coordinates at slice_at) drawn on top."""
     fig, ax, hist, x, y = _two_axis_figure(ds)
     values = ds[name].values.astype(float)
     shown = np.where(_unfinished(ds), np.nan, values)
@@ -296,7 +300,7 @@ def indicator_map(ds, name, cmap="viridis", clip=None, log=False, overlay=False)
     handles = _mask_layer(ax, ds, x, y)
     if overlay:
         a, b = grid_axes(ds)
-        keep, slab = _slice_slab(ds, (a, b))
+        keep, slab = _slice_slab(ds, slice_at or {})
         ax.scatter(ds[f"crossing_{a}"].values.ravel()[keep],
                    ds[f"crossing_{b}"].values.ravel()[keep],
                    s=2.0, lw=0, color="black", alpha=0.6, rasterized=True)
@@ -333,19 +337,16 @@ def indicator_map(ds, name, cmap="viridis", clip=None, log=False, overlay=False)
 SLAB = 0.025     # half-width of a slice's slab, as a share of each coordinate's range
 
 
-def _slice_slab(ds, axes):
-    """A grid over two coordinates of a section fixes the others (the `section` family's
-    [initial] values): the grid is a 2-D slice of the section, and only crossings within
-    the slab |q - q0| <= SLAB (range of q's crossings) of each fixed q belong on it.
-    Returns (mask over the flattened crossings, the slab's description with counts)."""
-    from ..pipeline.config import parse_config
-    given = parse_config(ds.attrs["config"], check_output=False).fixed
-    fixed = {q: float(given[q]) for q in ("sigma", "p_sigma", "eta", "p_eta")
-             if q not in axes and q in given and f"crossing_{q}" in ds}
-    keep = np.isfinite(ds[f"crossing_{axes[0]}"].values.ravel())
+def _slice_slab(ds, slice_at: dict):
+    """A grid over two coordinates of a section fixes the others (slice_at: name -> value):
+    the grid is a 2-D slice of the section, and only crossings within the slab |q - q0| <=
+    SLAB (range of q's crossings) of each fixed q belong on it. Returns (mask over the
+    flattened crossings, the slab's description with counts)."""
+    a = grid_axes(ds)[0]
+    keep = np.isfinite(ds[f"crossing_{a}"].values.ravel())
     total = int(keep.sum())
     parts = []
-    for q, q0 in fixed.items():
+    for q, q0 in slice_at.items():
         values = ds[f"crossing_{q}"].values.ravel()
         width = SLAB * float(np.nanmax(values) - np.nanmin(values))
         keep &= np.abs(values - q0) <= width

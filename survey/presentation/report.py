@@ -30,15 +30,17 @@ def without_provenance(text: str) -> str:
 
 
 def write(ds, folder, stem: str | None = None, figures: bool = True, check=None,
-          special=()) -> Path:
+          special=(), slice_at=None) -> Path:
     """Write STEM_report.md and its figures into `folder`; returns the report's path.
     check: the archive of the survey's [check] run (another seed and ensemble size), whose
     claims the report states beside its own. special: the special solutions its cells
-    start on (pipeline.special.special_cells), set beside the family."""
+    start on (pipeline.special.special_cells), set beside the family; slice_at: the
+    section coordinates a section grid fixes (pipeline.special.section_slice)."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     stem = stem or Path(ds.encoding.get("source", "survey")).stem
-    figs = plots.save(plots.figures(ds, special=special), folder, stem) if figures else []
+    figs = plots.save(plots.figures(ds, special=special, slice_at=slice_at), folder,
+                      stem) if figures else []
     text = markdown(ds, [p.name for p in figs], check, special)
     path = folder / f"{stem}_report.md"
     tmp = path.with_name(f".{path.name}.tmp")
@@ -500,7 +502,7 @@ def _special(ds, special, regime) -> list[str]:
                                                  ": nearby orbits leave at " + ", ".join(
                                                      f"{r:.4g}" for r in s["rates"])
                                                  + " per unit time")
-                   + f"; the cell's FTLE {s['ftle']:.3g}.")
+                   + f"; the cell's FTLE {s[V.ftle]:.3g}.")
     return out + [""]
 
 

@@ -436,9 +436,12 @@ def test_a_slice_grid_draws_only_the_crossings_in_its_slab(tmp_path):
            "integration": {"t_final": 200.0}, "section": {"coordinate": "phi"},
            "indicators": {"perturbations": 0}}
     ds = xr.open_dataset(run_survey(cfg))
-    figs = plots.figures(ds)
+    from survey.pipeline.special import section_slice
+    slice_at = section_slice(ds)
+    assert slice_at == {"eta": 3.0, "p_eta": 0.0}
+    figs = plots.figures(ds, slice_at=slice_at)
     ax = figs["map_megno_section"].axes[0]
-    keep, _ = plots._slice_slab(ds, ("sigma", "p_sigma"))
+    keep, _ = plots._slice_slab(ds, slice_at)
     total = int(np.isfinite(ds.crossing_sigma.values).sum())
     assert 0 < keep.sum() < total
     assert len(ax.collections[-1].get_offsets()) == keep.sum()
