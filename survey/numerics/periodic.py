@@ -83,7 +83,7 @@ class PeriodicOrbit(NamedTuple):
         for a quartet), ascending: |b| <= 1 on the unit circle, b = 1 and b = -1 where a pair
         passes through +1 (tangent, fold or branch) or -1 (period doubling)."""
         b = (self.multipliers + 1.0 / self.multipliers) / 2.0
-        b = b[np.lexsort((b.imag, b.real))]
+        b = b[np.lexsort((np.round(b.imag, 9), np.round(b.real, 9)))]    # pairs adjacent
         return b[::2]
 
     @property

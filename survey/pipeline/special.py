@@ -382,8 +382,10 @@ def periodic_text(system: System, orbit: PeriodicOrbit) -> str:
              "Non-trivial Floquet multipliers (|mu|, angle/pi): " + ", ".join(
                  f"{abs(z):.9f} {np.angle(z) / np.pi:+.6f}" for z in orbit.multipliers)
              + f": {orbit.kind}" + (", linearly stable." if orbit.stable else
-                                    ", unstable; nearby orbits leave at rates " + ", ".join(
-                                        f"{r:.6g}" for r in orbit.rates) + " per unit time."),
+                                    ", unstable; nearby orbits leave at " + ", ".join(
+                                        f"{r:.6g}" for r in sorted({float(f"{r:.6g}") for r in
+                                                                    orbit.rates}, reverse=True))
+                                    + " per unit time."),
              f"Greene's residues R = (2 - mu - 1/mu) / 4, one per pair (0 < R < 1 elliptic): "
              f"{_residues(orbit)}."]
     return "\n".join(lines)

@@ -497,12 +497,14 @@ def _special(ds, special, regime) -> list[str]:
             "FTLE, measured over the whole run, is that of the sea its orbit joins once "
             "it has left."]
     for s in periodic:
+        rates = sorted({float(f"{r:.4g}") for r in s["rates"]}, reverse=True)  # a quartet: one
         out.append(f"- {s['cell']}: period {s['period']:.6g}, turning {s['rotation']:.6g} "
                    f"rad, {s['orbit_kind']}" + (", linearly stable" if s["stable"] else
                                                  ": nearby orbits leave at " + ", ".join(
-                                                     f"{r:.4g}" for r in s["rates"])
+                                                     f"{r:.4g}" for r in rates)
                                                  + " per unit time")
-                   + f"; the cell's FTLE {s[V.ftle]:.3g}.")
+                   + (f"; the cell's FTLE {s[V.ftle]:.3g}." if np.isfinite(s[V.ftle]) else
+                      "; the cell has no FTLE (its run did not finish)."))
     return out + [""]
 
 
