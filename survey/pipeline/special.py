@@ -150,6 +150,9 @@ def continue_equilibria(path):
     if table["to"] is None:
         raise ConfigError("[equilibria].to", "is required with a parameter: its last value")
     p0, systems = _family_systems(config_system, table["parameter"])
+    if table["to"] == p0:
+        raise ConfigError("[equilibria].to", f"equals the parameter's start value {p0:g}; "
+                                             "give the family's other end")
     try:
         members, found, complete = equilibrium_family(
             systems, start, p0, table["to"], table["steps"], table["angular_momentum"],
@@ -300,10 +303,13 @@ def load_periodic(path):
         spin = float(system.angular_momentum(start)) if system.dim == 2 else 0.0
         try:
             eq = relative_equilibrium(system, system.split(start)[0], angular_momentum=spin)
-            start, table["period"] = lyapunov_start(system, eq, table["mode"],
-                                                    table["amplitude"])
         except ValueError as exc:
             raise SurveyError(f"{path}: [periodic] mode = {table['mode']}: {exc}") from None
+        if table["mode"] > eq.frequencies.size:
+            raise ConfigError("[periodic].mode", f"{table['mode']}: the start's relative "
+                              f"equilibrium has {eq.frequencies.size} normal modes on the "
+                              f"imaginary axis; give 1 to {eq.frequencies.size}")
+        start, table["period"] = lyapunov_start(system, eq, table["mode"], table["amplitude"])
         table["rotating"] = eq.rotation_rate != 0.0
         table["krein"] = int(eq.krein[eq.eigenvalues.imag > 0][
             np.argmin(np.abs(eq.eigenvalues[eq.eigenvalues.imag > 0].imag
@@ -348,6 +354,9 @@ def continue_periodic(path) -> tuple[System, dict, Family]:
                               (">" if table["krein"] > 0 else "<") + f" {p0:.10g}")
     else:
         p0, systems = _family_systems(config.tables["system"], name, "periodic")
+    if table["to"] == p0:
+        raise ConfigError("[periodic].to", f"equals the parameter's start value {p0:g}; "
+                                           "give the family's other end")
     try:
         family = periodic_family(systems, orbit, p0, table["to"], table["steps"],
                                  table["rotating"], name == "energy", table["tol"])

@@ -158,6 +158,10 @@ def test_periodic_family_command(tmp_path, capsys):
     assert main(["periodic", str(cfg)]) == 2
     assert "[periodic].to: mode 1's family leaves the equilibrium toward lower energy" \
         in capsys.readouterr().err
-    cfg.write_text(cfg.read_text().replace("to = 150.0\n", ""))
+    cfg.write_text(cfg.read_text().replace("mode = 1", "mode = 5"))
+    assert main(["periodic", str(cfg)]) == 2
+    assert "[periodic].mode: 5: the start's relative equilibrium has 3 normal modes" in \
+        capsys.readouterr().err
+    cfg.write_text(cfg.read_text().replace("mode = 5", "mode = 1").replace("to = 150.0\n", ""))
     assert main(["periodic", str(cfg)]) == 2
     assert "[periodic].to: is required with a parameter" in capsys.readouterr().err
