@@ -118,17 +118,21 @@ def locate(members, solve: Callable, tests: dict[str, Callable], bisect: float =
 def equilibrium_family(systems: Callable, start, p0: float, to: float, steps: int = 20,
                        angular_momentum: float | None = None,
                        rotation_rate: float | None = None, bisect: float = 1e-9,
-                       max_members: int = 1000):
+                       max_members: int = 1000, spin_parameter: bool = False):
     """The family of the relative equilibrium reached from positions `start` in
     systems(p0), followed by pseudo-arclength continuation in p to `to` at the given J (or
-    rate): the gradient of the amended potential in reduced coordinates (physics.
+    rate; with `spin_parameter` p is J itself and systems ignores it): the gradient of the
+    amended potential in reduced coordinates (physics.
     equilibria.amended) with the rotation pinned, bordered by the parameter's column (finite
     differences) and the arclength; unknowns scaled by |xi| and |to - p0|. Each member is
     polished and linearised by relative_equilibrium. Folds and changes of the number of
     reduced eigenvalues on the imaginary axis are bisected and named (a complex quartet: a
     Krein collision; a real pair). Returns (members [(p, RelativeEquilibrium)],
     bifurcations [Bifurcation], complete)."""
-    first = relative_equilibrium(systems(p0), start, angular_momentum, rotation_rate)
+    def spin(p):
+        return p if spin_parameter else angular_momentum
+
+    first = relative_equilibrium(systems(p0), start, spin(p0), rotation_rate)
     d = first.positions.shape[1]
     T, w = frame(systems(p0).masses, d)
     xi0 = T.T @ (first.positions.ravel() / w)
@@ -140,7 +144,7 @@ def equilibrium_family(systems: Callable, start, p0: float, to: float, steps: in
     def equations(p, xi):
         system = systems(p)
         T, w = frame(system.masses, d)
-        return system, T, w, amended(system, T, w, xi, angular_momentum, rotation_rate)
+        return system, T, w, amended(system, T, w, xi, spin(p), rotation_rate)
 
     def solve(x, row, target, max_iter=30):
         best = np.inf
@@ -162,7 +166,7 @@ def equilibrium_family(systems: Callable, start, p0: float, to: float, steps: in
             if error <= 1e-12:
                 q = (w * (T @ xi)).reshape(first.positions.shape)
                 try:
-                    eq = relative_equilibrium(system, q, angular_momentum, rotation_rate)
+                    eq = relative_equilibrium(system, q, spin(p), rotation_rate)
                 except ValueError:
                     return None
                 return eq, x, A

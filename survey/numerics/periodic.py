@@ -148,11 +148,11 @@ def _return(system, y, period, tol, tangents=True):
 
 class _Shooting(NamedTuple):
     """What the shooting equations hold fixed: the orbit returns rotated (`rotating`) or
-    not; its energy (None: the energy is the continuation parameter) and, rotating, J."""
+    not; its energy and, rotating, J (None: that one is the continuation parameter)."""
 
     rotating: bool
     energy: float | None
-    spin: float
+    spin: float | None
     tol: float
 
     def equations(self, system: System, y, T, theta, p=None, tangents=True):
@@ -174,9 +174,9 @@ class _Shooting(NamedTuple):
         if d == 2:
             F.append([0.0])
             if self.rotating:
-                j = float(system.angular_momentum(y))
-                F.append([j - self.spin])
-                errors.append(abs(j - self.spin) / max(abs(self.spin), 1.0))
+                j, spin = float(system.angular_momentum(y)), p if self.spin is None else self.spin
+                F.append([j - spin])
+                errors.append(abs(j - spin) / max(abs(spin), 1.0))
         C = _centre(system)
         F.append(C @ y)
         F = np.concatenate(F)
@@ -315,18 +315,22 @@ class Family(NamedTuple):
 
 def periodic_family(systems: Callable[[float], System], orbit: PeriodicOrbit, p0: float,
                     to: float, steps: int = 20, rotating: bool = False,
-                    energy_parameter: bool = False, tol: float = 1e-13,
+                    pinned: str | None = None, tol: float = 1e-13,
                     bisect: float = 1e-9, max_members: int = 1000) -> Family:
     """The family of `orbit` (a periodic orbit of systems(p0)) followed by pseudo-arclength
-    continuation (numerics.continuation) from p0 to `to`: p the energy (`energy_parameter`;
-    systems ignores it) or a parameter of the system at fixed energy. Unknowns (y, T[,
+    continuation (numerics.continuation) from p0 to `to`: p the energy or, for a rotating
+    orbit, the angular momentum (`pinned` = "energy" or "angular_momentum": the other one
+    held, systems ignores p) or a parameter of the system at fixed energy. Unknowns (y, T[,
     theta], p) scaled by |y|, T, 1 and |to - p0|; a step that moves a stability index by
     more than 0.1 is halved. Folds and changes of the number of multipliers on the unit
     circle are bisected along the arclength to `bisect` of |to - p0| and named."""
     n = orbit.state.size
     extra = 2 if rotating else 1
-    shooting = _Shooting(rotating, None if energy_parameter else orbit.energy,
-                         orbit.angular_momentum, tol)
+    if pinned == "angular_momentum" and not rotating:
+        raise ValueError("only a rotating orbit is continued in J (a periodic one's J is "
+                         "its own)")
+    shooting = _Shooting(rotating, None if pinned == "energy" else orbit.energy,
+                         None if pinned == "angular_momentum" else orbit.angular_momentum, tol)
     span = abs(to - p0)
     if span == 0:
         raise ValueError("the family's end value equals its start")
@@ -346,9 +350,9 @@ def periodic_family(systems: Callable[[float], System], orbit: PeriodicOrbit, p0
             try:
                 system = systems(p)
                 F, A, error, phi = shooting.equations(system, y, T, theta, p)
-                if energy_parameter:
+                if pinned:      # its row: energy n + 1, J n + 3 (after the orientation)
                     col = np.zeros(F.size)
-                    col[n + 1] = -1.0
+                    col[n + 1 if pinned == "energy" else n + 3] = -1.0
                 else:
                     h = 1e-7 * max(abs(p), 1.0)
                     col = (shooting.equations(systems(p + h), y, T, theta, p,

@@ -48,8 +48,9 @@ EQUILIBRIA = {
                             "start's size, normal about its centre)", low=0, high=10000),
     "seed": Key("int", 0, "seed of those configurations", low=0),
     "parameter": Key("str", "", "continue the start's equilibrium in this parameter: "
-                                "mass_K (body K, from 0) or a potential parameter by its grid-"
-                                "axis name (<potential>_<parameter>); '' for none"),
+                                "angular_momentum, mass_K (body K, from 0) or a potential "
+                                "parameter by its grid-axis name (<potential>_<parameter>); "
+                                "'' for none"),
     **FAMILY,
 }
 
@@ -66,8 +67,9 @@ PERIODIC = {
                 low=0, high=1000),
     "amplitude": Key("float", 1e-3, "the mode's displacement, relative to the equilibrium's "
                                     "size", above=0, high=0.5),
-    "parameter": Key("str", "", "continue the orbit in 'energy' (J held) or a parameter of "
-                                "the system at fixed energy: mass_K (body K, from 0) or a "
+    "parameter": Key("str", "", "continue the orbit in 'energy' (J held), in "
+                                "'angular_momentum' (a rotating orbit, E held) or a parameter "
+                                "of the system at fixed energy: mass_K (body K, from 0) or a "
                                 "potential parameter by its grid-axis name; '' for none"),
     **FAMILY,
 }
@@ -133,7 +135,8 @@ def _family_systems(config_system: dict, parameter: str, table: str = "equilibri
              for key, name in axes.items()}
     if parameter not in names:
         raise ConfigError(f"[{table}].parameter", f"{parameter!r} is neither "
-                          + ("energy, " if table == "periodic" else "") + "mass_K nor a "
+                          + ("energy, angular_momentum, " if table == "periodic" else
+                             "angular_momentum, ") + "mass_K nor a "
                           "parameter of the system's terms (" + ", ".join(sorted(names)) + ")")
     p0 = build_system(config_system).terms[names[parameter][0]]
     value = dict(zip(p0.param_names, p0.params))[names[parameter][1]]
@@ -149,14 +152,20 @@ def continue_equilibria(path):
     config_system = _load(path, "equilibria", EQUILIBRIA)[0].tables["system"]
     if table["to"] is None:
         raise ConfigError("[equilibria].to", "is required with a parameter: its last value")
-    p0, systems = _family_systems(config_system, table["parameter"])
+    spin = table["parameter"] == "angular_momentum"
+    if spin and table["rotation_rate"] is not None:
+        raise ConfigError("[equilibria].parameter", "'angular_momentum' runs J from "
+                                                    "angular_momentum: give it, not "
+                                                    "rotation_rate")
+    p0, systems = (table["angular_momentum"], lambda p: system) if spin else \
+        _family_systems(config_system, table["parameter"])
     if table["to"] == p0:
         raise ConfigError("[equilibria].to", f"equals the parameter's start value {p0:g}; "
                                              "give the family's other end")
     try:
         members, found, complete = equilibrium_family(
             systems, start, p0, table["to"], table["steps"], table["angular_momentum"],
-            table["rotation_rate"])
+            table["rotation_rate"], spin_parameter=spin)
     except ValueError as exc:
         raise SurveyError(f"{path}: the family does not start: {exc}") from None
     return table, members, found, complete
@@ -352,6 +361,13 @@ def continue_periodic(path) -> tuple[System, dict, Family]:
                                                         "lower") + f" energy (its Krein sign "
                               f"is {table['krein']:+d}): give to " +
                               (">" if table["krein"] > 0 else "<") + f" {p0:.10g}")
+    elif name == "angular_momentum":
+        if not table["rotating"]:
+            raise ConfigError("[periodic].parameter", "'angular_momentum' continues a rotating "
+                                                      "orbit (rotating = true or a mode of a "
+                                                      "rotating equilibrium); a periodic "
+                                                      "orbit's J is its own")
+        p0, systems = orbit.angular_momentum, lambda p: system
     else:
         p0, systems = _family_systems(config.tables["system"], name, "periodic")
     if table["to"] == p0:
@@ -359,7 +375,8 @@ def continue_periodic(path) -> tuple[System, dict, Family]:
                                            "give the family's other end")
     try:
         family = periodic_family(systems, orbit, p0, table["to"], table["steps"],
-                                 table["rotating"], name == "energy", table["tol"])
+                                 table["rotating"], name if name in (
+                                     "energy", "angular_momentum") else None, table["tol"])
     except ValueError as exc:
         raise SurveyError(f"{path}: the family does not start: {exc}") from None
     return system, table, family

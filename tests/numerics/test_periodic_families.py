@@ -60,7 +60,7 @@ def test_the_breathing_family_is_the_homographic_closed_form(triangle):
     equilibrium's."""
     orbit = lyapunov(triangle, 3)
     family = periodic_family(lambda p: PAPER, orbit, orbit.energy, 300.0, steps=8,
-                             rotating=True, energy_parameter=True)
+                             rotating=True, pinned="energy")
     assert family.complete and family.parameters[-1] == 300.0
     assert family.members[-1].energy == pytest.approx(300.0, rel=1e-12)
     assert np.all(np.diff(family.parameters) > 0) and not family.bifurcations
@@ -94,7 +94,7 @@ def test_the_figure_eight_along_its_energy_keeps_keplers_law():
     start = gravity.state(np.array([x1, -x1, [0.0, 0.0]]), [-v3 / 2, -v3 / 2, v3])
     eight = periodic_orbit(gravity, start, 6.33)
     family = periodic_family(lambda p: gravity, eight, eight.energy, 2 * eight.energy,
-                             steps=3, energy_parameter=True)
+                             steps=3, pinned="energy")
     assert family.complete and len(family.members) >= 4
     for member in family.members:
         assert member.period * abs(member.energy) ** 1.5 == pytest.approx(
@@ -110,7 +110,7 @@ def test_a_fold_brings_a_pair_through_plus_one_and_a_period_doubling_is_real(tri
     stability index is above -1 below E* and below -1 above it."""
     orbit = lyapunov(triangle, 1)
     family = periodic_family(lambda p: PAPER, orbit, orbit.energy, 90.0, steps=20,
-                             rotating=True, energy_parameter=True)
+                             rotating=True, pinned="energy")
     kinds = {b.kind: b for b in family.bifurcations}
     fold, plus, doubling = kinds["fold"], kinds["through +1"], \
         kinds["period doubling (through -1)"]
@@ -165,3 +165,28 @@ def test_periodic_family_command(tmp_path, capsys):
     cfg.write_text(cfg.read_text().replace("mode = 5", "mode = 1").replace("to = 150.0\n", ""))
     assert main(["periodic", str(cfg)]) == 2
     assert "[periodic].to: is required with a parameter" in capsys.readouterr().err
+
+
+def test_families_in_the_angular_momentum_keep_the_closed_forms(triangle):
+    """J as the parameter. The rotating triangle under P^2/2 from J = 36 to 72: Omega = 3
+    at every size, so every member has E = Omega J exactly and the same modes. The breathing
+    family's member at E = 110 from J = 36 to 30 (E held): still period pi/3, turning pi."""
+    from survey.numerics.continuation import equilibrium_family
+    members, found, complete = equilibrium_family(
+        lambda p: PAPER, triangle.positions, 36.0, 72.0, steps=4, angular_momentum=36.0,
+        spin_parameter=True)
+    assert complete and members[-1][0] == 72.0 and not found
+    for j, eq in members:
+        assert eq.angular_momentum == pytest.approx(j, rel=1e-12)
+        assert eq.rotation_rate == pytest.approx(3.0, rel=1e-10)
+        assert eq.energy == pytest.approx(3.0 * j, rel=1e-10)
+        np.testing.assert_allclose(eq.frequencies, triangle.frequencies, rtol=1e-9)
+    start, period = lyapunov_start(PAPER, triangle, 3)
+    orbit = periodic_orbit(PAPER, start, period, rotating=True, energy=110.0)
+    family = periodic_family(lambda p: PAPER, orbit, orbit.angular_momentum, 30.0, steps=4,
+                             rotating=True, pinned="angular_momentum")
+    assert family.complete and family.members[-1].angular_momentum == pytest.approx(30.0)
+    for member in family.members:
+        assert member.energy == pytest.approx(110.0, rel=1e-12)
+        assert member.period == pytest.approx(math.pi / 3, rel=1e-11)
+        assert member.rotation == pytest.approx(math.pi, rel=1e-11)

@@ -190,5 +190,6 @@ steps = 5
         capsys.readouterr().out
     cfg.write_text(cfg.read_text().replace('"mass_1"', '"gravity_H"'))
     assert main(["equilibria", str(cfg)]) == 2
-    assert "[equilibria].parameter: 'gravity_H' is neither mass_K nor a parameter" in \
+    assert "[equilibria].parameter: 'gravity_H' is neither angular_momentum, mass_K nor a " \
+        "parameter" in \
         capsys.readouterr().err
