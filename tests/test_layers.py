@@ -176,6 +176,8 @@ NOT_VARIABLES = {
     ("pipeline/special.py", "energy"): "an [equilibria] / [periodic] key and a JSON field",
     ("pipeline/special.py", "angular_momentum"): "an [equilibria] key and a JSON field",
     ("pipeline/special.py", "initial_state"): "a JSON field of `periodic --json`",
+    ("numerics/periodic.py", "energy"): "the quantity a periodic family runs in (`pinned`)",
+    ("numerics/periodic.py", "angular_momentum"): "the same",
 }
 
 
