@@ -71,7 +71,8 @@ def figures(ds, variables=None, special=(), slice_at=None) -> dict[str, Figure]:
     elif len(axes) == 1:
         out["scan"] = scan(ds, [n for n, _ in names] if variables is None else variables,
                            special)
-    if V.crossing_sigma in ds and int(np.nansum(ds[V.n_crossings].values)) > 0:
+    if V.crossing_sigma in ds and int(np.nansum(ds[V.n_crossings].values)) > 0 \
+            and len(shells(ds)) <= MAX_SHELLS:
         out["section"] = section(ds)
     if V.megno_history in ds and np.isfinite(ds[V.megno_history].values).any():
         out["convergence"] = convergence(ds)
@@ -486,41 +487,76 @@ def _below_log_axis(ax, x, y):
                 label=f"<= 0, off the log axis ({int(off.sum())})")
 
 
+MAX_SHELLS = 9      # a section figure draws up to this many shells, one panel each
+
+
+def _per_cell(ds, name) -> np.ndarray:
+    """A variable's value at every cell, flat in the grid's order (a grid axis such as the
+    target energy is a coordinate of one dimension)."""
+    status = ds[V.status]
+    return ds[name].broadcast_like(status).transpose(*status.dims).values.ravel()
+
+
+def shells(ds) -> list[np.ndarray]:
+    """The cells of an archive grouped by the Hamiltonian and energy shell they start on:
+    equal E and J (to 1e-9) and equal values of every grid axis that is a parameter of the
+    system (its terms' axes). Each group is a flat array of cell indices; cells without a
+    start are left out. A Poincare section is of one shell."""
+    axes = [a for a in grid_axes(ds)        # a term's parameter: another Hamiltonian
+            if str(ds[a].attrs.get("long_name", "")).startswith("parameter ")]
+    flat = {a: _per_cell(ds, a) for a in axes}
+    groups: dict[tuple, list[int]] = {}
+    energy, spin = _per_cell(ds, V.energy), _per_cell(ds, V.angular_momentum)
+    for i, (e, j) in enumerate(zip(energy, spin)):
+        if np.isfinite(e):
+            key = (float(f"{e:.9e}"), float(f"{j:.9e}")) + tuple(float(flat[a][i])
+                                                                for a in axes)
+            groups.setdefault(key, []).append(i)
+    return [np.array(cells) for cells in groups.values()]
+
+
 def section(ds, x="sigma", y="p_sigma", colour_by=V.regime) -> Figure:
-    """Section crossings of every cell in the (x, y) reduced coordinates, coloured by the
-    cell's regime (or an indicator), rasterised."""
-    fig = Figure(figsize=(6.4, 5.2), layout="constrained")
-    ax = fig.add_subplot()
+    """Section crossings in the (x, y) reduced coordinates, one panel per energy shell (and
+    Hamiltonian: see `shells`) -- a section never overlays different shells -- coloured by
+    the cell's regime (or an indicator), rasterised; each panel says it is a projection of
+    the 4-D section of the reduced 3-degree-of-freedom flow."""
+    groups = shells(ds)[:MAX_SHELLS]
+    cols = min(3, len(groups))
+    rows = -(-len(groups) // cols)
+    fig = Figure(figsize=(4.6 * cols + 0.6, 4.0 * rows + 0.8), layout="constrained")
+    axes = fig.subplots(rows, cols, squeeze=False).ravel()
     xs = ds[f"crossing_{x}"].values.reshape(-1, ds.sizes["crossing"])
     ys = ds[f"crossing_{y}"].values.reshape(-1, ds.sizes["crossing"])
-    if colour_by == V.regime and V.regime in ds:
-        regime = ds[V.regime].values.ravel()
-        for r in Regime:
-            cells = regime == r
-            if cells.any() and np.isfinite(xs[cells]).any():
-                ax.scatter(xs[cells].ravel(), ys[cells].ravel(), s=1.0, lw=0,
-                           color=REGIME_COLOURS[r], rasterized=True,
-                           label=f"{r.name.lower()} ({int(cells.sum())} cells)")
-        ax.legend(fontsize="small", markerscale=6, title=V.regime)
-    else:
-        value = np.repeat(ds[colour_by].values.ravel(), xs.shape[1])
-        pts = ax.scatter(xs.ravel(), ys.ravel(), c=value, s=1.0, lw=0, cmap="viridis",
-                         rasterized=True)
-        fig.colorbar(pts, ax=ax, label=label(colour_by))
-    ax.set_xlabel(label(x))
-    ax.set_ylabel(label(y))
+    energy, spin = _per_cell(ds, V.energy), _per_cell(ds, V.angular_momentum)
+    regime = ds[V.regime].values.ravel() if V.regime in ds else None
+    for ax, cells in zip(axes, groups):
+        size = 1.0 if np.isfinite(xs[cells]).sum() > 5000 else 5.0    # few points: seen
+        if colour_by == V.regime and regime is not None:
+            for r in Regime:
+                mine = cells[regime[cells] == r]
+                if mine.size and np.isfinite(xs[mine]).any():
+                    ax.scatter(xs[mine].ravel(), ys[mine].ravel(), s=size, lw=0,
+                               color=REGIME_COLOURS[r], rasterized=True,
+                               label=f"{r.name.lower()} ({mine.size})")
+            if ax.get_legend_handles_labels()[0]:
+                ax.legend(fontsize="x-small", markerscale=6 if size < 2 else 2)
+        else:
+            value = np.repeat(ds[colour_by].values.ravel()[cells], xs.shape[1])
+            pts = ax.scatter(xs[cells].ravel(), ys[cells].ravel(), c=value, s=size, lw=0,
+                             cmap="viridis", rasterized=True)
+            fig.colorbar(pts, ax=ax, label=label(colour_by))
+        ax.set_title(f"E = {energy[cells[0]]:.6g}, J = {spin[cells[0]]:.6g} "
+                     f"({cells.size} cell{'s' if cells.size > 1 else ''})", fontsize="small")
+        ax.set_xlabel(label(x))
+        ax.set_ylabel(label(y))
+    for ax in axes[len(groups):]:
+        ax.set_visible(False)
     section_name = ds.attrs.get("section", "")
-    shells = {(round(float(e), 9), round(float(j), 9)) for e, j in zip(
-        ds[V.energy].values.ravel(), ds[V.angular_momentum].values.ravel())
-        if np.isfinite(e)} if V.energy in ds and V.angular_momentum in ds else set()
-    # what the picture is: a projection of the 4-D section of three bodies in the plane,
-    # and, where the grid varies E or J, several shells on top of each other
-    note = (f"every crossing projected onto ({x}, {y}): the section of the reduced "
-            f"3-degree-of-freedom flow is 4-D, so a torus need not draw a curve")
-    if len(shells) > 1:
-        note += f"; {len(shells)} different (E, J) shells overlaid"
-    ax.set_title(f"surface of section {section_name}".strip() + "\n" +
-                 textwrap.fill(note, 70), fontsize="small")
+    fig.supxlabel(textwrap.fill(
+        f"surface of section {section_name}".strip() + f", one panel per energy shell: every "
+        f"crossing projected onto ({x}, {y}); the section of the reduced 3-degree-of-freedom "
+        f"flow is 4-D, so a torus need not draw a curve", int(13 * fig.get_figwidth())),
+        fontsize="small")
     return fig
 
 

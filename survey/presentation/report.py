@@ -119,6 +119,12 @@ def markdown(ds, figure_names=(), check=None, special=()) -> str:
     out += _quality(ds)
     if figure_names:
         out += ["## Figures", ""] + [f"![{name}]({name})" for name in figure_names] + [""]
+        many = len(plots.shells(ds)) if V.crossing_sigma in ds else 0
+        if many > plots.MAX_SHELLS:
+            out += [f"No section figure: the cells start on {many} different energy shells "
+                    "(E, J, and the system's parameters); a section is drawn one shell a "
+                    f"panel, at most {plots.MAX_SHELLS}. For a section, survey one shell: "
+                    "the `section` family at one E and J.", ""]
     return "\n".join(out)
 
 

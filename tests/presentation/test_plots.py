@@ -51,7 +51,10 @@ def legend_texts(ax):
 def test_maps_label_axes_with_symbols_and_mask_unfinished_cells(grid2):
     figs = plots.figures(grid2)
     assert {"map_regime", "map_megno", "map_ftle", "map_fli", "map_birkhoff_digits",
-            "section", "convergence"} <= set(figs)
+            "convergence"} <= set(figs)
+    # twelve cells on twelve energy shells: no section overlays them, and the report says
+    assert "section" not in figs and len(plots.shells(grid2)) > plots.MAX_SHELLS
+    assert "No section figure: the cells start on" in report.markdown(grid2, ["x.png"])
     ax = figs["map_megno"].axes[0]
     assert ax.get_xlabel() == r"$\delta$" and ax.get_ylabel() == "$E$"
     colourbar = [a for a in figs["map_megno"].axes if "clipped to [0, 8]" in a.get_ylabel()]
@@ -86,12 +89,19 @@ def test_scan_shades_each_cell_by_regime_with_error_bars(grid1):
 
 def test_section_convergence_and_frequency_map(grid1):
     figs = plots.figures(grid1)
-    section = figs["section"].axes[0]
+    # nine deltas, nine energy shells: one panel each, titled by its shell, never overlaid
+    panels = [a for a in figs["section"].axes if a.get_visible()]
+    assert len(panels) == 9 == len(plots.shells(grid1))
+    energy = grid1.energy.values
+    for ax, e in zip(panels, energy):
+        assert ax.get_title().startswith(f"E = {e:.6g}, J = ") and "(1 cell)" in ax.get_title()
+    section = panels[0]
     assert section.get_xlabel() == r"$\sigma$" and section.get_ylabel() == r"$p_\sigma$"
     assert all(c.get_rasterized() for c in section.collections)
-    # it says what it is: a projection of the 4-D section, here of nine shells at once
-    assert "every crossing projected onto (sigma, p_sigma)" in section.get_title()
-    assert "9 different (E, J) shells overlaid" in section.get_title()
+    # it says what it is: a projection of the 4-D section
+    note = figs["section"].get_supxlabel() if hasattr(figs["section"], "get_supxlabel") \
+        else figs["section"]._supxlabel.get_text()
+    assert "every crossing projected onto (sigma, p_sigma)" in note.replace("\n", " ")
     assert len(figs["convergence"].axes) == 3
     lines = figs["convergence"].axes[0].get_lines()
     assert len(lines) >= 2 and any("ln t / t" in ln.get_label() or "ln t" in ln.get_label()
@@ -451,5 +461,5 @@ def test_a_slice_grid_draws_only_the_crossings_in_its_slab(tmp_path):
         assert np.all(np.abs(values[keep] - q0) <= width)
     assert "the grid is a 2-D slice of the 4-D section" in ax.get_xlabel()
     assert f"{int(keep.sum())} of {total})" in ax.get_xlabel().replace("\n", " ")
-    title = figs["section"].axes[0].get_title()
-    assert "projected onto (sigma, p_sigma)" in title and "shells" not in title
+    panels = [a for a in figs["section"].axes if a.get_visible()]
+    assert len(panels) == 1 and panels[0].get_title().startswith("E = 84.4558, J = 24.4019")
