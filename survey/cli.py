@@ -283,16 +283,12 @@ def _survey(config, command, summary=False, write_report=True, **kw) -> Path:
     return path
 
 
-def _equilibria(args):
-    from .pipeline.special import print_equilibria
-    return print_equilibria(args.config, args.json, args.output,
-                            "python -m survey " + " ".join(sys.argv[1:]))
-
-
-def _periodic(args):
-    from .pipeline.special import print_periodic
-    return print_periodic(args.config, args.json, args.output,
-                          "python -m survey " + " ".join(sys.argv[1:]))
+def _special(args):
+    """`equilibria` and `periodic`: the special solutions of a config's system."""
+    from .pipeline import special
+    command = {"equilibria": special.print_equilibria, "periodic": special.print_periodic}
+    return command[args.command](args.config, args.json, args.output,
+                                 "python -m survey " + " ".join(sys.argv[1:]))
 
 
 def _verify(args):
@@ -347,21 +343,17 @@ def build_parser():
     rr.add_argument("--only", action="append", help="only these workflows (file stem)")
     rr.add_argument("--no-progress", action="store_true")
     rr.set_defaults(func=_reproduce)
-    e = sub.add_parser("equilibria", help="relative equilibria (rigid rotations, or rest) "
-                                          "of a config's system near its [initial] start, "
-                                          "with their linear stability; table [equilibria]")
-    e.add_argument("config", help="TOML file: [system], one [initial] start, [equilibria]")
-    e.add_argument("--json", action="store_true", help="print the numbers as JSON")
-    e.add_argument("--output", help="with [equilibria] parameter: write the family (NetCDF)")
-    e.set_defaults(func=_equilibria)
-    po = sub.add_parser("periodic", help="the periodic orbit (or relative periodic orbit) "
-                                         "through a config's [initial] start, by Newton "
-                                         "shooting, with its Floquet multipliers; table "
-                                         "[periodic]")
-    po.add_argument("config", help="TOML file: [system], one [initial] start, [periodic]")
-    po.add_argument("--json", action="store_true", help="print the numbers as JSON")
-    po.add_argument("--output", help="with [periodic] parameter: write the family (NetCDF)")
-    po.set_defaults(func=_periodic)
+    for name, what in (("equilibria", "relative equilibria (rigid rotations, or rest) of a "
+                                      "config's system near its [initial] start, with their "
+                                      "linear stability"),
+                       ("periodic", "the periodic orbit (or relative periodic orbit) through "
+                                    "a config's [initial] start, by Newton shooting, with its "
+                                    "Floquet multipliers")):
+        sp = sub.add_parser(name, help=f"{what}; table [{name}]")
+        sp.add_argument("config", help=f"TOML file: [system], one [initial] start, [{name}]")
+        sp.add_argument("--json", action="store_true", help="print the numbers as JSON")
+        sp.add_argument("--output", help=f"with [{name}] parameter: write the family (NetCDF)")
+        sp.set_defaults(func=_special)
     v = sub.add_parser("verify", help="recompute a sample of an archive's cells from its "
                                       "stored config and compare bit for bit (a family "
                                       "archive: every member, to 1e-8)")

@@ -98,8 +98,8 @@ def _load(path, name: str, keys: dict):
     return config, start, table
 
 
-def load_equilibria(path) -> tuple[System, np.ndarray, dict]:
-    """(system, start positions (N, d), the [equilibria] table)."""
+def load_equilibria(path):
+    """(config, system, start positions (N, d), the [equilibria] table)."""
     config, start, table = _load(path, "equilibria", EQUILIBRIA)
     system = config.system()
     if table["angular_momentum"] is not None and table["rotation_rate"] is not None:
@@ -113,7 +113,7 @@ def load_equilibria(path) -> tuple[System, np.ndarray, dict]:
     if table["angular_momentum"] is None and table["rotation_rate"] is None:
         table["angular_momentum"] = 0.0 if system.dim == 3 else \
             float(system.angular_momentum(start))
-    return system, system.split(start)[0], table
+    return config, system, system.split(start)[0], table
 
 
 def _family_systems(config_system: dict, parameter: str, table: str = "equilibria"):
@@ -143,13 +143,23 @@ def _family_systems(config_system: dict, parameter: str, table: str = "equilibri
     return float(value), lambda p: build_system(config_system, {parameter: p})
 
 
-def continue_equilibria(path):
+def solve_equilibria(path):
+    """(system, table, found): the relative equilibria from the start and the seeded
+    configurations, or with [equilibria] parameter the start's family, (members,
+    bifurcations, complete)."""
+    config, system, start, table = load_equilibria(path)
+    if table["parameter"]:
+        return system, table, _equilibrium_family(path, config, system, start, table)
+    return system, table, relative_equilibria(system, start, table["angular_momentum"],
+                                              table["rotation_rate"], table["starts"],
+                                              table["seed"])
+
+
+def _equilibrium_family(path, config, system, start, table):
     """The family of the start's relative equilibrium along [equilibria] parameter, from its
     value in [system] to `to` (pseudo-arclength, about `steps` members where it runs along
-    the parameter): (table, members, bifurcations, complete)."""
+    the parameter): (members, bifurcations, complete)."""
     from ..numerics.continuation import equilibrium_family
-    system, start, table = load_equilibria(path)
-    config_system = _load(path, "equilibria", EQUILIBRIA)[0].tables["system"]
     if table["to"] is None:
         raise ConfigError("[equilibria].to", "is required with a parameter: its last value")
     spin = table["parameter"] == "angular_momentum"
@@ -158,7 +168,7 @@ def continue_equilibria(path):
                                                     "angular_momentum: give it, not "
                                                     "rotation_rate")
     p0, systems = (table["angular_momentum"], lambda p: system) if spin else \
-        _family_systems(config_system, table["parameter"])
+        _family_systems(config.tables["system"], table["parameter"])
     if table["to"] == p0:
         raise ConfigError("[equilibria].to", f"equals the parameter's start value {p0:g}; "
                                              "give the family's other end")
@@ -168,7 +178,7 @@ def continue_equilibria(path):
             table["rotation_rate"], spin_parameter=spin)
     except ValueError as exc:
         raise SurveyError(f"{path}: the family does not start: {exc}") from None
-    return table, members, found, complete
+    return members, found, complete
 
 
 def family_text(table: dict, members, found, complete: bool) -> str:
@@ -237,13 +247,6 @@ def write_archive(ds, path, command: str) -> Path:
     return out
 
 
-def find_equilibria(path) -> tuple[System, dict, list[RelativeEquilibrium]]:
-    system, start, table = load_equilibria(path)
-    found = relative_equilibria(system, start, table["angular_momentum"],
-                                table["rotation_rate"], table["starts"], table["seed"])
-    return system, table, found
-
-
 def equilibria_json(found: list[RelativeEquilibrium]) -> dict:
     return {"equilibria": [{
         "positions": e.positions.tolist(), "rotation_rate": e.rotation_rate,
@@ -283,8 +286,10 @@ def print_equilibria(path, as_json_text: bool = False, output=None,
                      command: str = "python -m survey equilibria") -> int:
     """The command: the equilibria found, or with [equilibria] parameter the family of the
     start's one and where its stability changes (and --output, its archive)."""
-    if load_equilibria(path)[2]["parameter"]:
-        table, members, found, complete = continue_equilibria(path)
+    _refuse_output(path, "equilibria", output)
+    system, table, found = solve_equilibria(path)
+    if table["parameter"]:
+        members, found, complete = found
         if output:
             ds = equilibrium_dataset(table, members, found, Path(path).read_text())
             print(f"wrote {write_archive(ds, output, command)}")
@@ -294,9 +299,6 @@ def print_equilibria(path, as_json_text: bool = False, output=None,
                           "bifurcations": [b._asdict() for b in found]}, indent=1)
               if as_json_text else family_text(table, members, found, complete))
         return 0
-    if output:
-        raise ConfigError("--output", "writes a family: give [equilibria] parameter and to")
-    system, table, found = find_equilibria(path)
     print(json.dumps(equilibria_json(found), indent=1) if as_json_text else
           equilibria_text(system, table, found))
     return 0
@@ -338,20 +340,22 @@ def load_periodic(path):
     return config, system, start, table
 
 
-def find_periodic(path) -> tuple[System, dict, PeriodicOrbit]:
-    _, system, start, table = load_periodic(path)
+def solve_periodic(path) -> tuple[System, dict, PeriodicOrbit | Family]:
+    """(system, table, the orbit through the start, or with [periodic] parameter its
+    Family)."""
+    config, system, start, table = load_periodic(path)
     try:
         orbit = periodic_orbit(system, start, table["period"], table["rotating"],
                                table["energy"], table["tol"])
     except ValueError as exc:
         raise SurveyError(f"{path}: {exc}; try another [periodic] period or start") from None
-    return system, table, orbit
+    if not table["parameter"]:
+        return system, table, orbit
+    return system, table, _periodic_family(path, config, system, table, orbit)
 
 
-def continue_periodic(path) -> tuple[System, dict, Family]:
+def _periodic_family(path, config, system, table, orbit) -> Family:
     """The family of the start's periodic orbit along [periodic] parameter to `to`."""
-    config, system, start, table = load_periodic(path)
-    _, _, orbit = find_periodic(path)
     name = table["parameter"]
     if name == "energy":
         p0, systems = orbit.energy, lambda p: system
@@ -379,7 +383,7 @@ def continue_periodic(path) -> tuple[System, dict, Family]:
                                      "energy", "angular_momentum") else None, table["tol"])
     except ValueError as exc:
         raise SurveyError(f"{path}: the family does not start: {exc}") from None
-    return system, table, family
+    return family
 
 
 def periodic_json(orbit: PeriodicOrbit) -> dict:
@@ -502,9 +506,10 @@ def print_periodic(path, as_json_text: bool = False, output=None,
                    command: str = "python -m survey periodic") -> int:
     """The command: the orbit found, or with [periodic] parameter its family (and
     --output, the family's archive)."""
-    table = load_periodic(path)[3]
+    _refuse_output(path, "periodic", output)
+    system, table, found = solve_periodic(path)
     if table["parameter"]:
-        system, table, family = continue_periodic(path)
+        family = found
         if output:
             ds = family_dataset(table, family, Path(path).read_text())
             print(f"wrote {write_archive(ds, output, command)}")
@@ -515,12 +520,19 @@ def print_periodic(path, as_json_text: bool = False, output=None,
                          indent=1) if as_json_text else
               periodic_family_text(system, table, family))
         return 0
-    if output:
-        raise ConfigError("--output", "writes a family: give [periodic] parameter and to")
-    system, _, orbit = find_periodic(path)
-    print(json.dumps(periodic_json(orbit), indent=1) if as_json_text else
-          periodic_text(system, orbit))
+    print(json.dumps(periodic_json(found), indent=1) if as_json_text else
+          periodic_text(system, found))
     return 0
+
+
+def _refuse_output(path, name: str, output) -> None:
+    """--output writes a family: refused before any work where [name] has no parameter."""
+    try:
+        wants = bool(tomllib.loads(Path(path).read_text()).get(name, {}).get("parameter"))
+    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError, AttributeError):
+        return          # the loader names what is wrong with the file
+    if output and not wants:
+        raise ConfigError("--output", f"writes a family: give [{name}] parameter and to")
 
 
 def special_table(path) -> str | None:
@@ -539,21 +551,18 @@ def write_report(path, folder, draw=None) -> Path:
     its bifurcation diagram drawn by `draw(dataset, title)`."""
     path = Path(path)
     figure = None
-    if special_table(path) == "equilibria" and load_equilibria(path)[2]["parameter"]:
-        text = family_text(*continue_equilibria(path))
-    elif special_table(path) == "equilibria":
-        system, table, found = find_equilibria(path)
-        text = equilibria_text(system, table, found)
-    elif load_periodic(path)[3]["parameter"]:
-        system, table, family = continue_periodic(path)
-        text = periodic_family_text(system, table, family)
-        if draw is not None:     # the family's diagram (presentation.plots.family_diagram)
-            figure = Path(folder) / f"{path.stem}.png"
-            draw(family_dataset(table, family, path.read_text()),
-                 _family_title(path, system, table, family)).savefig(figure, dpi=130)
+    if special_table(path) == "equilibria":
+        system, table, found = solve_equilibria(path)
+        text = family_text(table, *found) if table["parameter"] else \
+            equilibria_text(system, table, found)
     else:
-        system, _, orbit = find_periodic(path)
-        text = periodic_text(system, orbit)
+        system, table, found = solve_periodic(path)
+        text = periodic_family_text(system, table, found) if table["parameter"] else \
+            periodic_text(system, found)
+        if table["parameter"] and draw is not None:     # plots.family_diagram
+            figure = Path(folder) / f"{path.stem}.png"
+            draw(family_dataset(table, found, path.read_text()),
+                 _family_title(path, system, table, found)).savefig(figure, dpi=130)
     command = f"python -m survey {special_table(path)} {path.as_posix()}"
     out = Path(folder) / f"{path.stem}.md"
     body = (f"# {path.stem}\n\n`{command}` (written by `python -m survey reproduce`):\n\n"
@@ -721,10 +730,10 @@ def verify_family(path) -> tuple[bool, list[str]]:
         config = Path(folder) / "family.toml"
         config.write_text(text)
         if kind == "periodic":
-            _, table, family = continue_periodic(config)
+            _, table, family = solve_periodic(config)
             fresh = family_dataset(table, family, text)
         else:
-            table, members, found, _ = continue_equilibria(config)
+            _, table, (members, found, _) = solve_equilibria(config)
             fresh = equilibrium_dataset(table, members, found, text)
     made = f"(made on {stored.attrs.get('machine', 'an unrecorded machine')}, checked on " \
            f"{machine()})"
