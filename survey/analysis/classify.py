@@ -13,7 +13,7 @@ import numpy as np
 from ..catalog.indicators import BY_NAME, REGISTRY, TANGENT
 from ..catalog.regimes import IRREGULAR, REGULAR, Regime, Thresholds
 from ..catalog.status import Status
-from ..catalog.variables import V
+from ..catalog.variables import START_COORDINATES, V
 
 # the lines of evidence (catalog.indicators.REGISTRY): (name, how it votes)
 EVIDENCE = tuple((i.name, i.vote) for i in REGISTRY if i.vote is not None)
@@ -221,15 +221,15 @@ def stored_table(ds) -> dict | None:
 
 
 def summary(ds, regime=None) -> list[str]:
-    """Counts of each regime, and for a one-axis grid where it changes from regular to
-    chaotic."""
+    """Counts of each regime, and for a one-axis grid of a family parameter where it
+    changes from regular to chaotic."""
     regime = ds[V.regime].values if regime is None else regime
     total = regime.size
     counts = [(r, int(np.sum(regime == r))) for r in Regime]
     lines = ["regimes: " + ", ".join(f"{r.name.lower()} {n} ({100 * n / total:.0f}%)"
                                      for r, n in counts if n)]
     axes = [d for d in ds[V.status].dims]
-    if len(axes) == 1:
+    if len(axes) == 1 and axes[0] not in START_COORDINATES:
         x = ds[axes[0]].values
         regular = np.isin(regime, REGULAR)
         chaotic = np.isin(regime, IRREGULAR)

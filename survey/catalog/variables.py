@@ -243,6 +243,12 @@ BY_NAME = {v.name: v for v in VARIABLES}
 V = SimpleNamespace(**{v.name: v.name for v in VARIABLES})
 # figure labels of the grid axes that are not archive variables (family and term
 # parameters, coordinates)
+# axes along which "where chaos sets in" means nothing: coordinates of a start on the
+# section (neighbouring cells are different orbits of one shell, not a family parameter
+# growing) and seeds (cells in no order at all)
+START_COORDINATES = {"sigma", "p_sigma", "eta", "p_eta", "phi", "theta", "seed", "direction"}
+
+
 PARAMETER_SYMBOLS = {
     "delta": r"$\delta$", "sigma": r"$\sigma$", "p_sigma": r"$p_\sigma$", "eta": r"$\eta$",
     "p_eta": r"$p_\eta$", "phi": r"$\phi$", "p_phi": r"$p_\phi$", "theta": r"$\theta$",

@@ -190,6 +190,78 @@ def _section(system, energy, angular_momentum, sigma, p_sigma, eta, p_eta, phi, 
     return q, p / system.masses[:, None]
 
 
+def _room(system, energy, angular_momentum, sigma, eta, phi):
+    """E - U - J^2/(2 I) on the section phi: the kinetic energy left for (p_sigma, p_eta,
+    p_phi) at the shape (sigma, eta); negative where the shape is out of reach."""
+    m = JacobiMasses.of(system)
+    inertia = m.mu1 * sigma ** 2 + m.mu2 * eta ** 2
+    return (energy - reduced_potential(system, sigma, eta, phi)
+            - angular_momentum ** 2 / (2 * inertia))
+
+
+def _reachable_box(system, energy, angular_momentum, phi):
+    """(sigma_max, eta_max) of the shapes reachable on the section: a coarse grid over
+    (0, L]^2, L doubled from 1e-3 until the reachable points stop short of its outer edges,
+    then a fine grid, the box two of its steps beyond them. Unbounded shells (an areal
+    potential's long thin triangles) are caught on the box's far edges, sampled down to
+    1e-9 of its size, where no shape may be reachable."""
+    size = 1e-3
+    for _ in range(60):
+        axis = size * np.arange(1, 33) / 32
+        ok = _room(system, energy, angular_momentum, axis[:, None], axis[None, :], phi) >= 0
+        if ok.any() and not (ok[-1].any() or ok[:, -1].any()):
+            axis = size * np.arange(1, 129) / 128
+            ok = _room(system, energy, angular_momentum, axis[:, None], axis[None, :], phi) >= 0
+            i, j = (min(127, np.flatnonzero(ok.any(axis=k)).max() + 2) for k in (1, 0))
+            box = float(axis[i]), float(axis[j])
+            edge = np.geomspace(1e-9, 1.0, 400)
+            if (_room(system, energy, angular_momentum, box[0], box[1] * edge, phi) >= 0).any() \
+                    or (_room(system, energy, angular_momentum, box[0] * edge, box[1],
+                              phi) >= 0).any():
+                break
+            return box
+        size *= 2.0
+    raise ValueError(f"the shapes reachable on the section at E = {energy:g}, J = "
+                     f"{angular_momentum:g} are unbounded or none (a potential that does not "
+                     "confine, such as an areal one's long thin triangles): give sigma_max "
+                     "and eta_max to sample a bounded part of the shell")
+
+
+def _section_sample(system, energy, angular_momentum, seed, sigma_max, eta_max, phi, theta,
+                    direction):
+    """A seeded start drawn uniformly (in the section's Liouville measure d sigma d p_sigma
+    d eta d p_eta) from everything the (E, J) shell reaches on the surface phi = phi0: a
+    grid of seeds fills one shell of the 4-D section, for a Poincare plot of it. Rejection
+    sampling of the shape against the room E - U - J^2/2I (the volume of momenta at a
+    shape), then momenta uniform in that ellipse; p_phi as in `section`. The shapes are
+    drawn from (0, sigma_max] x (0, eta_max]: found (0, the default) where the shell is
+    bounded, given where it is not."""
+    m = JacobiMasses.of(system)
+    if sigma_max < 0 or eta_max < 0 or (sigma_max == 0) != (eta_max == 0):
+        raise ValueError("sigma_max and eta_max bound the shapes drawn: both > 0, or both 0 "
+                         "(found from the shell)")
+    if sigma_max == 0:
+        sigma_max, eta_max = _reachable_box(system, energy, angular_momentum, phi)
+    grid = np.linspace(0, 1, 129)[1:]
+    most = float(np.max(_room(system, energy, angular_momentum, sigma_max * grid[:, None],
+                              eta_max * grid[None, :], phi)))
+    if not most > 0:
+        raise Inaccessible(f"no shape in sigma <= {sigma_max:g}, eta <= {eta_max:g} reaches "
+                           f"E = {energy:g} at J = {angular_momentum:g}")
+    rng = np.random.default_rng(int(seed))
+    for _ in range(100000):
+        sigma, eta, level, r2, angle = rng.random(5)
+        sigma, eta = sigma_max * (1.0 - sigma), eta_max * (1.0 - eta)    # in (0, max]
+        room = float(_room(system, energy, angular_momentum, sigma, eta, phi))
+        if room >= 1.25 * most * level:      # 1.25: the grid's maximum is not the maximum
+            radius = math.sqrt(r2)
+            p_sigma = math.sqrt(2 * m.mu1 * room) * radius * portable.cos(2 * math.pi * angle)
+            p_eta = math.sqrt(2 * m.mu2 * room) * radius * portable.sin(2 * math.pi * angle)
+            return _section(system, energy, angular_momentum, sigma, p_sigma, eta, p_eta, phi,
+                            theta, direction)
+    raise Inaccessible("no start drawn on the section in 100000 tries")
+
+
 def _positions(system: System, value, key: str) -> np.ndarray:
     if value is None:
         raise ValueError(f"{key} is required: {system.n_bodies} rows of {system.dim} numbers")
@@ -319,6 +391,9 @@ FAMILIES = {f.name: f for f in [
     Family("section", _section, dict(energy=84.45577136594005, angular_momentum=24.401923788646684,
                                      sigma=2 * SQ3, p_sigma=0.0, eta=3.0, p_eta=0.0,
                                      phi=math.pi / 2, theta=0.0, direction=1)),
+    Family("section_sample", _section_sample,
+           dict(energy=84.45577136594005, angular_momentum=24.401923788646684, seed=0,
+                sigma_max=0.0, eta_max=0.0, phi=math.pi / 2, theta=0.0, direction=1)),
     Family("explicit", _explicit, dict(positions=None, velocities=None), any_n=True),
     Family("equilibrium", _equilibrium, dict(positions=None, displacement=0.0, speed=1.0,
                                              seed=0), any_n=True),

@@ -68,12 +68,14 @@ def figures(ds, variables=None, special=(), slice_at=None) -> dict[str, Figure]:
             out["map_megno_section"] = indicator_map(ds, V.megno, style.cmap, style.clip,
                                                      style.log, overlay=True,
                                                      slice_at=slice_at or {})
-    elif len(axes) == 1:
+    elif len(axes) == 1 and axes[0] != "seed":      # seeds are in no order: no scan
         out["scan"] = scan(ds, [n for n, _ in names] if variables is None else variables,
                            special)
     if V.crossing_sigma in ds and int(np.nansum(ds[V.n_crossings].values)) > 0 \
             and len(shells(ds)) <= MAX_SHELLS:
         out["section"] = section(ds)
+        if len(shells(ds)) == 1 and V.crossing_p_eta in ds:     # the 4-D section, sliced
+            out["section_slice"] = section_slice(ds)
     if V.megno_history in ds and np.isfinite(ds[V.megno_history].values).any():
         out["convergence"] = convergence(ds)
     if V.frequency in ds and V.regime in ds and sum(
@@ -551,12 +553,91 @@ def section(ds, x="sigma", y="p_sigma", colour_by=V.regime) -> Figure:
         ax.set_ylabel(label(y))
     for ax in axes[len(groups):]:
         ax.set_visible(False)
-    section_name = ds.attrs.get("section", "")
     fig.supxlabel(textwrap.fill(
-        f"surface of section {section_name}".strip() + f", one panel per energy shell: every "
+        f"surface of section {_surface(ds)}, one panel per energy shell: every "
         f"crossing projected onto ({x}, {y}); the section of the reduced 3-degree-of-freedom "
         f"flow is 4-D, so a torus need not draw a curve", int(13 * fig.get_figwidth())),
         fontsize="small")
+    return fig
+
+
+def _surface(ds) -> str:
+    """The archive's surface of section as written in its config, e.g. 'phi = 1.5708'."""
+    import tomllib
+    try:
+        section = tomllib.loads(ds.attrs.get("config", "")).get("section", {})
+    except tomllib.TOMLDecodeError:
+        section = {}
+    coordinate = section.get("coordinate", "phi")
+    value = section.get("value", np.pi / 2 if coordinate == "phi" else 0.0)
+    return f"{coordinate} = {value:.6g}"
+
+
+SLICE_VIEWS = ((22, -58), (12, 32), (88, -90))     # (elevation, azimuth) of the 3-D views
+
+
+def section_slice(ds, fourth="p_eta", at=0.0) -> Figure:
+    """A one-shell section of three bodies in the plane (4-D: sigma, p_sigma, eta, p_eta)
+    drawn as researchers read one (Richter et al. 2014; Katsanikas and Patsis): the 3-D
+    slice |fourth - at| <= SLAB (its range) seen from three sides, where a torus (a 2-D
+    surface in the 4-D section) leaves closed curves and chaos a cloud -- regular cells
+    coloured by their first shape frequency, so each torus keeps one colour, the others by
+    regime -- and the projection onto (sigma, p_sigma) coloured by the fourth coordinate."""
+    from mpl_toolkits.mplot3d import Axes3D  # noqa: F401  (registers the 3-D projection)
+    n = ds.sizes["crossing"]
+    names = [q for q in ("sigma", "p_sigma", "eta", "p_eta") if q != fourth]
+    pts = {q: ds[f"crossing_{q}"].values.reshape(-1, n) for q in names + [fourth]}
+    width = SLAB * float(np.nanmax(pts[fourth]) - np.nanmin(pts[fourth]))
+    inside = np.abs(pts[fourth] - at) <= width
+    regime = ds[V.regime].values.ravel()
+    nu = ds[V.frequency].isel(fundamental=0).values.ravel() if V.frequency in ds \
+        else np.full(regime.shape, np.nan)
+    regular = np.isin(regime, REGULAR) & np.isfinite(nu)
+    from matplotlib.colors import Normalize
+    norm = Normalize(*(np.nanpercentile(nu[regular], [2, 98]) if regular.any() else (0, 1)))
+    fig = Figure(figsize=(11.5, 10.0), layout="constrained")
+    grid = fig.add_gridspec(2, 2)
+    for k, (elev, azim) in enumerate(SLICE_VIEWS):
+        ax = fig.add_subplot(grid[k // 2, k % 2], projection="3d")
+        ax.view_init(elev=elev, azim=azim)
+        for r in Regime:
+            mine = (regime == r) & ~regular
+            keep = inside & mine[:, None]
+            if keep.any():
+                ax.scatter(*(pts[q][keep] for q in names), s=1.5, lw=0, alpha=0.5,
+                           color=REGIME_COLOURS[r], rasterized=True,
+                           label=f"{r.name.lower()} ({int(mine.sum())} starts)")
+        keep = inside & regular[:, None]
+        if keep.any():
+            colours = np.broadcast_to(nu[:, None], inside.shape)[keep]
+            mesh = ax.scatter(*(pts[q][keep] for q in names), c=colours, cmap="viridis",
+                              norm=norm, s=2.0, lw=0, rasterized=True)
+        ax.set_xlabel(label(names[0]))
+        ax.set_ylabel(label(names[1]))
+        if elev < 80:
+            ax.set_zlabel(label(names[2]))
+        else:               # seen from above: the third axis is the depth
+            ax.set_zticks([])
+            ax.set_title(f"from above ({label(names[2])} hidden)", fontsize="small")
+        if k == 0 and ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize="x-small", markerscale=5, loc="upper left")
+    if regular.any():
+        fig.colorbar(mesh, ax=fig.axes[1], location="right", shrink=0.7, pad=0.08,
+                     label=f"{int(regular.sum())} regular starts:\nfirst shape frequency")
+    ax = fig.add_subplot(grid[1, 1])
+    good = np.isfinite(pts[fourth])
+    proj = ax.scatter(pts[names[0]][good], pts[names[1]][good], c=pts[fourth][good],
+                      cmap="coolwarm", s=0.6, lw=0, rasterized=True)
+    fig.colorbar(proj, ax=ax, label=label(fourth))
+    ax.set_xlabel(label(names[0]))
+    ax.set_ylabel(label(names[1]))
+    ax.set_title(f"every crossing, projected, coloured by {label(fourth)}", fontsize="small")
+    energy, spin = _per_cell(ds, V.energy), _per_cell(ds, V.angular_momentum)
+    fig.supxlabel(textwrap.fill(
+        f"one energy shell E = {np.nanmean(energy):.7g}, J = {np.nanmean(spin):.7g}, "
+        f"surface of section {_surface(ds)}; 3-D views: the slice |{fourth} - {at:g}| <= {width:.3g} of the 4-D section "
+        f"({int(inside.sum())} of {int(good.sum())} crossings), in which a torus draws "
+        "closed curves and chaos fills a volume", 150), fontsize="small")
     return fig
 
 

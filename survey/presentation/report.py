@@ -15,7 +15,7 @@ from ..catalog import defaults
 from ..catalog.indicators import INDICATORS
 from ..catalog.regimes import IRREGULAR, REGULAR, Regime, Thresholds
 from ..catalog.status import Status
-from ..catalog.variables import ENSEMBLE_MIN, V
+from ..catalog.variables import ENSEMBLE_MIN, START_COORDINATES, V
 from . import plots
 
 
@@ -225,15 +225,9 @@ def _ensembles(ds, regime) -> list[str]:
     return out + [""]
 
 
-# axes along which "where chaos sets in" means nothing: coordinates of a start on the
-# section (neighbouring cells are different orbits of one shell, not a family parameter
-# growing) and seeds
-COORDINATES = {"sigma", "p_sigma", "eta", "p_eta", "phi", "theta", "seed", "direction"}
-
-
 def _why_no_onset(ds, axis) -> str:
     """Why an onset along `axis` would mean nothing ("" if it means something)."""
-    if axis in COORDINATES:
+    if axis in START_COORDINATES:
         return (f"{axis} is a coordinate of the starts on one energy shell, not a parameter "
                 "of a family of orbits: regular and chaotic cells interleave there")
     if "term" in ds[axis].attrs.get("long_name", ""):

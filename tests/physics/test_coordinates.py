@@ -146,3 +146,53 @@ def test_energy_target_rescales_relative_velocities(paper_system):
     np.testing.assert_array_equal(paper_system.split(y)[0], q0)
     with pytest.raises(Inaccessible, match="exceeds the target energy"):
         initial_state(paper_system, "sides", energy=10.0)     # U(q0) = 22.445
+
+
+def test_section_sample_fills_one_shell_in_the_liouville_measure(paper_system):
+    """Seeded starts on the section phi = pi/2 at one (E, J): each on the shell and the
+    surface, the same bits for the same seed, and together distributed as the section's
+    invariant measure d sigma d p_sigma d eta d p_eta restricted to the shell -- the shapes
+    with density E - U - J^2/2I (the area of their momentum ellipse; its marginals here
+    by quadrature), the momenta uniform in the ellipse."""
+    from survey.physics.families import _room
+    from survey.physics.jacobi import JacobiMasses
+    E, J, n = 84.45577136594005, 24.401923788646684, 240
+    ys = np.array([initial_state(paper_system, "section_sample", energy=E,
+                                 angular_momentum=J, seed=k) for k in range(n)])
+    np.testing.assert_array_equal(ys[7], initial_state(paper_system, "section_sample",
+                                                       energy=E, angular_momentum=J, seed=7))
+    np.testing.assert_allclose(paper_system.energy(ys), E, rtol=1e-13)
+    np.testing.assert_allclose(paper_system.angular_momentum(ys), J, rtol=1e-13)
+    r = reduced(paper_system, ys)
+    np.testing.assert_allclose(r.phi, math.pi / 2, atol=1e-13)
+    assert np.all(r.p_phi > 0)
+    # the marginals of sigma and eta against quadrature of the room (Kolmogorov-Smirnov
+    # at the 0.1% level: a sampler that ignored the room's weight fails it)
+    grid = np.linspace(1e-4, 7.0, 1401)
+    room = np.clip(_room(paper_system, E, J, grid[:, None], grid[None, :], math.pi / 2),
+                   0, None)
+    for values, density in ((r.sigma, room.sum(axis=1)), (r.eta, room.sum(axis=0))):
+        cdf = np.cumsum(density) / density.sum()
+        gap = np.abs(np.searchsorted(np.sort(values), grid, side="right") / n - cdf).max()
+        assert gap < 1.95 / math.sqrt(n)
+    # the momenta: uniform in the ellipse p_sigma^2/2mu1 + p_eta^2/2mu2 <= room, so the
+    # share of the room in p_sigma has mean 1/4 (the same for p_eta; p_phi takes the rest)
+    m = JacobiMasses.of(paper_system)
+    left = _room(paper_system, E, J, r.sigma, r.eta, math.pi / 2)
+    share = r.p_sigma ** 2 / (2 * m.mu1) / left
+    assert abs(share.mean() - 0.25) < 4 * 0.25 / math.sqrt(n)     # its variance: 1/16
+    assert np.all(share + r.p_eta ** 2 / (2 * m.mu2) / left <= 1 + 1e-12)
+
+
+@pytest.mark.parametrize("potential", ["areal_power", "areal_barrier"])
+def test_section_sample_needs_bounds_where_the_shell_has_none(potential):
+    """An areal potential does not confine: long thin triangles of any size reach the
+    shell. The sampler says so, and samples the part a box bounds."""
+    system = System.create(potential=potential)
+    E, J = 10.0, 1.0
+    with pytest.raises(ValueError, match="unbounded.*give sigma_max and eta_max"):
+        initial_state(system, "section_sample", energy=E, angular_momentum=J)
+    y = initial_state(system, "section_sample", energy=E, angular_momentum=J,
+                      sigma_max=4.0, eta_max=4.0, seed=3)
+    r = reduced(system, y)
+    assert system.energy(y) == pytest.approx(E, rel=1e-13) and r.sigma <= 4 and r.eta <= 4

@@ -463,3 +463,49 @@ def test_a_slice_grid_draws_only_the_crossings_in_its_slab(tmp_path):
     assert f"{int(keep.sum())} of {total})" in ax.get_xlabel().replace("\n", " ")
     panels = [a for a in figs["section"].axes if a.get_visible()]
     assert len(panels) == 1 and panels[0].get_title().startswith("E = 84.4558, J = 24.4019")
+
+
+def test_one_shell_is_drawn_as_3d_slices_and_a_projection_coloured_by_the_fourth(tmp_path):
+    """Seeded starts filling one (E, J) shell: its 4-D section drawn as the slice
+    |p_eta| <= 2.5% of p_eta's range in (sigma, p_sigma, eta) from three sides (exactly the
+    crossings in the slab; regular starts coloured by their frequency), the projection of
+    every crossing coloured by p_eta, and a caption that states shell, slice and counts.
+    A seed axis has no order: no scan and no boundaries along it."""
+    cfg = {"survey": {"name": "shell", "output": str(tmp_path / "shell.nc")},
+           "initial": {"family": "section_sample", "energy": 84.45577136594005,
+                       "angular_momentum": 24.401923788646684, "seed": [0, 1, 2, 3]},
+           "integration": {"t_final": 300.0},
+           "section": {"coordinate": "phi", "max_crossings": 400},
+           "indicators": {"perturbations": 0}}
+    ds = xr.open_dataset(run_survey(cfg))
+    figs = plots.figures(ds)
+    assert "scan" not in figs and "section_slice" in figs
+    from survey.analysis.classify import summary
+    assert len(summary(ds)) == 1                       # the regime counts, no boundaries
+    fig = figs["section_slice"]
+    views = [a for a in fig.axes if a.name == "3d"]
+    assert len(views) == 3
+    p_eta = ds.crossing_p_eta.values
+    width = plots.SLAB * (np.nanmax(p_eta) - np.nanmin(p_eta))
+    inside = np.abs(p_eta) <= width
+    total = int(np.isfinite(p_eta).sum())
+    assert 0 < inside.sum() < total
+    for ax in views:
+        assert sum(len(c.get_offsets()) for c in ax.collections) == inside.sum()
+        assert (ax.get_xlabel(), ax.get_ylabel()) == (r"$\sigma$", r"$p_\sigma$")
+    assert views[0].get_zlabel() == r"$\eta$"
+    regular = np.isin(ds.regime.values, [Regime.TORUS, Regime.RESONANT, Regime.PERIODIC])
+    coloured = [c for c in views[0].collections if c.get_array() is not None]
+    if regular.any():
+        nu = ds.frequency.isel(fundamental=0).values
+        np.testing.assert_array_equal(
+            np.sort(coloured[0].get_array()),
+            np.sort(np.broadcast_to(nu[:, None], p_eta.shape)[inside & regular[:, None]]))
+    projection = [a for a in fig.axes if a.name != "3d" and a.get_xlabel() == r"$\sigma$"][0]
+    np.testing.assert_array_equal(projection.collections[0].get_array(),
+                                  p_eta[np.isfinite(p_eta)])
+    caption = fig.get_supxlabel() if hasattr(fig, "get_supxlabel") else fig._supxlabel.get_text()
+    caption = caption.replace("\n", " ")
+    assert "one energy shell E = 84.45577, J = 24.40192, surface of section phi = 1.5708" \
+        in caption
+    assert f"({int(inside.sum())} of {total} crossings)" in caption
