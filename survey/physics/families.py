@@ -145,13 +145,20 @@ def _rotating_line(system, radius, angle):
     return q, vel
 
 
-def _isosceles(system, base, height, base_rate, height_rate):
+def _isosceles(system, base, height, base_rate, height_rate, apex):
     """Paper Sec. 3.3: u = (-b/2, -h/3), v = (0, 2h/3), w = (b/2, -h/3) with the matching
-    velocities; the shape stays isosceles (a = c) for equal masses."""
+    velocities; the shape stays isosceles for equal masses. apex = 2 puts w at the apex
+    (u = (-b/2, -h/3), v = (b/2, -h/3)): then the reduced coordinates are the plane's own,
+    sigma = |b|, eta = |h|, p_sigma = sgn(b) p_b, p_eta = sgn(h) p_h (p_b = db/dt / 2,
+    p_h = 2 dh/dt / 3; H = p_b^2 + 3/4 p_h^2 + U)."""
     _equal_masses(system, "isosceles")
-    q = np.array([[-base / 2, -height / 3], [0.0, 2 * height / 3], [base / 2, -height / 3]])
-    vel = np.array([[-base_rate / 2, -height_rate / 3], [0.0, 2 * height_rate / 3],
-                    [base_rate / 2, -height_rate / 3]])
+    if apex not in (1, 2):
+        raise ValueError(f"isosceles apex must be 1 (v, the paper's) or 2 (w), got {apex!r}")
+    corner = (1, 2) if apex == 1 else (2, 1)        # (apex, the base's right end)
+    q, vel = np.zeros((3, 2)), np.zeros((3, 2))
+    q[0], vel[0] = (-base / 2, -height / 3), (-base_rate / 2, -height_rate / 3)
+    q[corner[0]], vel[corner[0]] = (0.0, 2 * height / 3), (0.0, 2 * height_rate / 3)
+    q[corner[1]], vel[corner[1]] = (base / 2, -height / 3), (base_rate / 2, -height_rate / 3)
     return q, vel
 
 
@@ -386,7 +393,8 @@ FAMILIES = {f.name: f for f in [
     Family("linear", _linear, dict(half_length=2.5, velocity_u=(1.5, -10.0711), delta=0.0,
                                    delta_direction=(0.5, 1.0))),
     Family("rotating_line", _rotating_line, dict(radius=2.5, angle=0.0)),
-    Family("isosceles", _isosceles, dict(base=2.0, height=1.5, base_rate=0.0, height_rate=0.0)),
+    Family("isosceles", _isosceles, dict(base=2.0, height=1.5, base_rate=0.0, height_rate=0.0,
+                                         apex=1)),
     Family("areal_example", _areal_example, dict(velocity_u=(1.0, 3.0))),
     Family("section", _section, dict(energy=84.45577136594005, angular_momentum=24.401923788646684,
                                      sigma=2 * SQ3, p_sigma=0.0, eta=3.0, p_eta=0.0,
