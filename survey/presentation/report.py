@@ -104,9 +104,8 @@ def markdown(ds, figure_names=(), check=None, special=()) -> str:
             out.append(f"| {r.name.lower()} | {k} | {100 * k / n:.1f}% | "
                        f"{'—' if sure is None else sure} | {r.meaning} |")
     out += ["", "Confirmed: the verdict is of the class (regular or irregular) decided at the "
-                "horizon before; the others are claimed to their horizon only. The cells are "
-                "a deterministic grid, not a random sample: a share is a count, with no "
-                "sampling interval.", ""]
+                "horizon before; the others are claimed to their horizon only. "
+                + _sample_share(axes, regime), ""]
     out += _horizons(ds, regime, steady, integ.get("t_final", defaults.T_FINAL))
 
     out += _ensembles(ds, regime)
@@ -126,6 +125,31 @@ def markdown(ds, figure_names=(), check=None, special=()) -> str:
                     f"panel, at most {plots.MAX_SHELLS}. For a section, survey one shell: "
                     "the `section` family at one E and J.", ""]
     return "\n".join(out)
+
+
+def wilson(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
+    """The Wilson score interval (95% by default) of a binomial share k / n."""
+    p, q = k / n, z * z / n
+    centre, half = (p + q / 2) / (1 + q), z / (1 + q) * np.sqrt(p * (1 - p) / n + q / (4 * n))
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def _sample_share(axes, regime) -> str:
+    """What a share of cells means: a count on a grid; on seeded random starts (the only
+    axis a seed) an estimate of the regular share of the measure the family draws from
+    (for `section_sample`, the section's Liouville measure on the shell)."""
+    if list(axes) != ["seed"]:
+        return ("The cells are a deterministic grid, not a random sample: a share is a "
+                "count, with no sampling interval.")
+    decided = np.isin(regime, REGULAR + IRREGULAR)
+    n, k = int(decided.sum()), int(np.isin(regime, REGULAR).sum())
+    if n == 0:
+        return "The cells are seeded random starts, and none was decided."
+    lo, hi = wilson(k, n)
+    return (f"The cells are seeded random starts, a sample of the measure their family "
+            f"draws from: of the {n} decided, {k} are regular, a regular share of "
+            f"{100 * k / n:.0f}% (95% Wilson interval {100 * lo:.0f}-{100 * hi:.0f}%; the "
+            f"{regime.size - n} undecided left out).")
 
 
 def _scale_free(ds, axes) -> list[str]:
@@ -227,6 +251,8 @@ def _ensembles(ds, regime) -> list[str]:
 
 def _why_no_onset(ds, axis) -> str:
     """Why an onset along `axis` would mean nothing ("" if it means something)."""
+    if axis == "seed":
+        return "the cells are seeded random starts, in no order"
     if axis in START_COORDINATES:
         return (f"{axis} is a coordinate of the starts on one energy shell, not a parameter "
                 "of a family of orbits: regular and chaotic cells interleave there")
@@ -243,6 +269,8 @@ def _onsets(ds, axes, regime, check=None) -> list[str]:
                if a not in meaningful]
     if len(axes) == 2 and meaningful and meaningful[0] != axes[0]:
         axes, regime = axes[::-1], regime.T          # the onset along the meaningful axis
+    if list(axes) == ["seed"]:
+        return skipped + [""]
     if len(axes) == 1 and not meaningful:
         x = ds[axes[0]].values
         return [f"## Regimes along {axes[0]}", ""] + [

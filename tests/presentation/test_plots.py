@@ -509,3 +509,13 @@ def test_one_shell_is_drawn_as_3d_slices_and_a_projection_coloured_by_the_fourth
     assert "one energy shell E = 84.45577, J = 24.40192, surface of section phi = 1.5708" \
         in caption
     assert f"({int(inside.sum())} of {total} crossings)" in caption
+    # seeded starts are a random sample of the shell: the report gives the regular share
+    # with its 95% Wilson interval (scipy's, independently), and no regimes "along" seeds
+    from scipy.stats import binomtest
+    text = report.markdown(ds, ["shell_section_slice.png"])
+    decided = np.isin(ds.regime.values, [0, 1, 2, 3, 4, 8])
+    k, n = int(regular.sum()), int(decided.sum())
+    ci = binomtest(k, n).proportion_ci(method="wilson")
+    assert (f"of the {n} decided, {k} are regular, a regular share of {100 * k / n:.0f}% "
+            f"(95% Wilson interval {100 * ci.low:.0f}-{100 * ci.high:.0f}%") in text
+    assert "Regimes along seed" not in text and "in no order" in text
