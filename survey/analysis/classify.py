@@ -211,11 +211,11 @@ def on_resonance(ds, th: Thresholds) -> np.ndarray:
             (order <= th.resonance_order)
 
 
-def stored_table(ds) -> dict | None:
-    """The [tori] table of the config stored in an archive, if any."""
+def stored_table(ds, table: str = "tori") -> dict | None:
+    """A table ([tori] by default) of the config stored in an archive, if any."""
     import tomllib
     try:
-        return tomllib.loads(ds.attrs.get("config", "")).get("tori")
+        return tomllib.loads(ds.attrs.get("config", "")).get(table)
     except tomllib.TOMLDecodeError:
         return None
 

@@ -74,7 +74,7 @@ def figures(ds, variables=None, special=(), slice_at=None) -> dict[str, Figure]:
     if V.crossing_sigma in ds and int(np.nansum(ds[V.n_crossings].values)) > 0 \
             and len(shells(ds)) <= MAX_SHELLS:
         out["section"] = section(ds)
-        if len(shells(ds)) == 1 and V.crossing_p_eta in ds:     # the 4-D section, sliced
+        if len(shells(ds)) == 1 and _surface(ds)[0] == "phi":   # the 4-D section, sliced
             out["section_slice"] = section_slice(ds)
     if V.megno_history in ds and np.isfinite(ds[V.megno_history].values).any():
         out["convergence"] = convergence(ds)
@@ -554,23 +554,18 @@ def section(ds, x="sigma", y="p_sigma", colour_by=V.regime) -> Figure:
     for ax in axes[len(groups):]:
         ax.set_visible(False)
     fig.supxlabel(textwrap.fill(
-        f"surface of section {_surface(ds)}, one panel per energy shell: every "
-        f"crossing projected onto ({x}, {y}); the section of the reduced 3-degree-of-freedom "
+        "surface of section {} = {:.6g}, one panel per energy shell: every ".format(*_surface(ds))
+        + f"crossing projected onto ({x}, {y}); the section of the reduced 3-degree-of-freedom "
         f"flow is 4-D, so a torus need not draw a curve", int(13 * fig.get_figwidth())),
         fontsize="small")
     return fig
 
 
-def _surface(ds) -> str:
-    """The archive's surface of section as written in its config, e.g. 'phi = 1.5708'."""
-    import tomllib
-    try:
-        section = tomllib.loads(ds.attrs.get("config", "")).get("section", {})
-    except tomllib.TOMLDecodeError:
-        section = {}
+def _surface(ds) -> tuple[str, float]:
+    """The archive's surface of section (coordinate, value) as its config gives it."""
+    section = stored_table(ds, "section") or {}
     coordinate = section.get("coordinate", "phi")
-    value = section.get("value", np.pi / 2 if coordinate == "phi" else 0.0)
-    return f"{coordinate} = {value:.6g}"
+    return coordinate, section.get("value", np.pi / 2 if coordinate == "phi" else 0.0)
 
 
 SLICE_VIEWS = ((22, -58), (12, 32), (88, -90))     # (elevation, azimuth) of the 3-D views
@@ -634,9 +629,10 @@ def section_slice(ds, fourth="p_eta", at=0.0) -> Figure:
     ax.set_title(f"every crossing, projected, coloured by {label(fourth)}", fontsize="small")
     energy, spin = _per_cell(ds, V.energy), _per_cell(ds, V.angular_momentum)
     fig.supxlabel(textwrap.fill(
-        f"one energy shell E = {np.nanmean(energy):.7g}, J = {np.nanmean(spin):.7g}, "
-        f"surface of section {_surface(ds)}; 3-D views: the slice |{fourth} - {at:g}| <= {width:.3g} of the 4-D section "
-        f"({int(inside.sum())} of {int(good.sum())} crossings), in which a torus draws "
+        f"one energy shell E = {np.nanmean(energy):.7g}, J = {np.nanmean(spin):.7g}, surface of "
+        f"section phi = {_surface(ds)[1]:.6g}; 3-D views: the slice |{fourth} - {at:g}| <= "
+        f"{width:.3g} of the 4-D section ({int(inside.sum())} of {int(good.sum())} "
+        "crossings), in which a torus draws "
         "closed curves and chaos fills a volume", 150), fontsize="small")
     return fig
 
