@@ -239,3 +239,32 @@ def summary(ds, regime=None) -> list[str]:
                 lines.append(f"{axes[0]}: {Regime(regime[a]).name.lower()} at {x[a]:g} -> "
                              f"{Regime(regime[b]).name.lower()} at {x[b]:g}")
     return lines
+
+
+def wilson(k, n, level: float = 0.95):
+    """The Wilson score interval (95% by default) of binomial shares k / n (arrays or
+    numbers; NaN where n = 0)."""
+    from statistics import NormalDist
+    z = NormalDist().inv_cdf(0.5 + level / 2)
+    k, n = np.asarray(k, dtype=float), np.asarray(n, dtype=float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        p, q = k / n, z * z / n
+        centre = (p + q / 2) / (1 + q)
+        half = z / (1 + q) * np.sqrt(p * (1 - p) / n + q / (4 * n))
+    return np.maximum(0.0, centre - half), np.minimum(1.0, centre + half)
+
+
+def regular_share(ds, regime=None):
+    """Over a grid with a `seed` axis (several seeded starts per point): at each point of
+    the other axes the starts decided (regular or irregular), those regular, their share
+    and its 95% Wilson interval -- the starts are a random sample, the share an estimate
+    of the regular part of what the family draws from. An xarray Dataset."""
+    import xarray as xr
+    regime = ds[V.regime] if regime is None else regime
+    decided = regime.isin(list(REGULAR + IRREGULAR)).sum("seed")
+    regular = regime.isin(list(REGULAR)).sum("seed")
+    low, high = wilson(regular.values, decided.values)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        share = regular / decided.where(decided > 0)
+    return xr.Dataset({"decided": decided, "regular": regular, "share": share,
+                       "share_low": (decided.dims, low), "share_high": (decided.dims, high)})

@@ -206,20 +206,29 @@ def _room(system, energy, angular_momentum, sigma, eta, phi):
             - angular_momentum ** 2 / (2 * inertia))
 
 
+def _fine_axis() -> np.ndarray:
+    """Points on (0, 1]: 128 even steps, and 24 more geometric down to 1e-9 -- a
+    perimetric shell may reach a pair collision (sigma -> 0) only in a thin strip."""
+    return np.concatenate([np.geomspace(1e-9, 1 / 128, 24, endpoint=False),
+                           np.arange(1, 129) / 128])
+
+
 def _reachable_box(system, energy, angular_momentum, phi):
     """(sigma_max, eta_max) of the shapes reachable on the section: a coarse grid over
     (0, L]^2, L doubled from 1e-3 until the reachable points stop short of its outer edges,
     then a fine grid, the box two of its steps beyond them. Unbounded shells (an areal
     potential's long thin triangles) are caught on the box's far edges, sampled down to
-    1e-9 of its size, where no shape may be reachable."""
-    size = 1e-3
+    1e-9 of its size, where no shape may be reachable; an empty shell is Inaccessible."""
+    size, seen = 1e-3, False
     for _ in range(60):
         axis = size * np.arange(1, 33) / 32
         ok = _room(system, energy, angular_momentum, axis[:, None], axis[None, :], phi) >= 0
+        seen |= bool(ok.any())
         if ok.any() and not (ok[-1].any() or ok[:, -1].any()):
-            axis = size * np.arange(1, 129) / 128
+            axis = size * _fine_axis()
             ok = _room(system, energy, angular_momentum, axis[:, None], axis[None, :], phi) >= 0
-            i, j = (min(127, np.flatnonzero(ok.any(axis=k)).max() + 2) for k in (1, 0))
+            i, j = (min(axis.size - 1, np.flatnonzero(ok.any(axis=k)).max() + 2)
+                    for k in (1, 0))
             box = float(axis[i]), float(axis[j])
             edge = np.geomspace(1e-9, 1.0, 400)
             if (_room(system, energy, angular_momentum, box[0], box[1] * edge, phi) >= 0).any() \
@@ -228,10 +237,13 @@ def _reachable_box(system, energy, angular_momentum, phi):
                 break
             return box
         size *= 2.0
+    if not seen:
+        raise Inaccessible(f"no shape reaches E = {energy:g} at J = {angular_momentum:g} on "
+                           "the section (the shell is empty)")
     raise ValueError(f"the shapes reachable on the section at E = {energy:g}, J = "
-                     f"{angular_momentum:g} are unbounded or none (a potential that does not "
-                     "confine, such as an areal one's long thin triangles): give sigma_max "
-                     "and eta_max to sample a bounded part of the shell")
+                     f"{angular_momentum:g} are unbounded (a potential that does not confine, "
+                     "such as an areal one's long thin triangles): give sigma_max and eta_max "
+                     "to sample a bounded part of the shell")
 
 
 def _section_sample(system, energy, angular_momentum, seed, sigma_max, eta_max, phi, theta,
@@ -249,7 +261,7 @@ def _section_sample(system, energy, angular_momentum, seed, sigma_max, eta_max, 
                          "(found from the shell)")
     if sigma_max == 0:
         sigma_max, eta_max = _reachable_box(system, energy, angular_momentum, phi)
-    grid = np.linspace(0, 1, 129)[1:]
+    grid = _fine_axis()
     most = float(np.max(_room(system, energy, angular_momentum, sigma_max * grid[:, None],
                               eta_max * grid[None, :], phi)))
     if not most > 0:

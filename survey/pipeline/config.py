@@ -90,6 +90,10 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "energy": Key("axis", None, "target energy: rescales centre-of-mass-frame velocities "
                                     "so that K + U = energy (cells with U > energy are "
                                     "inaccessible); a number or a grid axis", "energy"),
+        "starts_per_cell": Key("int", 1, "seeded starts per grid point, for a family with a "
+                                         "seed: a last grid axis `seed` of that many values "
+                                         "from the family's seed; maps and reports give "
+                                         "each point's regular share", low=1),
     },
     "integration": {
         "t_final": Key("float", defaults.T_FINAL, "integration time of every cell", "time",
@@ -570,7 +574,8 @@ def validate(raw: dict, text: str, where: str = "<config>", check_output: bool =
     tables["section_enabled"] = "section" in raw
     tables["check_enabled"] = "check" in raw
     _validate_names(tables)
-    check_memory(tables, math.prod(_axis_size(v) for v in initial_raw.values()))
+    check_memory(tables, math.prod(_axis_size(v) for v in initial_raw.values())
+                 * tables["initial"]["starts_per_cell"])
 
     term_axes = _validate_terms(tables["system"], raw.get("system", {}))
     system = _validate_system(tables["system"], term_axes)
@@ -710,7 +715,7 @@ def _validate_initial(given: dict, body: dict, system: System):
                                               "and microcanonical start any number)")
     axes, fixed = [], {}
     for key, value in given.items():
-        if key == "family":
+        if key in ("family", "starts_per_cell"):
             continue
         where = f"[initial].{key}"
         default = defaults.get(key)
@@ -733,6 +738,19 @@ def _validate_initial(given: dict, body: dict, system: System):
             fixed[key] = float(value)
         else:
             axes.append(Axis(key, values))
+    starts = body["starts_per_cell"]
+    if starts > 1:
+        if "seed" not in defaults:
+            raise ConfigError("[initial].starts_per_cell", f"family {family!r} has no seed: "
+                              "its starts are not random (families with a seed: " + ", ".join(
+                                  f for f in FAMILIES if "seed" in FAMILIES[f].defaults) + ")")
+        if any(a.name == "seed" for a in axes):
+            raise ConfigError("[initial].starts_per_cell", "seed is already a grid axis; "
+                                                           "give one or the other")
+        first = fixed.pop("seed", defaults["seed"])
+        if first != int(first):
+            raise ConfigError("[initial].seed", f"a seed is a whole number, got {first:g}")
+        axes.append(Axis("seed", np.arange(first, first + starts, dtype=float)))
     return axes, fixed
 
 

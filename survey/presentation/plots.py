@@ -19,7 +19,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
-from ..analysis.classify import stored_table
+from ..analysis.classify import regular_share, stored_table
 from ..catalog import defaults
 from ..catalog.indicators import OWNER, REGISTRY
 from ..catalog.regimes import IRREGULAR, REGULAR, Regime, Thresholds
@@ -55,7 +55,10 @@ def figures(ds, variables=None, special=(), slice_at=None) -> dict[str, Figure]:
     axes = grid_axes(ds)
     out = {}
     names = [m for m in MAPS if m[0] in ds and (variables is None or m[0] in variables)]
-    if len(axes) == 2:
+    if "seed" in axes and len(axes) > 1:    # seeded starts per point: their regular share
+        if V.regime in ds and len(axes) in (2, 3):
+            out["regular_share"] = regular_share_figure(ds)
+    elif len(axes) == 2:
         if V.regime in ds and (variables is None or V.regime in variables):
             out["map_regime"] = regime_map(ds, special)
         for name, style in names:       # a map with no value would be all mask
@@ -260,6 +263,50 @@ def regime_map(ds, special=()) -> Figure:
     hist.set_xlabel("cells")
     hist.yaxis.tick_right()
     ax.set_title("regime of each cell", fontsize="medium")
+    return fig
+
+
+def regular_share_figure(ds) -> Figure:
+    """Several seeded starts per grid point: the share of each point's decided starts that
+    are regular -- a map over two axes (points with none decided masked, each labelled
+    k/n), or along one axis with its 95% Wilson interval as a bar."""
+    share = regular_share(ds)
+    points = [a for a in grid_axes(ds) if a != "seed"]
+    starts = ds.sizes["seed"]
+    fig = Figure(figsize=(8.0, 5.0), layout="constrained")
+    ax = fig.add_subplot()
+    if len(points) == 2:
+        a, b = points
+        values = share.share.transpose(a, b).values
+        mesh = ax.pcolormesh(ds[a].values, ds[b].values, values.T, cmap="RdYlBu", vmin=0,
+                             vmax=1, shading="nearest")
+        blank = ~np.isfinite(values)
+        if blank.any():
+            _hatch_cells(ax, ds[a].values, ds[b].values, blank)
+        fig.colorbar(mesh, ax=ax, label=f"regular share of the decided starts (of {starts} "
+                                         f"per point)")
+        ax.set_xlabel(label(a))
+        ax.set_ylabel(label(b))
+        if blank.any():
+            ax.legend(handles=[Patch(**UNCONFIRMED, label=f"no start decided "
+                                                          f"({int(blank.sum())})")],
+                      loc="upper right", fontsize="small", framealpha=0.9)
+    else:
+        (a,) = points
+        x = ds[a].values
+        y = share.share.values
+        ax.errorbar(x, y, yerr=[y - share.share_low.values, share.share_high.values - y],
+                    fmt="o", ms=4, color="#1f77b4", ecolor="0.4", capsize=2,
+                    label=f"regular share of the decided starts ({starts} per point), "
+                          "95% Wilson interval")
+        ax.set_ylim(-0.03, 1.03)
+        ax.set_xlabel(label(a))
+        ax.set_ylabel("regular share")
+        ax.legend(fontsize="small", loc="best")
+    blank = int(np.sum(share.decided.values == 0))
+    ax.set_title(f"{starts} seeded starts per point: the regular share" + (
+        f" ({blank} point{'s' * (blank > 1)} with none decided: not drawn)" if blank else ""),
+        fontsize="medium")
     return fig
 
 

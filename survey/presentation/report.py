@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analysis.classify import evidence_votes, stored_table
+from ..analysis.classify import evidence_votes, regular_share, stored_table, wilson
 from ..analysis.frequencies import twist
 from ..analysis.onset import onset, onset_over_horizons, runs
 from ..catalog import defaults
@@ -109,6 +109,7 @@ def markdown(ds, figure_names=(), check=None, special=()) -> str:
     out += _horizons(ds, regime, steady, integ.get("t_final", defaults.T_FINAL))
 
     out += _ensembles(ds, regime)
+    out += _shares(ds, axes, regime)
     out += _onsets(ds, axes, regime, check)
     out += _second_run(ds, check, regime)
     out += _tori_table(ds, axes, regime)
@@ -127,17 +128,14 @@ def markdown(ds, figure_names=(), check=None, special=()) -> str:
     return "\n".join(out)
 
 
-def wilson(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
-    """The Wilson score interval (95% by default) of a binomial share k / n."""
-    p, q = k / n, z * z / n
-    centre, half = (p + q / 2) / (1 + q), z / (1 + q) * np.sqrt(p * (1 - p) / n + q / (4 * n))
-    return max(0.0, centre - half), min(1.0, centre + half)
-
-
 def _sample_share(axes, regime) -> str:
     """What a share of cells means: a count on a grid; on seeded random starts (the only
     axis a seed) an estimate of the regular share of the measure the family draws from
     (for `section_sample`, the section's Liouville measure on the shell)."""
+    if "seed" in axes and len(axes) > 1:
+        return (f"The cells are {regime.shape[list(axes).index('seed')]} seeded starts at each point of the other axes: a share over all cells is "
+                "a count, and each point's regular share (below) an estimate with its "
+                "interval.")
     if list(axes) != ["seed"]:
         return ("The cells are a deterministic grid, not a random sample: a share is a "
                 "count, with no sampling interval.")
@@ -150,6 +148,43 @@ def _sample_share(axes, regime) -> str:
             f"draws from: of the {n} decided, {k} are regular, a regular share of "
             f"{100 * k / n:.0f}% (95% Wilson interval {100 * lo:.0f}-{100 * hi:.0f}%; the "
             f"{regime.size - n} undecided left out).")
+
+
+SHARE_ROWS = 40     # grid points listed one by one in the regular-share table
+
+
+def _shares(ds, axes, regime) -> list[str]:
+    """Several seeded starts per grid point: each point's regular share with its 95%
+    Wilson interval (the points with every start alike summarised beyond SHARE_ROWS)."""
+    if "seed" not in axes or len(axes) == 1:
+        return []
+    share = regular_share(ds, ds[V.status].copy(data=regime))
+    points = [a for a in axes if a != "seed"]
+    flat = share.stack(point=points)
+    out = [f"## Regular share per grid point ({ds.sizes['seed']} seeded starts each)", "",
+           "Regular share: of a point's starts decided regular or irregular, the regular "
+           "ones; 95% Wilson interval (the starts are a random sample of what the family "
+           "draws from; undecided starts are left out).", "",
+           "| " + " | ".join(points) + " | decided | regular | share | 95% interval |",
+           "|" + " --- |" * (len(points) + 4)]
+    mixed = np.flatnonzero((flat.share.values > 0) & (flat.share.values < 1))
+    rows = np.arange(flat.sizes["point"]) if flat.sizes["point"] <= SHARE_ROWS else \
+        mixed[:SHARE_ROWS]
+    for i in rows:
+        p = flat.isel(point=i)
+        where = " | ".join(f"{float(p[a]):g}" for a in points)
+        n, k = int(p.decided), int(p.regular)
+        value = f"{100 * k / n:.0f}% | {100 * float(p.share_low):.0f}-" \
+                f"{100 * float(p.share_high):.0f}%" if n else "— | —"
+        out.append(f"| {where} | {n} | {k} | {value} |")
+    if flat.sizes["point"] > SHARE_ROWS:
+        s = flat.share.values
+        first = f", the first {SHARE_ROWS}" if mixed.size > SHARE_ROWS else ""
+        out += ["", f"{flat.sizes['point']} points: listed those with a share strictly "
+                    f"between 0 and 1 ({mixed.size}{first}); all regular at "
+                    f"{int(np.sum(s == 1))}, none regular at {int(np.sum(s == 0))}, none "
+                    f"decided at {int(np.sum(np.isnan(s)))}."]
+    return out + [""]
 
 
 def _scale_free(ds, axes) -> list[str]:
@@ -269,7 +304,7 @@ def _onsets(ds, axes, regime, check=None) -> list[str]:
                if a not in meaningful]
     if len(axes) == 2 and meaningful and meaningful[0] != axes[0]:
         axes, regime = axes[::-1], regime.T          # the onset along the meaningful axis
-    if list(axes) == ["seed"]:
+    if "seed" in axes:           # seeded starts: their shares above say it
         return skipped + [""]
     if len(axes) == 1 and not meaningful:
         x = ds[axes[0]].values

@@ -198,28 +198,13 @@ def test_section_sample_needs_bounds_where_the_shell_has_none(potential):
     assert system.energy(y) == pytest.approx(E, rel=1e-13) and r.sigma <= 4 and r.eta <= 4
 
 
-@pytest.mark.parametrize("potential", ["perimetric_power", "areal_barrier"])
-def test_isosceles_with_its_apex_at_w_has_the_planes_own_reduced_coordinates(potential):
-    """Paper, Special Solutions: the isosceles triangles with base b and height h form an
-    invariant plane with H = p_b^2 + 3/4 p_h^2 + U (p_b = b'/2, p_h = 2h'/3). With the
-    apex at w the reduced coordinates are those of the plane: sigma = |b|, eta = |h|,
-    phi = pi/2, (p_sigma, p_eta) = (p_b, p_h), no rotation -- and it stays so."""
-    system = System.create(potential=potential)
-    b, h, db, dh = 1.3, 1.1, 0.7, -0.4
-    y = initial_state(system, "isosceles", base=b, height=h, base_rate=db, height_rate=dh,
-                      apex=2)
-    r = reduced(system, y)
-    np.testing.assert_allclose([r.sigma, r.eta, r.phi, r.p_sigma, r.p_eta, r.p_phi, r.J],
-                               [b, h, math.pi / 2, db / 2, 2 * dh / 3, 0, 0], atol=1e-15)
-    P, A = b + math.sqrt(b * b + 4 * h * h), b * h / 2
-    u = 0.5 * P ** 2 if potential == "perimetric_power" else 2 / A + A ** 2
-    assert system.energy(y) == pytest.approx((db / 2) ** 2 + 0.75 * (2 * dh / 3) ** 2 + u,
-                                             rel=1e-14)
-    out = integrate(system, y, 5.0, t_eval=np.linspace(0, 5, 11))
-    later = reduced(system, out.samples)
-    np.testing.assert_allclose(np.cos(later.phi), 0, atol=1e-13)     # still isosceles
-    paper = initial_state(system, "isosceles", base=b, height=h)     # apex at v, as printed
-    q, _ = system.split(paper)
-    np.testing.assert_allclose(q, [[-b / 2, -h / 3], [0, 2 * h / 3], [b / 2, -h / 3]])
-    with pytest.raises(ValueError, match="apex must be 1"):
-        initial_state(system, "isosceles", apex=0)
+def test_section_sample_below_the_shells_minimum_is_inaccessible(paper_system):
+    """Under P^2/2 at J = 24.40 the least of U + J^2/2I on the section is 60.157 (a
+    spinning pair collision, sigma -> 0; the rotating triangle's 3 J = 73.2 is not the
+    least): below it the shell is empty, which makes the cell inaccessible, not the survey
+    wrong; just above it the sampler finds the thin region near sigma = 0."""
+    J = 24.401923788646684
+    with pytest.raises(Inaccessible, match="the shell is empty"):
+        initial_state(paper_system, "section_sample", energy=60.0, angular_momentum=J)
+    y = initial_state(paper_system, "section_sample", energy=62.0, angular_momentum=J)
+    assert reduced(paper_system, y).sigma < 1.0

@@ -519,3 +519,65 @@ def test_one_shell_is_drawn_as_3d_slices_and_a_projection_coloured_by_the_fourth
     assert (f"of the {n} decided, {k} are regular, a regular share of {100 * k / n:.0f}% "
             f"(95% Wilson interval {100 * ci.low:.0f}-{100 * ci.high:.0f}%") in text
     assert "Regimes along seed" not in text and "in no order" in text
+
+
+def test_starts_per_cell_give_each_point_a_regular_share_with_its_interval(tmp_path):
+    """[initial] starts_per_cell = M: M seeded starts per grid point (a last axis `seed`
+    from the family's seed), kept one by one in the archive; each point's regular share of
+    its decided starts with the 95% Wilson interval (scipy's, independently) in the
+    report's table and as the figure's bars; no per-cell maps or onsets over seeds."""
+    from scipy.stats import binomtest
+    cfg = {"survey": {"name": "ens", "output": str(tmp_path / "ens.nc")},
+           "initial": {"family": "section_sample", "energy": [84.45577136594005, 95.0],
+                       "angular_momentum": 24.401923788646684, "seed": 5,
+                       "starts_per_cell": 5},
+           "integration": {"t_final": 200.0}, "indicators": {"perturbations": 0}}
+    ds = xr.open_dataset(run_survey(cfg))
+    assert ds.regime.dims == ("energy", "seed") and ds.seed.values.tolist() == [5, 6, 7, 8, 9]
+    from survey.analysis.classify import regular_share
+    share = regular_share(ds)
+    text = report.markdown(ds, ["ens_regular_share.png"])
+    assert "## Regular share per grid point (5 seeded starts each)" in text
+    fig = plots.figures(ds)
+    assert "regular_share" in fig and not any(k.startswith(("map", "scan")) for k in fig)
+    bars = fig["regular_share"].axes[0].containers[0]
+    for i, energy in enumerate(ds.energy.values):
+        regime = ds.regime.values[i]
+        n = int(np.isin(regime, [0, 1, 2, 3, 4, 8]).sum())
+        k = int(np.isin(regime, [0, 1, 2, 8]).sum())
+        assert (int(share.decided[i]), int(share.regular[i])) == (n, k)
+        ci = binomtest(k, n).proportion_ci(method="wilson")
+        assert float(share.share_low[i]) == pytest.approx(ci.low, abs=1e-9)
+        assert float(share.share_high[i]) == pytest.approx(ci.high, abs=1e-9)
+        assert (f"| {energy:g} | {n} | {k} | {100 * k / n:.0f}% | {100 * ci.low:.0f}-"
+                f"{100 * ci.high:.0f}% |") in text
+        x, y = bars.lines[0].get_data()
+        assert (x[i], y[i]) == pytest.approx((energy, k / n))
+    assert "Where chaos sets in" not in text
+
+
+def test_starts_per_cell_needs_a_family_with_a_seed():
+    base = {"survey": {"name": "x", "output": "x.nc"}}
+    with pytest.raises(ConfigError, match=r"starts_per_cell.*has no seed"):
+        load_config({**base, "initial": {"family": "equilateral", "starts_per_cell": 4}})
+    with pytest.raises(ConfigError, match=r"starts_per_cell.*already a grid axis"):
+        load_config({**base, "initial": {"family": "section_sample", "seed": [0, 1],
+                                         "starts_per_cell": 4}})
+
+
+def test_starts_per_cell_over_two_axes_draw_a_share_map(tmp_path):
+    cfg = {"survey": {"name": "ens2", "output": str(tmp_path / "ens2.nc")},
+           "initial": {"family": "section_sample", "energy": [84.45577136594005, 95.0],
+                       "angular_momentum": [24.401923788646684, 26.0],
+                       "starts_per_cell": 2},
+           "integration": {"t_final": 60.0}, "indicators": {"perturbations": 0}}
+    ds = xr.open_dataset(run_survey(cfg))
+    from survey.analysis.classify import regular_share
+    share = regular_share(ds)
+    ax = plots.figures(ds)["regular_share"].axes[0]
+    mesh = [c for c in ax.collections if isinstance(c, QuadMesh)][0]
+    np.testing.assert_array_equal(np.ma.filled(mesh.get_array(), np.nan).ravel(),
+                                  share.share.transpose("energy", "angular_momentum")
+                                  .values.T.ravel())
+    assert (ax.get_xlabel(), ax.get_ylabel()) == (plots.label("energy"),
+                                                  plots.label("angular_momentum"))
