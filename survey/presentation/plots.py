@@ -288,7 +288,8 @@ def regular_share_figure(ds) -> Figure:
         ax.set_xlabel(label(a))
         ax.set_ylabel(label(b))
         if blank.any():
-            ax.legend(handles=[Patch(**UNCONFIRMED, label=f"no start decided "
+            ax.legend(handles=[Patch(**UNCONFIRMED, label=f"no start decided: none "
+                                                          f"accessible, or all undetermined "
                                                           f"({int(blank.sum())})")],
                       loc="upper right", fontsize="small", framealpha=0.9)
     else:

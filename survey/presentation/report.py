@@ -293,7 +293,8 @@ def _why_no_onset(ds, axis) -> str:
                 "of a family of orbits: regular and chaotic cells interleave there")
     if "term" in ds[axis].attrs.get("long_name", ""):
         return (f"{axis} is a parameter of the potential: each value is another system, "
-                "compared at one start each")
+                "compared at " + (f"{ds.sizes['seed']} seeded starts each" if "seed" in ds.dims
+                                  else "one start each"))
     return ""
 
 
