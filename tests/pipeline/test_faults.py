@@ -422,7 +422,8 @@ def test_a_full_disk_names_the_file_and_keeps_the_finished_cells(tmp_path, monke
 
 
 def test_ctrl_c_says_how_to_resume_and_the_rerun_finishes(tmp_path):
-    cfg = grid(tmp_path, delta="{start = 0.0, stop = 6.0, num = 24}", t_final=300.0)
+    # 24 chunks of 2 cells, one worker: seconds of work are left when the first chunk lands
+    cfg = grid(tmp_path, delta="{start = 0.0, stop = 6.0, num = 48}", t_final=300.0)
     folder = checkpoint_dir(load_config(cfg))
     proc = subprocess.Popen([sys.executable, "-m", "survey", str(cfg), "--no-progress"],
                             start_new_session=True, stdout=subprocess.PIPE,
@@ -431,11 +432,12 @@ def test_ctrl_c_says_how_to_resume_and_the_rerun_finishes(tmp_path):
     while not list(folder.glob("chunk-*.npz")) and proc.poll() is None \
             and time.monotonic() < deadline:
         time.sleep(0.02)
+    assert proc.poll() is None, "the survey ended before its first checkpoint was seen"
     os.killpg(proc.pid, signal.SIGINT)      # what a terminal's Ctrl-C does: the whole group
     out, err = proc.communicate(timeout=120)
-    assert proc.returncode == 130, err
+    assert proc.returncode == 130, (out, err)
     assert err.strip() == "interrupted -- run the same command to resume", err
-    assert 1 <= len(list(folder.glob("chunk-*.npz"))) < 12
+    assert 1 <= len(list(folder.glob("chunk-*.npz"))) < 24
     code, out, err = run_cli(cfg, "--no-progress")
     assert code == 0 and "wrote" in out
     same_data(xr.open_dataset(tmp_path / "g.nc"), fresh(tmp_path, cfg))
