@@ -599,6 +599,7 @@ def section(ds, x="sigma", y="p_sigma", colour_by=V.regime) -> Figure:
                      f"({cells.size} cell{'s' if cells.size > 1 else ''})", fontsize="small")
         ax.set_xlabel(label(x))
         ax.set_ylabel(label(y))
+        _one_point(ax, xs[cells], ys[cells])
     for ax in axes[len(groups):]:
         ax.set_visible(False)
     fig.supxlabel(textwrap.fill(
@@ -607,6 +608,22 @@ def section(ds, x="sigma", y="p_sigma", colour_by=V.regime) -> Figure:
         f"flow is 4-D, so a torus need not draw a curve", int(13 * fig.get_figwidth())),
         fontsize="small")
     return fig
+
+
+def _one_point(ax, xs, ys):
+    """A panel whose crossings all lie within roundoff of one point (an equilibrium's or a
+    periodic orbit's) is drawn as that point in a window of unit size, and says so:
+    autoscaled, the roundoff would look like a cloud."""
+    spread = max(np.nanmax(v) - np.nanmin(v) for v in (xs, ys)) if np.isfinite(xs).any() \
+        else np.inf
+    scale = max(np.nanmax(np.abs(xs)), np.nanmax(np.abs(ys)), 1.0) if np.isfinite(spread) \
+        else 1.0
+    if spread <= 1e-9 * scale:
+        cx, cy = np.nanmean(xs), np.nanmean(ys)
+        ax.set_xlim(cx - 0.5, cx + 0.5)
+        ax.set_ylim(cy - 0.5, cy + 0.5)
+        ax.text(0.5, 0.08, f"every crossing within {spread:.1g} of one point",
+                transform=ax.transAxes, ha="center", fontsize="x-small", color="0.3")
 
 
 def _surface(ds) -> tuple[str, float]:

@@ -581,3 +581,21 @@ def test_starts_per_cell_over_two_axes_draw_a_share_map(tmp_path):
                                   .values.T.ravel())
     assert (ax.get_xlabel(), ax.get_ylabel()) == (plots.label("energy"),
                                                   plots.label("angular_momentum"))
+
+
+def test_a_section_panel_of_one_point_is_drawn_as_a_point():
+    """An equilibrium's or periodic orbit's crossings agree to roundoff: autoscaled, that
+    roundoff would look like a cloud; the panel shows a window of unit size and says so.
+    Crossings that differ keep the autoscaled view."""
+    from matplotlib.figure import Figure
+    rng = np.random.default_rng(0)
+    ax = Figure().subplots()
+    xs, ys = 3.4641016 + 1e-14 * rng.normal(size=(1, 50)), 1e-14 * rng.normal(size=(1, 50))
+    ax.scatter(xs, ys)
+    plots._one_point(ax, xs, ys)
+    assert np.diff(ax.get_xlim())[0] == pytest.approx(1.0)
+    assert "every crossing within" in ax.texts[0].get_text()
+    ax = Figure().subplots()
+    ax.scatter(xs + 0.1 * rng.normal(size=xs.shape), ys)
+    plots._one_point(ax, xs + 0.1 * rng.normal(size=xs.shape), ys)
+    assert not ax.texts and np.diff(ax.get_xlim())[0] < 1.0
