@@ -737,7 +737,9 @@ def convergence(ds, cells=None) -> Figure:
             ax.set_yscale("symlog", linthresh=float(np.log(t[-1]) / t[-1]))
         if name == V.ftle_history:
             ax.plot(t, np.log(t) / t, "k:", lw=1, label=r"$\ln t / t$ (torus)")
-    axes[0].legend(fontsize="x-small", ncol=2)
+    # below the panels, not in the first: long cell labels would cover its curves
+    fig.legend(*axes[0].get_legend_handles_labels(), loc="outside lower center", ncol=2,
+               fontsize="x-small", frameon=False)
     axes[-1].set_xlabel("t")
     return fig
 
