@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analysis.classify import evidence_votes, regular_share, stored_table, wilson
+from ..analysis.classify import evidence_votes, regular_share, stored_table
 from ..analysis.frequencies import twist
 from ..analysis.onset import onset, onset_over_horizons, runs
 from ..catalog import defaults
@@ -105,7 +105,7 @@ def markdown(ds, figure_names=(), check=None, special=()) -> str:
                        f"{'—' if sure is None else sure} | {r.meaning} |")
     out += ["", "Confirmed: the verdict is of the class (regular or irregular) decided at the "
                 "horizon before; the others are claimed to their horizon only. "
-                + _sample_share(axes, regime), ""]
+                + _sample_share(ds, axes, regime), ""]
     out += _horizons(ds, regime, steady, integ.get("t_final", defaults.T_FINAL))
 
     out += _ensembles(ds, regime)
@@ -128,26 +128,25 @@ def markdown(ds, figure_names=(), check=None, special=()) -> str:
     return "\n".join(out)
 
 
-def _sample_share(axes, regime) -> str:
+def _sample_share(ds, axes, regime) -> str:
     """What a share of cells means: a count on a grid; on seeded random starts (the only
     axis a seed) an estimate of the regular share of the measure the family draws from
     (for `section_sample`, the section's Liouville measure on the shell)."""
     if "seed" in axes and len(axes) > 1:
-        return (f"The cells are {regime.shape[list(axes).index('seed')]} seeded starts at each point of the other axes: a share over all cells is "
-                "a count, and each point's regular share (below) an estimate with its "
-                "interval.")
+        return (f"The cells are {ds.sizes['seed']} seeded starts at each point of the other "
+                "axes: a share over all cells is a count, and each point's regular share "
+                "(below) an estimate with its interval.")
     if list(axes) != ["seed"]:
         return ("The cells are a deterministic grid, not a random sample: a share is a "
                 "count, with no sampling interval.")
-    decided = np.isin(regime, REGULAR + IRREGULAR)
-    n, k = int(decided.sum()), int(np.isin(regime, REGULAR).sum())
+    share = regular_share(ds, ds[V.status].copy(data=regime))
+    n, k = int(share.decided), int(share.regular)
     if n == 0:
         return "The cells are seeded random starts, and none was decided."
-    lo, hi = wilson(k, n)
     return (f"The cells are seeded random starts, a sample of the measure their family "
             f"draws from: of the {n} decided, {k} are regular, a regular share of "
-            f"{100 * k / n:.0f}% (95% Wilson interval {100 * lo:.0f}-{100 * hi:.0f}%; the "
-            f"{regime.size - n} undecided left out).")
+            f"{100 * k / n:.0f}% (95% Wilson interval {100 * float(share.share_low):.0f}-"
+            f"{100 * float(share.share_high):.0f}%; the {regime.size - n} undecided left out).")
 
 
 SHARE_ROWS = 40     # grid points listed one by one in the regular-share table
