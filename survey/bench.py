@@ -1,7 +1,7 @@
 """`python -m survey bench`: survey against its baselines, measured in the same run -- a
 101-orbit grid end to end against heyoka's SIMD batch ensemble (`scan_vs_heyoka`), a
 default cell against its bare orbit (`default_cell`), what a survey costs beside its cells
-(`fixed_costs`), survey's DOP853 against scipy's DOP853 (NumPy right-hand side) and heyoka's
+(`fixed_costs`), how busy a refined map keeps the workers (`refined_map`), survey's DOP853 against scipy's DOP853 (NumPy right-hand side) and heyoka's
 Taylor integrator on the paper's two orbits (`run`), the cost of indicators, sections and
 the torus analysis, the scaling on 1 vs 2 workers, the driver's memory, and what the paper's
 one-term systems would pay on the general path of sums of terms (`interaction_terms`).
@@ -357,6 +357,48 @@ def survey_scaling(cells=200, t_final=2000.0, repeats=2, folder="results/bench",
     return rows
 
 
+def refined_map(t_final=300.0, levels=3, folder="results/bench", out=print):
+    """A refined map (equilateral family over (delta, E), 9 x 7 cells refined `levels`
+    times where neighbours disagree) on 2 local workers: how busy the workers were while
+    it ran -- from the scheduler's task stream, each worker's share of the compute phase
+    (first task started to last task ended) spent outside tasks, and its longest idle gap
+    -- and the cells against the finest uniform grid (target: no worker idle more than
+    10% of the time)."""
+    import xarray as xr
+
+    from .pipeline.sweep import run_survey
+    cfg = {"survey": {"name": "bench-refined", "output": f"{folder}/bench-refined.nc"},
+           "initial": {"family": "equilateral", "delta": {"start": 0.0, "stop": 8.0, "num": 9},
+                       V.energy: {"start": 60.0, "stop": 120.0, "num": 7}},
+           "integration": {"t_final": t_final},
+           "indicators": {"perturbations": 0},
+           "refine": {"max_level": levels},
+           "dask": {"workers": 2}}
+    timings = {}
+    path = run_survey(cfg, progress=False, timings=timings)
+    with xr.open_dataset(path) as ds:
+        cells, level = ds.sizes["cell"], ds["level"].values
+    tasks = timings["tasks"]
+    begin, end = min(t[1] for t in tasks), max(t[2] for t in tasks)
+    out("")
+    out(f"Refined map (equilateral, (delta, E) from 9 x 7 cells, {levels} levels, t = "
+        f"{t_final:g}, 2 workers): {cells} cells ({', '.join(f'level {k}: {n}' for k, n in enumerate(np.bincount(level)))}); "
+        f"the finest uniform grid has {(8 * 2 ** levels + 1) * (6 * 2 ** levels + 1)}")
+    out(f"compute phase {timings['compute']:.2f} s, {len(tasks)} tasks; from the first task's "
+        f"start to the last one's end {end - begin:.2f} s")
+    out(f"{'worker':>28s} {'tasks':>6s} {'busy s':>7s} {'idle':>6s} {'longest gap s':>14s}")
+    idle = {}
+    for worker in sorted({t[0] for t in tasks}):
+        spans = sorted((a, b) for w, a, b in tasks if w == worker)
+        busy = sum(b - a for a, b in spans)
+        gaps = [spans[0][0] - begin] + [c - b for (_, b), (c, _) in zip(spans, spans[1:])] + \
+            [end - spans[-1][1]]
+        idle[worker] = 1.0 - busy / (end - begin)
+        out(f"{worker:>28s} {len(spans):6d} {busy:7.2f} {idle[worker]:6.1%} {max(gaps):14.2f}")
+    out(f"largest idle share {max(idle.values()):.1%} (target <= 10%)")
+    return dict(cells=cells, idle=idle, compute=timings["compute"])
+
+
 def survey_memory(sizes=(10_000, 100_000), folder="results/bench", out=print):
     """Peak resident memory of the process driving a survey of many tiny cells (the
     workers are separate processes): finished results stream to checkpoint files, and the
@@ -511,7 +553,8 @@ def scan_vs_heyoka(cells=101, t_final=2000.0, tol=1e-12, repeats=2, folder="resu
         f"vector + MEGNO, 2 workers / threads; best of {repeats} interleaved runs): seconds")
     out(f"survey (rtol = atol = {tol:g}, largest energy error {survey_dE:.1e}):")
     out(f"  compute phase          {best['compute']:7.2f}")
-    out("  in process, by phase   " + ", ".join(f"{k} {v:.2f}" for k, v in phases.items()))
+    out("  in process, by phase   " + ", ".join(f"{k} {v:.2f}" for k, v in phases.items()
+                                                if k != "tasks"))
     out(f"  python -m survey run   {best[False]:7.2f}  (interpreter start to archive, no "
         "torus analysis)")
     out(f"  the same with [tori]   {best[True]:7.2f}  (the default torus analysis)")

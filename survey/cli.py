@@ -14,7 +14,7 @@ COMPILING_COMMANDS = ("run", "reproduce", "verify", "orbit", "bench", "equilibri
 # the embedded default survey (`python -m survey run`)
 DEFAULT_CONFIG = Path(__file__).parent / "default.toml"
 BENCH_PARTS = ["scan", "cell", "fixed", "integrator", "step", "indicators", "tori", "terms",
-               "survey", "memory", "newton"]
+               "survey", "refine", "memory", "newton"]
 
 
 def _bench(args):
@@ -30,6 +30,7 @@ def _bench(args):
              "tori": lambda: bench.torus_overhead(t_final=t),
              "terms": lambda: bench.interaction_terms(t_final=t),
              "survey": bench.survey_scaling,
+             "refine": bench.refined_map,
              "memory": bench.survey_memory,
              "newton": bench.newton_step}
     for name in BENCH_PARTS:
@@ -255,12 +256,16 @@ def _survey(config, command, summary=False, write_report=True, **kw) -> Path:
     import xarray as xr
 
     from .analysis.classify import summary as summarise
+    from .catalog.variables import V
     from .pipeline.special import section_slice, special_cells
     from .pipeline.sweep import run_survey
     from .presentation import report
     path = run_survey(config, command=command, **kw)
     if summary:
-        print(f"wrote {path} ({config.n_cells} cells)")
+        with xr.open_dataset(path) as ds:
+            refined = f", {int((ds['level'] > 0).sum())} of them added by refinement" \
+                if "level" in ds.coords else ""
+            print(f"wrote {path} ({ds[V.status].size} cells{refined})")
     second = config.check()
     check = None
     if second is not None:

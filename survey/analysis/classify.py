@@ -14,6 +14,7 @@ from ..catalog.indicators import BY_NAME, REGISTRY, TANGENT
 from ..catalog.regimes import IRREGULAR, REGULAR, Regime, Thresholds
 from ..catalog.status import Status
 from ..catalog.variables import START_COORDINATES, V
+from .refine import as_grid, refined_axes
 
 # the lines of evidence (catalog.indicators.REGISTRY): (name, how it votes)
 EVIDENCE = tuple((i.name, i.vote) for i in REGISTRY if i.vote is not None)
@@ -223,13 +224,14 @@ def stored_table(ds, table: str = "tori") -> dict | None:
 def summary(ds, regime=None) -> list[str]:
     """Counts of each regime, and for a one-axis grid of a family parameter where it
     changes from regular to chaotic."""
+    ds = as_grid(ds)
     regime = ds[V.regime].values if regime is None else regime
     total = regime.size
     counts = [(r, int(np.sum(regime == r))) for r in Regime]
     lines = ["regimes: " + ", ".join(f"{r.name.lower()} {n} ({100 * n / total:.0f}%)"
                                      for r, n in counts if n)]
     axes = [d for d in ds[V.status].dims]
-    if len(axes) == 1 and axes[0] not in START_COORDINATES:
+    if len(axes) == 1 and axes[0] not in START_COORDINATES and not refined_axes(ds):
         x = ds[axes[0]].values
         regular = np.isin(regime, REGULAR)
         chaotic = np.isin(regime, IRREGULAR)

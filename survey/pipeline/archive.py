@@ -170,14 +170,30 @@ def _component_labels(config):
     return q + [f"p{c}" for c in q]
 
 
-def coordinates(config) -> dict:
+def coordinates(config, cells=None) -> dict:
     """Coordinate variables (numeric, monotone: CF section 1.3) and the string labels of the
-    component and spatial dimensions as auxiliary coordinates (CF section 6.1)."""
+    component and spatial dimensions as auxiliary coordinates (CF section 6.1). A refined
+    survey's cells (sorted lattice ids) lie along a `cell` dimension, each grid parameter
+    and the cell's refinement level an auxiliary coordinate along it."""
     terms = system_terms(config.tables["system"])
-    coords = {a.name: (a.name, a.values, {
+    dims = grid_dims(config)
+    if cells is not None:
+        lattice = config.lattice()
+        at = lattice.indices(cells)
+    coords = {a.name: (dims[0] if cells is not None else a.name,
+                       a.values if cells is None else lattice.axis_values(k)[at[k]], {
         "long_name": f"parameter {a.param} of the {terms[a.term][0]} term {terms[a.term][1]}"
         if a.term >= 0 else f"initial-condition parameter {a.name}", "units": "1"})
-        for a in config.axes}
+        for k, a in enumerate(config.axes)}
+    if cells is not None:
+        coords["cell"] = ("cell", np.asarray(cells, dtype=np.int64), {
+            "long_name": "index of the cell on the refinement lattice (C order over the grid "
+                         "axes, each interval of the grid halved max_level times)",
+            "units": "1", "lattice_shape": np.array(lattice.shape, dtype=np.int64),
+            "max_level": np.int64(lattice.levels)})
+        coords["level"] = ("cell", lattice.level(cells), {
+            "long_name": "refinement level of the cell (0: the grid; each level halves the "
+                         "spacing of the cells it splits)", "units": "1"})
     tori = config.tables["tori"]
     coords["history_time"] = ("history_time", history_grid(
         config.tables["integration"]["t_final"], config.tables["indicators"]["history_points"],
@@ -237,25 +253,33 @@ def attributes(config, command: str) -> dict:
     }
 
 
-def write(config, load: Callable[[list[str]], dict], command: str) -> Path:
+def grid_dims(config) -> tuple[str, ...]:
+    """The dimensions of a cell's values: the grid axes, or `cell` for a refined survey."""
+    return ("cell",) if config.refined else tuple(a.name for a in config.axes)
+
+
+def write(config, load: Callable[[list[str]], dict], command: str, cells=None) -> Path:
     """Write the archive atomically: to a temporary file beside the output, in groups of
     variables of at most GROUP_BYTES together (peak memory: a group, or one variable if
-    larger), then renamed into place. `load(names)` returns those variables over all cells in flat C order, each
-    of shape (n_cells, ...)."""
+    larger), then renamed into place. `load(names)` returns those variables over all cells
+    in flat C order (a refined survey: over its `cells`, sorted lattice ids), each of shape
+    (cells, ...)."""
     import xarray as xr
     out = config.output
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = partial_path(out)
-    dims = tuple(a.name for a in config.axes)
+    dims = grid_dims(config)
+    shape = config.shape if cells is None else (len(cells),)
     try:
-        coords = coordinates(config)
+        coords = coordinates(config, cells)
         base = xr.Dataset(coords={k: xr.Variable(*v) for k, v in coords.items()},
                           attrs=attributes(config, command))
         base.to_netcdf(tmp, mode="w", engine="netcdf4",
                        encoding={k: {"_FillValue": None} for k in coords})
-        for group in _groups(config, [v for v in variables(config) if not v.derived]):
+        count = int(np.prod(shape))
+        for group in _groups(config, [v for v in variables(config) if not v.derived], count):
             data = load([v.name for v in group])
-            _append(tmp, [(v, data.pop(v.name).reshape(config.shape + cell_shape(config, v)),
+            _append(tmp, [(v, data.pop(v.name).reshape(shape + cell_shape(config, v)),
                            dims + v.extra, {}) for v in group])
         with xr.open_dataset(tmp, engine="netcdf4") as ds:    # reads only what it needs
             derived = derive(ds)
@@ -270,12 +294,12 @@ def write(config, load: Callable[[list[str]], dict], command: str) -> Path:
     return out
 
 
-def _groups(config, vs: list[Var]):
-    """Consecutive runs of variables whose arrays over all cells fit in GROUP_BYTES
+def _groups(config, vs: list[Var], count: int):
+    """Consecutive runs of variables whose arrays over all `count` cells fit in GROUP_BYTES
     together (a larger variable goes alone)."""
     group, size = [], 0
     for v in vs:
-        nbytes = config.n_cells * int(np.prod(cell_shape(config, v))) * np.dtype(v.dtype).itemsize
+        nbytes = count * int(np.prod(cell_shape(config, v))) * np.dtype(v.dtype).itemsize
         if group and size + nbytes > GROUP_BYTES:
             yield group
             group, size = [], 0
@@ -345,7 +369,17 @@ def problems(ds, config) -> list[str]:
     if sha != ds.attrs["config_sha256"]:
         found.append("config_sha256 does not match the stored config text (edited after "
                      "the run)")
-    for name, (dim, values, attrs) in coordinates(config).items():
+    cells = None
+    if config.refined:
+        if "cell" not in ds.coords:
+            return found + ["the config refines its grid, and the archive has no cell "
+                            "coordinate"]
+        cells = ds["cell"].values.astype(np.int64)
+        if cells.size == 0 or np.any(np.diff(cells) <= 0) or cells[0] < 0 or \
+                cells[-1] >= np.prod(config.lattice().shape):
+            return found + ["coordinate cell is not a sorted list of refinement-lattice "
+                            "indices"]
+    for name, (dim, values, attrs) in coordinates(config, cells).items():
         if name not in ds.variables:
             found.append(f"coordinate {name} is missing")
             continue
@@ -358,7 +392,7 @@ def problems(ds, config) -> list[str]:
     expected = {v.name: v for v in variables(config)}
     for name in sorted(set(ds.data_vars) - set(expected)):
         found.append(f"variable {name} is not part of this config's archive")
-    dims = tuple(a.name for a in config.axes)
+    dims = grid_dims(config)
     for name, v in expected.items():
         if name not in ds.data_vars:
             found.append(f"variable {name} is missing")

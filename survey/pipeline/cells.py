@@ -35,19 +35,21 @@ from .build import build_system, indicator_options, section_event_for
 from .config import Config
 
 
-def build_starts(config: Config) -> np.ndarray:
-    """Initial states of every cell (n_cells, n), NaN rows where inaccessible. A value that
-    makes no start at all (a degenerate triangle) is a ConfigError naming the cell."""
+def build_starts(config: Config, ids=None) -> np.ndarray:
+    """Initial states of the cells `ids` (default every cell; (len, n)), NaN rows where
+    inaccessible. A value that makes no start at all (a degenerate triangle) is a
+    ConfigError naming the cell."""
     system = config.system()
     varies = any(a.term >= 0 for a in config.axes)
     family = config.tables["initial"]["family"]
-    starts = np.full((config.n_cells, system.n), np.nan)
-    for index in range(config.n_cells):
+    ids = range(config.n_cells) if ids is None else [int(i) for i in ids]
+    starts = np.full((len(ids), system.n), np.nan)
+    for row, index in enumerate(ids):
         params = config.cell_parameters(index)
         if varies:
             system = config.system(index)
         try:
-            starts[index] = initial_state(system, family, **params)
+            starts[row] = initial_state(system, family, **params)
         except Inaccessible:
             continue
         except ValueError as exc:
@@ -183,6 +185,12 @@ def _verdicts(task: CellTask, system, results, half: bool = False):
     arrays = archive.empty_results(slots, len(results))
     for k, result in enumerate(results):
         archive.fill_row(arrays, k, result)
+    return classify_rows(task, system, arrays, half)
+
+
+def classify_rows(task: CellTask, system, arrays: dict, half: bool = False):
+    """(regime, confidence) of cells from their result arrays (a task's, or a
+    checkpoint's), as the archive derives them."""
     tor, ind = task.tori, task.indicators
     table = Table(arrays, history_time=history_grid(
         task.integration["t_final"], ind["history_points"], tor["extend"],

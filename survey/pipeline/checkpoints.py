@@ -68,14 +68,15 @@ def scan_checkpoints(folder: Path, config: Config, starts, key: str) -> dict[Pat
     """The usable checkpoint files and their cells. A file that cannot be read, was written
     under another key, holds cells outside the grid or already held, lacks a variable or has
     one of the wrong shape, or whose starts differ from this grid's, is reported and
-    deleted: its cells are computed again."""
+    deleted: its cells are computed again. starts: every cell's start, or a function giving
+    the starts of given cells."""
     slots = archive.layout(config)
-    usable, seen = {}, np.zeros(config.n_cells, dtype=bool)
+    usable, seen = {}, set()
     for path in sorted(folder.glob("chunk-*.npz")):
         try:
             with np.load(path) as z:
                 ids = z["cell_ids"]
-                problem = _chunk_problem(z, ids, slots, seen, starts, key)
+                problem = _chunk_problem(z, ids, slots, seen, starts, key, config.n_cells)
         except Exception as exc:   # zipfile, pickle and numpy raise many kinds
             problem = f"unreadable ({type(exc).__name__}: {str(exc)[:80]})"
         if problem:
@@ -83,19 +84,19 @@ def scan_checkpoints(folder: Path, config: Config, starts, key: str) -> dict[Pat
             with contextlib.suppress(OSError):
                 path.unlink()
             continue
-        seen[ids] = True
+        seen.update(ids.tolist())
         usable[path] = ids
     return usable
 
 
-def _chunk_problem(z, ids, slots, seen, starts, key) -> str:
+def _chunk_problem(z, ids, slots, seen, starts, key, cells) -> str:
     if str(z["result_key"]) != key:
         return "was written for another config or code version"
     if ids.dtype.kind != "i" or ids.ndim != 1 or not ids.size:
         return "has no valid cell list"
-    if ids.min() < 0 or ids.max() >= len(starts) or np.unique(ids).size != ids.size:
+    if ids.min() < 0 or ids.max() >= cells or np.unique(ids).size != ids.size:
         return "names cells outside this grid"
-    if seen[ids].any():
+    if not seen.isdisjoint(ids.tolist()):
         return "repeats cells another checkpoint holds"
     for s in slots:
         if s.name not in z.files:
@@ -103,7 +104,7 @@ def _chunk_problem(z, ids, slots, seen, starts, key) -> str:
         if z[s.name].shape != (ids.size,) + s.shape or z[s.name].dtype != np.dtype(s.dtype):
             return f"has variable {s.name} of the wrong shape or type"
     stored = z[V.initial_state]
-    if stored.tobytes() != starts[ids].tobytes():
+    if stored.tobytes() != (starts(ids) if callable(starts) else starts[ids]).tobytes():
         return "holds starts that differ from this grid's (another grid's results)"
     return ""
 
@@ -155,17 +156,25 @@ def _remove_stale_temporaries(output: Path):
             f.unlink()
 
 
-def loader(config: Config, files: dict[Path, np.ndarray]):
-    """Reads variables over all cells from the checked checkpoint files, opening each file
-    once per call."""
+def loader(config: Config, files: dict[Path, np.ndarray], cells=None):
+    """Reads variables over all cells (or over the sorted ids `cells` of a refined survey:
+    a checkpoint's other cells are left out) from the checked checkpoint files, opening
+    each file once per call."""
     specs = {v.name: v for v in archive.variables(config)}
+    count = config.n_cells if cells is None else len(cells)
 
     def load(names):
-        out = {name: np.full((config.n_cells,) + archive.cell_shape(config, specs[name]),
+        out = {name: np.full((count,) + archive.cell_shape(config, specs[name]),
                              specs[name].fill, specs[name].dtype) for name in names}
         for path, ids in files.items():
+            if cells is None:
+                keep, rows = slice(None), ids
+            else:
+                rows = np.searchsorted(cells, ids)
+                keep = (rows < len(cells)) & (cells[np.minimum(rows, len(cells) - 1)] == ids)
+                rows = rows[keep]
             with np.load(path) as z:
                 for name in names:
-                    out[name][ids] = z[name]
+                    out[name][rows] = z[name][keep]
         return out
     return load

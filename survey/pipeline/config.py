@@ -13,18 +13,19 @@ import math
 import os
 import re
 import tomllib
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ..analysis.refine import Lattice, Rule
 from ..catalog import defaults
 from ..catalog.errors import ConfigError
 from ..catalog.indicators import BY_NAME as INDICATOR
-from ..catalog.indicators import INDICATORS, IndicatorOptions
+from ..catalog.indicators import INDICATORS, REGISTRY, TANGENT, IndicatorOptions
 from ..catalog.regimes import Thresholds
-from ..catalog.variables import OBSERVABLES
+from ..catalog.variables import OBSERVABLES, V
 from ..numerics.dop853 import RTOL_MIN
 from ..numerics.sections import REDUCED_SURFACES, SURFACES
 from ..physics.families import FAMILIES, family_parameters
@@ -180,6 +181,28 @@ SCHEMA: dict[str, dict[str, Key]] = {
                                         "twice [indicators].perturbations, at least 8)",
                              low=-1, high=1000),
     },
+    "refine": {
+        "max_level": Key("int", 4, "refinement steps after the grid: each halves the spacing "
+                                   "of the cells it splits (a boundary is then known to the "
+                                   "grid step / 2^max_level)", low=1, high=12,
+                        hint="2^12 = 4096 halvings of a grid step are beyond what a finite-time "
+                             "verdict can resolve"),
+        "max_cells": Key("int", 0, "cells in all, the grid's included; a level that would pass "
+                                   "it is not added (0: no limit but max_level)", low=0),
+        "by": Key("str", "class", "what makes neighbouring cells disagree: their verdict "
+                                  "class (regular, irregular, neither) or their regime",
+                  choices=("class", V.regime)),
+        "indicator": Key("str", "", "also split where this indicator jumps by more than "
+                                    "`jump`, or changes by more than the factor `ratio`, "
+                                    "between neighbours (its headline variable: ftle, megno, "
+                                    "fli, sali, gali2, birkhoff_digits, "
+                                    "frequency_diffusion)"),
+        "jump": Key("float", 0.0, "that jump, in the indicator's units (0: none)", low=0),
+        "ratio": Key("float", 0.0, "that factor, for positive indicators spanning decades "
+                                   "such as ftle (0: none)", low=0),
+        "tolerance": Key("float", 0.0, "one axis: a boundary is bisected until its interval "
+                                       "is no wider than this (0: down to max_level)", low=0),
+    },
     "dask": {
         "workers": Key("int", 2, "local worker processes (1 thread each)", low=1, high=512,
                        hint="more workers than cores only queue; for more machines give "
@@ -269,6 +292,30 @@ class Config:
     def cell_parameters(self, index: int) -> dict:
         """Family parameters (and target energy) of flat cell `index` (C order)."""
         return {**self.fixed, **self.axis_values(index, terms=False)}
+
+    @property
+    def refined(self) -> bool:
+        """Whether the grid is refined where its cells disagree ([refine])."""
+        return self.tables["refine_enabled"]
+
+    def lattice(self) -> Lattice:
+        """The nodes a refined survey can hold: the grid's intervals halved max_level
+        times."""
+        return Lattice(tuple(a.values for a in self.axes), self.tables["refine"]["max_level"])
+
+    def rule(self) -> Rule:
+        r = self.tables["refine"]
+        return Rule(by=r["by"], indicator=r["indicator"], jump=r["jump"] or np.inf,
+                    ratio=r["ratio"] or np.inf, tolerance=r["tolerance"],
+                    max_cells=r["max_cells"] or 1 << 62)
+
+    def fine(self) -> "Config":
+        """The survey over every node of the refinement lattice: a cell's flat index there
+        is its lattice id, so everything that reads a cell by its index (its start, its
+        System, its task) reads a refined survey's cells."""
+        lattice = self.lattice()
+        axes = tuple(replace(a, values=lattice.axis_values(k)) for k, a in enumerate(self.axes))
+        return replace(self, axes=axes)
 
     def axis_values(self, index: int, terms: bool) -> dict:
         at = np.unravel_index(index, self.shape) if self.axes else ()
@@ -573,6 +620,7 @@ def validate(raw: dict, text: str, where: str = "<config>", check_output: bool =
         tables[table] = check_table(table, keys, raw.get(table, {}))
     tables["section_enabled"] = "section" in raw
     tables["check_enabled"] = "check" in raw
+    tables["refine_enabled"] = "refine" in raw
     _validate_names(tables)
     check_memory(tables, math.prod(_axis_size(v) for v in initial_raw.values())
                  * tables["initial"]["starts_per_cell"])
@@ -586,6 +634,8 @@ def validate(raw: dict, text: str, where: str = "<config>", check_output: bool =
                                                           "an interaction term")
     axes = term_axes + axes
     _validate_cross(tables, system)
+    if tables["refine_enabled"]:
+        _validate_refine(tables, axes)
     config = Config(tables=tables, axes=tuple(axes), fixed=fixed, text=text, source=where)
     if check_output:
         ensure_writable(config.output)
@@ -752,6 +802,63 @@ def _validate_initial(given: dict, body: dict, system: System):
             raise ConfigError("[initial].seed", f"a seed is a whole number, got {first:g}")
         axes.append(Axis("seed", np.arange(first, first + starts, dtype=float)))
     return axes, fixed
+
+
+# the variables a refinement may follow: each indicator's headline
+REFINE_INDICATORS = tuple(i.headline for i in REGISTRY)
+
+
+def _validate_refine(tables: dict, axes: list[Axis]):
+    r = tables["refine"]
+    if not 1 <= len(axes) <= 2:
+        raise ConfigError("[refine]", f"refines a grid over one or two axes; this one has "
+                                      f"{len(axes)}" + (" (give the others single values)"
+                                                        if axes else " (make a parameter an "
+                                                        "axis)"))
+    for a in axes:
+        if a.name == "seed":
+            raise ConfigError("[refine]", "splits parameter cells by their regimes; a grid "
+                                          "of seeded starts (seed, starts_per_cell) is a sample, "
+                                          "not a place to bisect: drop one or the other")
+        where = f"[system] {a.name}" if a.term >= 0 else f"[initial].{a.name}"
+        if a.values.size < 2:
+            raise ConfigError(where, "a refined axis needs at least two values")
+        if np.any(np.diff(a.values) <= 0):
+            raise ConfigError(where, "a refined axis must be increasing: refinement splits "
+                                     "the intervals between neighbours; sort the values")
+    if not (tables["indicators"]["which"] or tables["tori"]["analyse"]):
+        raise ConfigError("[refine]", "splits cells whose regimes differ, and with [indicators] "
+                                      "which = [] and [tori] analyse = false nothing decides a "
+                                      "regime; compute indicators")
+    if r["indicator"]:
+        if r["indicator"] not in REFINE_INDICATORS:
+            raise ConfigError("[refine].indicator", f"{r['indicator']!r} is not one of "
+                              f"{', '.join(REFINE_INDICATORS)}"
+                              + _suggest(r["indicator"], REFINE_INDICATORS))
+        owner = next(i for i in REGISTRY if r["indicator"] in i.variables)
+        tangent = owner.source == TANGENT
+        if not (owner.name in tables["indicators"]["which"] if tangent
+                else tables["tori"]["analyse"]):
+            raise ConfigError("[refine].indicator", f"{r['indicator']} is not computed by "
+                              "this survey: " + (f"add {owner.name!r} to [indicators] which"
+                                                 if tangent else "set [tori] analyse = true"))
+        if not (r["jump"] > 0 or r["ratio"] > 0):
+            raise ConfigError("[refine].jump", f"(or ratio) is needed with indicator = "
+                                               f"{r['indicator']!r}: the change that splits")
+        if 0 < r["ratio"] <= 1:
+            raise ConfigError("[refine].ratio", f"is a factor above 1 (1.1: a change of 10%), "
+                                                f"got {r['ratio']!r}")
+    elif r["jump"] > 0 or r["ratio"] > 0:
+        which = "jump" if r["jump"] > 0 else "ratio"
+        raise ConfigError(f"[refine].{which}", "needs an indicator to measure it on: set "
+                                               "[refine] indicator")
+    if r["tolerance"] > 0 and len(axes) != 1:
+        raise ConfigError("[refine].tolerance", "applies to one axis (a bisection); a map "
+                                                "over two stops at max_level")
+    base = math.prod(a.values.size for a in axes)
+    if r["max_cells"] and r["max_cells"] < base:
+        raise ConfigError("[refine].max_cells", f"is below the {base} cells of the grid it "
+                                                "refines; raise it (or 0: no limit)")
 
 
 def _validate_cross(tables: dict, system: System):

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..analysis.refine import as_grid, cell_label, cell_values
 from ..catalog.errors import ConfigError, SurveyError
 from ..numerics.integrate import integrate
 from ..numerics.periodic import (
@@ -30,6 +31,7 @@ from ..physics.equilibria import (
     relative_equilibrium,
 )
 from ..physics.system import System
+from .build import build_system
 from .cells import build_starts
 from .config import Key, _decode, check_table, validate
 
@@ -118,7 +120,7 @@ def load_equilibria(path):
 
 def _family_systems(config_system: dict, parameter: str, table: str = "equilibria"):
     """(p0, p -> System): the parameter's value in [system] and the System at another."""
-    from .build import build_system, term_axis_names
+    from .build import term_axis_names
     if parameter.startswith("mass_"):
         masses = list(config_system["masses"] or [1.0] * config_system["bodies"])
         k = parameter[5:]
@@ -601,10 +603,9 @@ def equilibrium_cells(ds, most: int = 8) -> list[dict]:
     if not cells.size:
         return []
     config = parse_config(ds.attrs["config"], check_output=False)
-    axes = list(ds[V.status].dims)
     out = []
     for idx in map(tuple, cells):
-        system = config.system(int(np.ravel_multi_index(idx, config.shape)) if idx else 0)
+        system = _cell_system(config, ds, idx)
         start = ds[V.initial_state].values[idx]
         spin = float(ds[V.angular_momentum].values[idx]) if system.dim == 2 else 0.0
         try:
@@ -612,8 +613,7 @@ def equilibrium_cells(ds, most: int = 8) -> list[dict]:
         except (ValueError, np.linalg.LinAlgError):
             continue
         out.append({"kind": "equilibrium",
-                    "cell": ", ".join(f"{a}={float(ds[a].values[i]):g}"
-                                      for a, i in zip(axes, idx)), "index": idx,
+                    "cell": cell_label(ds, idx), "index": idx,
                     "rotation_rate": eq.rotation_rate, "stable": eq.stable,
                     "frequencies": eq.frequencies.tolist(),
                     "krein": [int(k) for k in eq.krein if k],
@@ -673,7 +673,7 @@ def homographic_cells(ds, most: int = 8) -> list[dict]:
     for flat, y in enumerate(starts):
         if len(out) == most or not np.all(np.isfinite(y)):
             continue
-        system = config.system(flat)
+        system = _cell_system(config, ds, np.unravel_index(flat, ds[V.status].shape))
         period = homographic_period(system, y, min(horizon, 100.0))
         if period is None:
             continue
@@ -684,18 +684,27 @@ def homographic_cells(ds, most: int = 8) -> list[dict]:
         idx = np.unravel_index(flat, ds[V.status].shape) if axes else ()
         ftle = float(ds[V.ftle].values[idx]) if V.ftle in ds else float("nan")
         out.append({"kind": "periodic", "index": idx,
-                    "cell": ", ".join(f"{a}={float(ds[a].values[i]):g}"
-                                      for a, i in zip(axes, idx)),
+                    "cell": cell_label(ds, idx),
                     "period": orbit.period, "rotation": orbit.rotation,
                     "orbit_kind": orbit.kind, "stable": orbit.stable,
                     "rates": orbit.rates.tolist(), V.ftle: ftle})
     return out
 
 
+def _cell_system(config, ds, idx) -> System:
+    """The System of an archive's cell at index `idx` of its grid: the [system] table with
+    the cell's values of any interaction-term axes (read from the archive's coordinates,
+    so a refined survey's cells are read too)."""
+    values = cell_values(ds, idx)
+    return build_system(config.tables["system"], {a.name: values[a.name] for a in config.axes
+                                                  if a.term >= 0})
+
+
 def special_cells(ds) -> list[dict]:
     """The special solutions an archive's cells start on, for its report: relative
     equilibria at its equilibrium cells, relative periodic orbits at its homographic
     ones."""
+    ds = as_grid(ds)
     return equilibrium_cells(ds) + homographic_cells(ds)
 
 

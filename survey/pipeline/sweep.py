@@ -23,7 +23,8 @@ from ..catalog.errors import ArchiveError, ConfigError, SurveyError
 from ..catalog.status import Status
 from ..catalog.variables import BY_NAME, V
 from . import archive
-from .cells import CellTask, build_starts, jobs_per_cell, run_cells, warm_up
+from ..analysis.refine import plan
+from .cells import CellTask, build_starts, classify_rows, jobs_per_cell, run_cells, warm_up
 from .checkpoints import (
     checkpoint_dir,
     chunk_path,
@@ -137,7 +138,7 @@ def run_survey(source, *, workers: int | None = None, scheduler: str | None = No
     given, receives the seconds spent preparing cells, starting the cluster, computing
     (first task submitted to last result saved), stopping the cluster and writing the
     archive."""
-    clock = {"start": time.perf_counter()}
+    clock = {"start": time.perf_counter(), "stream": timings is not None}
     workers, scheduler, progress = _api_arguments(workers, scheduler, progress)
     config = source if isinstance(source, Config) else load_config(source)
     address = scheduler or config.tables["dask"]["scheduler"]
@@ -147,46 +148,17 @@ def run_survey(source, *, workers: int | None = None, scheduler: str | None = No
         progress = sys.stderr.isatty()
     key = config.result_key()
     folder = checkpoint_dir(config)
-    task = CellTask.of(config)
     with output_lock(config.output):
-        starts = build_starts(config)
-        with contextlib.ExitStack() as stack:
-            client = bar = done = None
-            for round_ in range(4):     # rounds after the first only if checkpoints vanish
-                if done is None:
-                    done = scan_checkpoints(folder, config, starts, key)
-                else:       # checked when found or written here: are they still there?
-                    done = {path: ids for path, ids in done.items() if path.exists()}
-                have = np.zeros(config.n_cells, dtype=bool)
-                for ids in done.values():
-                    have[ids] = True
-                todo = np.flatnonzero(~have)
-                if not todo.size:
-                    break
-                if round_ == 3:
-                    raise SurveyError(f"{todo.size} cells are still missing from {folder} "
-                                      "after computing them again (is something deleting "
-                                      "checkpoints?); the checkpoints are kept: run the same "
-                                      "command again")
-                if round_:
-                    warn(f"{todo.size} finished cells went missing from {folder}; computing "
-                         "them again")
-                if client is None:
-                    client = _start(stack, config, task, starts, todo, workers, address,
-                                    clock, progress)
-                    from tqdm import tqdm
-                    bar = stack.enter_context(tqdm(total=config.n_cells, unit="cell",
-                                                   disable=not progress, desc=config.name,
-                                                   smoothing=0.1))
-                bar.n = int(have.sum())
-                bar.refresh()
-                done.update(_compute(client, task, starts, todo, folder, key, config, bar,
-                                     round_))
-                clock["computed"] = time.perf_counter()
+        if config.refined:
+            done, cells = _refined(config, key, folder, workers, address, clock, progress)
+            load = loader(config.fine(), done, cells)
+        else:
+            done, cells = _grid(config, key, folder, workers, address, clock, progress), None
+            load = loader(config, done)
         clock["archive"] = time.perf_counter()
         try:
             with notice(f"writing {config.output}", progress):
-                path = archive.write(config, loader(config, done), command)
+                path = archive.write(config, load, command, cells)
         except OSError as exc:
             raise write_error(exc, config.output, folder) from None
         except RuntimeError as exc:     # netCDF4 reports a full disk as an HDF error
@@ -202,8 +174,150 @@ def run_survey(source, *, workers: int | None = None, scheduler: str | None = No
                        cluster=c.get("cluster", c["archive"]) - c.get("prepared", c["archive"]),
                        compute=c.get("computed", c["archive"]) - c.get("cluster", c["archive"]),
                        shutdown=c["archive"] - c.get("computed", c["archive"]),
-                       archive=now - c["archive"], total=now - c["start"])
+                       archive=now - c["archive"], total=now - c["start"],
+                       tasks=c.get("tasks", []))
     return path
+
+
+def _grid(config, key, folder, workers, address, clock, progress) -> dict:
+    """Every cell of the grid, from checkpoints where they are, computed where not:
+    the checkpoint files and their cells."""
+    task = CellTask.of(config)
+    starts = build_starts(config)
+    with contextlib.ExitStack() as stack:
+        client = bar = done = None
+        for round_ in range(4):     # rounds after the first only if checkpoints vanish
+            if done is None:
+                done = scan_checkpoints(folder, config, starts, key)
+            else:       # checked when found or written here: are they still there?
+                done = {path: ids for path, ids in done.items() if path.exists()}
+            have = np.zeros(config.n_cells, dtype=bool)
+            for ids in done.values():
+                have[ids] = True
+            todo = np.flatnonzero(~have)
+            if not todo.size:
+                break
+            if round_ == 3:
+                raise SurveyError(f"{todo.size} cells are still missing from {folder} "
+                                  "after computing them again (is something deleting "
+                                  "checkpoints?); the checkpoints are kept: run the same "
+                                  "command again")
+            if round_:
+                warn(f"{todo.size} finished cells went missing from {folder}; computing "
+                     "them again")
+            if client is None:
+                client = _start(stack, config, task, todo[~np.isnan(starts[todo, 0])][:1],
+                                starts, workers, address, clock, progress)
+                from tqdm import tqdm
+                bar = stack.enter_context(tqdm(total=config.n_cells, unit="cell",
+                                               disable=not progress, desc=config.name,
+                                               smoothing=0.1))
+            bar.n = int(have.sum())
+            bar.refresh()
+            done.update(_compute(client, task, starts, todo, folder, key, config, bar,
+                                 round_))
+            _computed(client, clock)
+    return done
+
+
+def _refined(config, key, folder, workers, address, clock, progress):
+    """The cells of a refined survey (analysis.refine): the grid, then, as each chunk's
+    results come in, the cells their disagreements call for, submitted at once (no level
+    waits for the whole of the one before); from checkpoints where they are. Returns the
+    checkpoint files with their cells, and the survey's cells (sorted lattice ids). The
+    cells are a function of the results alone, so any worker count, chunking or
+    interruption gives the same survey."""
+    from dask.distributed import as_completed
+    from tqdm import tqdm
+    fine, lattice, rule = config.fine(), config.lattice(), config.rule()
+    task, system = CellTask.of(fine), config.system()
+    cache: dict[int, np.ndarray] = {}
+
+    def starts(ids):
+        missing = [int(i) for i in ids if int(i) not in cache]
+        for i, row in zip(missing, build_starts(fine, missing) if missing else ()):
+            cache[i] = row
+        return np.array([cache[int(i)] for i in ids]).reshape(len(ids), -1)
+
+    known: dict[int, tuple[int, float]] = {}
+
+    def learn(ids, result):
+        regime, _ = classify_rows(task, system, result)
+        value = result[rule.indicator] if rule.indicator else np.full(len(ids), np.nan)
+        known.update(zip(map(int, ids), zip(map(int, regime), map(float, value))))
+
+    done = scan_checkpoints(folder, fine, starts, key)
+    for path, ids in done.items():
+        with np.load(path) as z:
+            learn(ids, {name: z[name] for name in z.files if name not in ("cell_ids",
+                                                                         "result_key")})
+    with contextlib.ExitStack() as stack:
+        client = bar = None
+        flight: dict = {}
+        queue = None
+        for _ in range(4):          # again only if checkpoints vanish
+            while True:
+                p = plan(lattice, rule, known)
+                busy = {int(i) for ids in flight.values() for i in ids}
+                todo = np.array([i for i in p.needed.tolist() if i not in busy], dtype=np.int64)
+                if todo.size:
+                    if client is None:
+                        first = starts(todo)
+                        pick = todo[~np.isnan(first[:, 0])][:1]
+                        client = _start(stack, config, task, pick, lambda ids: starts(ids),
+                                        workers, address, clock, progress)
+                        bar = stack.enter_context(tqdm(unit="cell", disable=not progress,
+                                                       desc=config.name, smoothing=0.1))
+                        queue = as_completed()
+                    size = config.tables["dask"]["chunk_size"] or chunk_size(
+                        todo.size, len(client.scheduler_info()["workers"]),
+                        jobs_per_cell(task))
+                    for ids in _chunks(todo, size):
+                        future = client.submit(run_cells, task, ids, starts(ids), pure=False,
+                                               key=f"cells-{key}-{ids[0]}-{ids[-1]}-{ids.size}",
+                                               retries=config.tables["dask"]["retries"])
+                        flight[future] = ids
+                        queue.add(future)
+                if bar is not None:
+                    bar.total = len(p.cells)
+                    bar.n = sum(1 for c in p.cells.tolist() if c in known)
+                    bar.refresh()
+                if not flight:
+                    break
+                future = next(queue)
+                ids = flight.pop(future)
+                result = future.result()
+                save_chunk(folder, key, ids, result)
+                done[chunk_path(folder, ids)] = ids
+                future.release()
+                learn(ids, result)
+            if not p.done:
+                raise SurveyError("refinement stopped with undecided cells (a bug: please "
+                                  "report it with the config)")
+            gone = [path for path in done if not path.exists()]
+            if not gone:
+                break
+            warn(f"{len(gone)} checkpoint files went missing from {folder}; computing their "
+                 "cells again")
+            for path in gone:
+                for i in done.pop(path).tolist():
+                    known.pop(int(i), None)
+        else:
+            raise SurveyError(f"checkpoints keep going missing from {folder} (is something "
+                              "deleting them?); run the same command again")
+        if client is not None:
+            _computed(client, clock)
+    return done, p.cells
+
+
+def _computed(client, clock):
+    """The compute phase ends: its time, and (timings asked for) when each task ran on
+    which worker, from the scheduler's task stream."""
+    clock["computed"] = time.perf_counter()
+    if clock["stream"]:
+        clock["tasks"] = [(r["worker"], ss["start"], ss["stop"])
+                          for r in client.get_task_stream() for ss in r["startstops"]
+                          if ss["action"] == "compute"]
 
 
 def _api_arguments(workers, scheduler, progress):
@@ -227,18 +341,21 @@ def _api_arguments(workers, scheduler, progress):
     return workers, scheduler or None, None if progress is None else bool(progress)
 
 
-def _start(stack, config, task, starts, todo, workers, address, clock, progress):
+def _start(stack, config, task, first, starts, workers, address, clock, progress):
     """Compile (or load from the disk cache) the kernels once, then start the cluster and
-    let every worker load them before the first task."""
-    first = todo[~np.isnan(starts[todo, 0])][:1]
+    let every worker load them before the first task (`first`: a cell with a start, if any;
+    starts: every cell's start, or a function giving given cells' starts)."""
+    at = (starts(first) if callable(starts) else starts[first])
     with notice(COMPILING, progress):
-        warm_up(task, first, starts[first])
+        warm_up(task, first, at)
     clock["prepared"] = time.perf_counter()
     cluster = f"connecting to the dask scheduler at {address}" if address else \
         f"starting {workers or config.tables['dask']['workers']} local dask workers"
     with notice(cluster, progress):
         client = stack.enter_context(_client(config, workers, address))
-        client.run(warm_up, task, first, starts[first])
+        client.run(warm_up, task, first, at)
+        if clock["stream"]:
+            client.get_task_stream()        # records from here on
     clock["cluster"] = time.perf_counter()
     return client
 
@@ -294,16 +411,19 @@ def verify(path, cells: int = 8, seed: int = 0, differences: dict | None = None)
             return False, ["the archive does not match its stored config:"] + \
                 [f"  {p}" for p in found]
         made_on = ds.attrs.get("machine", "an unrecorded machine")
-        n = config.n_cells
+        grid = config.fine() if config.refined else config
+        ids = ds["cell"].values.astype(np.int64) if config.refined else np.arange(config.n_cells)
+        n, ndim = ids.size, len(archive.grid_dims(config))
         others = np.random.default_rng(seed).permutation(np.arange(1, n - 1))[:max(cells - 2, 0)]
         sample = np.unique(np.concatenate([[0, n - 1], others]))   # first, last, random
         try:
-            stored = {v.name: ds[v.name].values.reshape((n,) + ds[v.name].shape[len(config.shape):])
+            stored = {v.name: ds[v.name].values.reshape((n,) + ds[v.name].shape[ndim:])
                       for v in archive.variables(config) if v.reproducible and not v.derived}
             derived = archive.derive(ds)
             rederived = [v.name for v in archive.variables(config) if v.derived and
                          np.asarray(derived[v.name], dtype=v.dtype).tobytes()
                          != ds[v.name].values.astype(v.dtype).tobytes()]
+            unrefined = _refinement_problem(ds, config, ids) if config.refined else ""
         except (OSError, RuntimeError, ValueError) as exc:
             raise ArchiveError(f"{path}: its data cannot be read ({exc}); the file "
                                        "may be truncated") from None
@@ -311,7 +431,7 @@ def verify(path, cells: int = 8, seed: int = 0, differences: dict | None = None)
     sample = sample[~timed_out]
     with notice(f"recomputing {len(sample)} cells (compiling the kernels if this kind of "
                 "system has not run here before: about half a minute)", sys.stderr.isatty()):
-        fresh = run_cells(CellTask.of(config), sample, build_starts(config)[sample])
+        fresh = run_cells(CellTask.of(grid), ids[sample], build_starts(grid, ids[sample]))
     here = archive.machine()
     lines = compare({k: v[sample] for k, v in stored.items()}, fresh, differences)
     ok = not lines
@@ -319,14 +439,34 @@ def verify(path, cells: int = 8, seed: int = 0, differences: dict | None = None)
         ok = False
         lines.append(f"{name}: differs from what its evidence in the archive gives "
                      "(survey.analysis.classify)")
+    if unrefined:
+        ok = False
+        lines.append(unrefined)
     verdict = "all reproducible variables match bit for bit" if ok else "MISMATCH"
-    lines.insert(0, f"recomputed cells {', '.join(map(str, sample))} of {n}: {verdict}")
+    which = " (by their lattice index)" if config.refined else ""
+    lines.insert(0, f"recomputed cells {', '.join(map(str, ids[sample]))}{which} of {n}: "
+                    f"{verdict}")
     if made_on != here:
         lines.append(f"the archive was made on {made_on}; this is {here}")
     if timed_out.any():
         lines.append(f"skipped {timed_out.sum()} sampled cells that hit cell_time_limit (not "
                      "reproducible)")
     return ok, lines
+
+
+def _refinement_problem(ds, config, ids) -> str:
+    """Why a refined archive's cells are not the refinement its own regimes call for
+    (analysis.refine.plan under its stored config), or ""."""
+    rule = config.rule()
+    values = ds[rule.indicator].values if rule.indicator else np.full(ids.size, np.nan)
+    known = dict(zip(ids.tolist(), zip(ds[V.regime].values.tolist(), values.tolist())))
+    p = plan(config.lattice(), rule, known)
+    if p.done and np.array_equal(p.cells, ids):
+        return ""
+    extra = np.setdiff1d(ids, p.cells).size
+    missing = np.setdiff1d(p.cells, ids).size + p.needed.size
+    return (f"cell: not the refinement its regimes call for ({missing} cells missing, "
+            f"{extra} not called for)")
 
 
 def same_results(old, new) -> list[str]:

@@ -20,6 +20,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 from ..analysis.classify import regular_share, stored_table
+from ..analysis.refine import as_grid, painted, refined_axes
 from ..catalog import defaults
 from ..catalog.indicators import OWNER, REGISTRY
 from ..catalog.regimes import IRREGULAR, REGULAR, Regime, Thresholds
@@ -46,26 +47,50 @@ def grid_axes(ds) -> list[str]:
     return list(ds[V.status].dims)
 
 
+def map_axes(ds) -> list[str]:
+    """The axes a map is drawn over: the grid's, or those a refined survey's cells spread
+    over."""
+    return refined_axes(ds) or grid_axes(ds)
+
+
+def _on_grid(ds):
+    """(x, y, grid) of a map: its axis values, and grid(v) -> per-cell values v on them
+    (a refined survey's cells painted as the squares of their levels: analysis.refine)."""
+    if refined_axes(ds):
+        x, y, rows = painted(ds)
+        return x, y, lambda v: np.asarray(v)[rows]
+    a, b = grid_axes(ds)
+    return ds[a].values, ds[b].values, np.asarray
+
+
+def _cell_xy(ds, idx, a, b) -> tuple[float, float]:
+    """Where cell `idx` (its index in the archive's cells) lies on a map over a and b."""
+    flat = np.ravel_multi_index(idx, ds[V.status].shape)
+    return float(_per_cell(ds, a)[flat]), float(_per_cell(ds, b)[flat])
+
+
 def figures(ds, variables=None, special=(), slice_at=None) -> dict[str, Figure]:
     """The figures that fit the archive's grid: maps for two axes, scans for one, the
     section, convergence histories and the frequency map where the data exist. special:
     the special solutions its cells start on (pipeline.special.special_cells), marked on
     the regime map and the scans; slice_at: the section coordinates a grid over the others
-    fixes (pipeline.special.section_slice), for its overlay of crossings."""
+    fixes (pipeline.special.section_slice), for its overlay of crossings. A refined survey
+    over one axis is drawn as the uneven grid it is (analysis.refine.as_grid)."""
+    ds = as_grid(ds)
     axes = grid_axes(ds)
     out = {}
     names = [m for m in MAPS if m[0] in ds and (variables is None or m[0] in variables)]
     if "seed" in axes and len(axes) > 1:    # seeded starts per point: their regular share
         if V.regime in ds and len(axes) in (2, 3):
             out["regular_share"] = regular_share_figure(ds)
-    elif len(axes) == 2:
+    elif len(map_axes(ds)) == 2:
         if V.regime in ds and (variables is None or V.regime in variables):
             out["map_regime"] = regime_map(ds, special)
         for name, style in names:       # a map with no value would be all mask
             if np.isfinite(ds[name].values).any():
                 out[f"map_{name}"] = indicator_map(ds, name, style.cmap, style.clip,
                                                    style.log)
-        if all(f"crossing_{a}" in ds for a in axes) and V.megno in ds \
+        if all(f"crossing_{a}" in ds for a in map_axes(ds)) and V.megno in ds \
                 and np.isfinite(ds[V.megno].values).any():
             style = OWNER[V.megno].map
             out["map_megno_section"] = indicator_map(ds, V.megno, style.cmap, style.clip,
@@ -115,9 +140,11 @@ def survey_title(ds) -> str:
     T = float(config.get("integration", {}).get("t_final", defaults.T_FINAL))
     longest = float(np.nanmax(ds[V.regime_horizon].values)) if V.regime_horizon in ds and \
         np.isfinite(ds[V.regime_horizon].values).any() else T
-    axes = grid_axes(ds)
+    axes = map_axes(ds)
     varies = (f"; {', '.join(axes)} varied over {ds[V.status].size} cells" if axes
               else "; one cell")
+    if "level" in ds.coords:
+        varies += f" (refined to level {int(ds['level'].max())})"
     extended = f" (verdicts in doubt to {longest:g})" if longest > T else ""
     return f"{name}: {family} family under {potential}, T = {T:g}{extended}{varies}"
 
@@ -137,7 +164,7 @@ def _unfinished(ds) -> np.ndarray:
     return ~np.isin(ds[V.status].values, [Status.OK, Status.EVENT])
 
 
-def _mask_layer(ax, ds, x, y):
+def _mask_layer(ax, ds, x, y, grid=np.asarray):
     """Cells whose run did not finish, in their status colours; legend handles with
     counts."""
     status = ds[V.status].values
@@ -145,8 +172,9 @@ def _mask_layer(ax, ds, x, y):
     for s, colour in STATUS_COLOURS.items():
         where = status == s
         if where.any():
-            rgba = np.zeros(status.shape + (4,))
-            rgba[where] = _rgba(colour)
+            on = grid(where)
+            rgba = np.zeros(on.shape + (4,))
+            rgba[on] = _rgba(colour)
             ax.pcolormesh(x, y, np.moveaxis(rgba, 0, 1) if rgba.ndim == 3 else rgba,
                           shading="nearest")
             handles.append(Patch(color=colour, label=f"{s.name.lower()} ({int(where.sum())})"))
@@ -204,10 +232,13 @@ def _two_axis_figure(ds):
     fig = Figure(figsize=(9.0, 5.0), layout="constrained")
     gs = fig.add_gridspec(1, 2, width_ratios=[4, 1.1])
     ax, hist = fig.add_subplot(gs[0]), fig.add_subplot(gs[1])
-    a, b = grid_axes(ds)
+    a, b = map_axes(ds)
     ax.set_xlabel(label(a))
     ax.set_ylabel(label(b))
-    return fig, ax, hist, ds[a].values, ds[b].values
+    if refined_axes(ds):
+        ax.set_title(f"{ds.sizes['cell']} cells, refined to level {int(ds['level'].max())}: "
+                     "each drawn over the square of its level's spacing", fontsize="small")
+    return (fig, ax, hist, *_on_grid(ds))
 
 
 def _special_marks(special) -> list[tuple[tuple, str, str]]:
@@ -231,27 +262,28 @@ def _mark_handles(marks) -> list:
 
 
 def regime_map(ds, special=()) -> Figure:
-    fig, ax, hist, x, y = _two_axis_figure(ds)
+    fig, ax, hist, x, y, grid = _two_axis_figure(ds)
     regime = ds[V.regime].values
     colours = [REGIME_COLOURS[r] for r in Regime]
     cmap = ListedColormap(colours)
     norm = BoundaryNorm(np.arange(len(Regime) + 1) - 0.5, len(Regime))
     # paler where fewer lines of evidence support the regime: a cell 1 of 5 lines called
     # chaotic is not drawn like one all 5 did
-    rgba = cmap(norm(regime))
-    rgba[..., :3] = 1.0 - confidence_shade(ds)[..., None] * (1.0 - rgba[..., :3])
+    rgba = cmap(norm(grid(regime)))
+    rgba[..., :3] = 1.0 - grid(confidence_shade(ds))[..., None] * (1.0 - rgba[..., :3])
     ax.pcolormesh(x, y, np.moveaxis(rgba, 0, 1) if rgba.ndim == 3 else rgba,
                   shading="nearest")
     doubt = unconfirmed(ds)
-    _hatch_cells(ax, x, y, doubt)
+    _hatch_cells(ax, x, y, grid(doubt))
     counts = [(r, int(np.sum(regime == r))) for r in Regime]
     handles = [Patch(color=REGIME_COLOURS[r], label=f"{r.name.lower()} ({n})")
                for r, n in counts if n]
-    handles += _scale_free_lines(ds, ax, x, y)
+    handles += _scale_free_lines(ds, ax, x, y, grid)
     marks = _special_marks(special)
-    for (i, j), marker, _ in marks:     # black on a white halo: seen on any colour
-        ax.plot(x[i], y[j], marker, ms=9, mfc="none", mec="w", mew=3.0)
-        ax.plot(x[i], y[j], marker, ms=9, mfc="none", mec="k", mew=1.3)
+    for idx, marker, _ in marks:     # black on a white halo: seen on any colour
+        at = _cell_xy(ds, idx, *map_axes(ds))
+        ax.plot(*at, marker, ms=9, mfc="none", mec="w", mew=3.0)
+        ax.plot(*at, marker, ms=9, mfc="none", mec="k", mew=1.3)
     handles += _mark_handles(marks)
     if doubt.any():
         handles.append(Patch(**UNCONFIRMED, label=f"not confirmed at the horizon before "
@@ -262,7 +294,8 @@ def regime_map(ds, special=()) -> Figure:
               color=[REGIME_COLOURS[r] for r, n in counts if n])
     hist.set_xlabel("cells")
     hist.yaxis.tick_right()
-    ax.set_title("regime of each cell", fontsize="medium")
+    if not refined_axes(ds):
+        ax.set_title("regime of each cell", fontsize="medium")
     return fig
 
 
@@ -311,11 +344,11 @@ def regular_share_figure(ds) -> Figure:
     return fig
 
 
-def _scale_free_lines(ds, ax, x, y) -> list:
+def _scale_free_lines(ds, ax, x, y, grid=np.asarray) -> list:
     """On a map over energy of a homogeneous potential: dashed lines of equal
     scale_free_energy, along which the cells' energy shells are one phase portrait rescaled
     (their starts are different points of it); their legend entry."""
-    if V.scale_free_energy not in ds or "energy" not in grid_axes(ds):
+    if V.scale_free_energy not in ds or "energy" not in map_axes(ds):
         return []
     eps = ds[V.scale_free_energy].values
     if np.sum(np.isfinite(eps)) < 4 or np.nanmin(eps) == np.nanmax(eps):
@@ -324,7 +357,7 @@ def _scale_free_lines(ds, ax, x, y) -> list:
     # range is widest
     levels = np.unique([float(f"{v:.2g}") for v in
                         np.nanquantile(eps, np.linspace(0.08, 0.92, 7))])
-    lines = ax.contour(x, y, eps.T, levels=levels, colors="0.25", linewidths=0.7,
+    lines = ax.contour(x, y, grid(eps).T, levels=levels, colors="0.25", linewidths=0.7,
                        linestyles="dashed")
     ax.clabel(lines, fmt="%.3g", fontsize="x-small")
     return [Line2D([], [], color="0.25", lw=0.7, ls="--",
@@ -336,7 +369,7 @@ def indicator_map(ds, name, cmap="viridis", clip=None, log=False, overlay=False,
     """An indicator over the two grid axes with its histogram; `overlay`: when the axes are
     section coordinates, the section crossings in the slab of the slice the grid is (the
     other coordinates at slice_at) drawn on top."""
-    fig, ax, hist, x, y = _two_axis_figure(ds)
+    fig, ax, hist, x, y, grid = _two_axis_figure(ds)
     values = ds[name].values.astype(float)
     shown = np.where(_unfinished(ds), np.nan, values)
     finite = shown[np.isfinite(shown)]
@@ -346,11 +379,11 @@ def indicator_map(ds, name, cmap="viridis", clip=None, log=False, overlay=False,
                                 np.nanmax(finite) if finite.size else 1.0)
     from matplotlib.colors import LogNorm, Normalize
     norm = LogNorm(max(lo, 1e-6), max(hi, 2e-6)) if log else Normalize(lo, hi)
-    mesh = ax.pcolormesh(x, y, np.clip(shown, lo if not log else -np.inf, hi).T, cmap=cmap,
-                         norm=norm, shading="nearest")
-    handles = _mask_layer(ax, ds, x, y)
+    mesh = ax.pcolormesh(x, y, grid(np.clip(shown, lo if not log else -np.inf, hi)).T,
+                         cmap=cmap, norm=norm, shading="nearest")
+    handles = _mask_layer(ax, ds, x, y, grid)
     if overlay:
-        a, b = grid_axes(ds)
+        a, b = map_axes(ds)
         keep, slab = _slice_slab(ds, slice_at or {})
         ax.scatter(ds[f"crossing_{a}"].values.ravel()[keep],
                    ds[f"crossing_{b}"].values.ravel()[keep],
@@ -552,7 +585,7 @@ def shells(ds) -> list[np.ndarray]:
     equal E and J (to 1e-9) and equal values of every grid axis that is a parameter of the
     system (its terms' axes). Each group is a flat array of cell indices; cells without a
     start are left out. A Poincare section is of one shell."""
-    axes = [a for a in grid_axes(ds)        # a term's parameter: another Hamiltonian
+    axes = [a for a in map_axes(ds)        # a term's parameter: another Hamiltonian
             if str(ds[a].attrs.get("long_name", "")).startswith("parameter ")]
     flat = {a: _per_cell(ds, a) for a in axes}
     groups: dict[tuple, list[int]] = {}
@@ -746,9 +779,9 @@ def convergence(ds, cells=None) -> Figure:
 
 def cell_labels(ds) -> list[str]:
     """'delta=4.2, energy=90' for every cell, in flat C order."""
-    axes = grid_axes(ds)
-    mesh = np.meshgrid(*[ds[a].values for a in axes], indexing="ij")
-    return [", ".join(f"{a}={m.ravel()[i]:.6g}" for a, m in zip(axes, mesh))
+    axes = map_axes(ds)
+    values = [_per_cell(ds, a) for a in axes]
+    return [", ".join(f"{a}={v[i]:.6g}" for a, v in zip(axes, values))
             for i in range(ds[V.status].size)]
 
 

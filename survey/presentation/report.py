@@ -11,6 +11,7 @@ import numpy as np
 from ..analysis.classify import evidence_votes, regular_share, stored_table
 from ..analysis.frequencies import twist
 from ..analysis.onset import onset, onset_over_horizons, runs
+from ..analysis.refine import as_grid, boundaries
 from ..catalog import defaults
 from ..catalog.indicators import INDICATORS
 from ..catalog.regimes import IRREGULAR, REGULAR, Regime, Thresholds
@@ -39,6 +40,7 @@ def write(ds, folder, stem: str | None = None, figures: bool = True, check=None,
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     stem = stem or Path(ds.encoding.get("source", "survey")).stem
+    ds, check = as_grid(ds), None if check is None else as_grid(check)
     figs = plots.save(plots.figures(ds, special=special, slice_at=slice_at), folder,
                       stem) if figures else []
     text = markdown(ds, [p.name for p in figs], check, special)
@@ -50,8 +52,9 @@ def write(ds, folder, stem: str | None = None, figures: bool = True, check=None,
 
 
 def markdown(ds, figure_names=(), check=None, special=()) -> str:
+    ds, check = as_grid(ds), None if check is None else as_grid(check)
     config = tomllib.loads(ds.attrs.get("config", ""))
-    axes = list(ds[V.status].dims)
+    axes = plots.map_axes(ds)
     regime = ds[V.regime].values
     th = Thresholds(**json.loads(ds[V.regime].attrs["thresholds"])) \
         if "thresholds" in ds[V.regime].attrs else Thresholds.from_table(stored_table(ds))
@@ -63,7 +66,7 @@ def markdown(ds, figure_names=(), check=None, special=()) -> str:
     integ = config.get("integration", {})
     initial = config.get("initial", {})
     grid = ", ".join(f"{a} from {float(ds[a].min()):g} to {float(ds[a].max()):g} "
-                     f"({ds.sizes[a]} values)" for a in axes) or "a single cell"
+                     f"({np.unique(ds[a].values).size} values)" for a in axes) or "a single cell"
     if "interactions" in system:
         potential = "the sum of " + " + ".join(
             f"{t.get('kind')} `{t.get('potential')}` "
@@ -109,6 +112,7 @@ def markdown(ds, figure_names=(), check=None, special=()) -> str:
     out += _horizons(ds, regime, steady, integ.get("t_final", defaults.T_FINAL))
 
     out += _ensembles(ds, regime)
+    out += _refinement(ds, config, regime)
     out += _shares(ds, axes, regime)
     out += _onsets(ds, axes, regime, check)
     out += _second_run(ds, check, regime)
@@ -126,6 +130,55 @@ def markdown(ds, figure_names=(), check=None, special=()) -> str:
                     f"panel, at most {plots.MAX_SHELLS}. For a section, survey one shell: "
                     "the `section` family at one E and J.", ""]
     return "\n".join(out)
+
+
+def _refinement(ds, config, regime) -> list[str]:
+    """How a refined survey's cells came about, and (one axis) the regime boundaries its
+    bisection located."""
+    if "level" not in ds.coords:
+        return []
+    r = config.get("refine", {})
+    level = ds["level"].values
+    axes = str(ds.attrs.get("grid_axes", "")).split()
+    base = int(np.sum(level == 0))
+    top = int(level.max())
+    why = ["their verdict class (regular, irregular, neither) differs" if r.get("by", "class")
+           == "class" else "their regimes differ"]
+    if r.get("indicator"):
+        why += [f"{r['indicator']} changes by more than " + " or by ".join(
+            x for x in (f"{r['jump']:g}" if r.get("jump") else "",
+                        f"a factor {r['ratio']:g}" if r.get("ratio") else "") if x)]
+    limits = [f"at most {r.get('max_level', 4)} levels"]
+    if r.get("tolerance"):
+        limits.append(f"intervals no narrower than {r['tolerance']:g}")
+    if r.get("max_cells"):
+        limits.append(f"at most {r['max_cells']} cells")
+    counts = ", ".join(f"level {k}: {int(np.sum(level == k))}" for k in range(top + 1))
+    spans = [float(ds[a].max() - ds[a].min()) for a in axes]
+    steps = [np.diff(np.unique(ds[a].values)) for a in axes]
+    finest = [float(s.min()) if s.size else 0.0 for s in steps]
+    uniform = int(np.prod([round(span / f) + 1 if f > 0 else 1
+                           for span, f in zip(spans, finest)]))
+    out = ["## Refinement", "",
+           f"The grid of {base} cells was refined where neighbouring cells disagree -- "
+           + " or ".join(why) + f" -- splitting their interval{'s' if len(axes) == 1 else ''}"
+           f" level by level ({', '.join(limits)}): {regime.size} cells in all ({counts}). "
+           f"The finest spacing reached, {', '.join(f'{f:.3g}' for f in finest)} in "
+           f"{', '.join(axes)}, would take {uniform} cells as a uniform grid: this survey "
+           f"used {100 * regime.size / uniform:.0f}% of that.", ""]
+    if len(axes) == 1:
+        found = boundaries(ds[axes[0]].values, regime, level)
+        if found:
+            a = axes[0]
+            out += [f"Boundaries between regular and irregular cells along {a}, each at the "
+                    "middle of the last interval the bisection left (undetermined and failed "
+                    "cells skipped):", "",
+                    f"| {a} from | to | boundary | +- | into | level |",
+                    "| --- | --- | --- | --- | --- | --- |"]
+            out += [f"| {b['left']:.6g} | {b['right']:.6g} | {b['at']:.6g} | "
+                    f"{b['error']:.2g} | {b['into']} | {b['level']} |" for b in found]
+            out.append("")
+    return out
 
 
 def _sample_share(ds, axes, regime) -> str:
@@ -233,9 +286,8 @@ def _horizons(ds, regime, steady, T) -> list[str]:
                        f"{int(np.sum(at & steady))} |")
     doubt = np.isin(regime, REGULAR + IRREGULAR) & ~steady
     if doubt.any():
-        axes = list(ds[V.status].dims)
-        where = [", ".join(f"{a}={float(ds[a].values[i]):g}" for a, i in zip(axes, idx))
-                 for idx in zip(*np.nonzero(doubt))]
+        labels = plots.cell_labels(ds)
+        where = [labels[i] for i in np.flatnonzero(doubt.ravel())]
         shown = "; ".join(where[:12]) + (f"; and {len(where) - 12} more" if len(where) > 12
                                          else "")
         out += ["", f"Not confirmed ({int(doubt.sum())}): {shown}. Their regime holds to its "
@@ -330,7 +382,8 @@ def _onsets(ds, axes, regime, check=None) -> list[str]:
             out.append(f"Along {axes[0]} the orbits are regular up to {found['last_regular']:g}; "
                        f"the first irregular cell is at {found['first_irregular']:g}: onset "
                        f"{axes[0]} = {found['estimate']:.4g} +- {found['error']:.2g} (half the "
-                       "grid step).")
+                       + ("interval the bisection ended with)." if "level" in ds.coords else
+                          "grid step)."))
             out += _onset_horizons(ds, x, regime, axes[0], check)
             if found["all_irregular_from"] is not None:
                 mixed = found["all_irregular_from"] > found["first_irregular"]
@@ -346,22 +399,26 @@ def _onsets(ds, axes, regime, check=None) -> list[str]:
                 f"| {b} | regular cells | irregular cells | onset along {a} |"
                 + (f" the same{seed} |" if check is not None else ""),
                 "| --- | --- | --- | --- |" + (" --- |" if check is not None else "")]
-        x = ds[a].values
-        columns = [_onset_columns(ds, a, regime)]
-        if check is not None:
-            columns.append(_onset_columns(check, a, _transposed(check, a,
-                                                                check[V.regime].values)))
-        for j, yb in enumerate(ds[b].values):
-            col = regime[:, j]
+        theirs = {} if check is None else dict(_lines(check, a, b))
+        ds = ds.assign({V.regime: ((a, b) if a in ds.dims else ("cell",), regime)})
+        for yb, line in _lines(ds, a, b):
+            col = line[V.regime].values
             where = ["none" if found is None else
                      f"{found['estimate']:.4g} +- {found['error']:.2g}"
-                     for found in (c(j) for c in columns)]
+                     for found in [_onset_1d(other, other[a].values) for other in
+                                   [line] + ([theirs[yb]] if yb in theirs else [])]]
+            if check is not None and yb not in theirs:
+                where.append("—")
             out.append(f"| {yb:g} | {int(np.isin(col, REGULAR).sum())} | "
                        f"{int(np.isin(col, IRREGULAR).sum())} | {' | '.join(where)} |")
-        out += ["", "Each onset's uncertainty: half the grid step, or its shift over the last "
-                    "step of the horizon of the verdicts, whichever is larger." if
-                    V.regime_history in ds else "Each onset's uncertainty: half the grid step.",
-                ""]
+        step = "half the grid step" if "level" not in ds.coords else \
+            "half the interval between neighbouring cells"
+        out += ["", f"Each onset's uncertainty: {step}, or its shift over the last step of the "
+                    "horizon of the verdicts, whichever is larger." if V.regime_history in ds
+                else f"Each onset's uncertainty: {step}.", ""]
+        if "level" in ds.coords:
+            out[-2] += (f" Rows of the refined map at the grid's values of {b} only (the "
+                        "others hold cells near a boundary alone).")
     return out
 
 
@@ -370,20 +427,18 @@ def _seed(ds) -> int:
     return int(config.get("indicators", {}).get("seed", 0))
 
 
-def _transposed(ds, first, values):
-    """A 2-D array of ds's cells with the axis `first` first."""
-    return values if ds[V.status].dims[0] == first else values.swapaxes(0, 1)
-
-
-def _onset_columns(ds, a, regime):
-    """onset(j): the onset along axis `a` in column j of a 2-D archive (regime with a
-    first), over the horizons of the verdicts where they are stored."""
-    x = ds[a].values
-    if V.regime_history not in ds:
-        return lambda j: onset(x, regime[:, j])
-    history = _transposed(ds, a, ds[V.regime_history].values)
-    factors = [float(f) for f in ds["horizon_factor"].values]
-    return lambda j: onset_over_horizons(x, regime[:, j], history[:, j], factors)
+def _lines(ds, a, b):
+    """(value of b, the cells at it as a Dataset along a) for each value of b: a map's
+    rows; of a refined map only those at the grid's values of b (holding cells of level
+    0), with every cell the refinement put there."""
+    if b in ds.dims:
+        return [(float(y), ds.isel({b: j})) for j, y in enumerate(ds[b].values)]
+    out = []
+    for y in np.unique(ds[b].values):
+        row = ds.isel(cell=np.flatnonzero(ds[b].values == y))
+        if (row["level"].values == 0).any():
+            out.append((float(y), row.sortby(a).swap_dims({"cell": a})))
+    return out
 
 
 def _onset_1d(ds, x):
@@ -430,16 +485,25 @@ def _second_run(ds, check, regime) -> list[str]:
     size): the regime counts, the cells whose verdict changed class, the spreads."""
     if check is None:
         return []
+    shared = ""
     if check[V.regime].shape != regime.shape:
-        return ["## The same survey with another seed and ensemble", "",
-                "The [check] archive has another grid: nothing is compared.", ""]
+        axes = list(ds[V.status].dims)
+        if not ("level" in ds.coords and "level" in check.coords and len(axes) == 1):
+            return ["## The same survey with another seed and ensemble", "",
+                    "The [check] archive has another grid: nothing is compared.", ""]
+        a = axes[0]
+        common = np.intersect1d(ds[a].values, check[a].values)
+        shared = (f" Each run refined the grid by its own verdicts: they share {common.size} "
+                  f"of their {ds.sizes[a]} and {check.sizes[a]} cells, compared here.")
+        ds, check = ds.sel({a: common}), check.sel({a: common})
+        regime = ds[V.regime].values
     orbits = [int(np.max(x[V.ensemble_orbits].values, initial=0)) if V.ensemble_orbits in x
               else 1 for x in (ds, check)]
     other = check[V.regime].values
     out = ["## The same survey with another seed and ensemble", "",
            f"Every cell run again with seed {_seed(check)} (here {_seed(ds)}) and {orbits[1]} "
            f"orbits per cell (here {orbits[0]}): its own deviation vectors and perturbed "
-           "starts, the same grid, thresholds and horizons.", "",
+           "starts, the same grid, thresholds and horizons." + shared, "",
            "| regime | cells here | cells there |", "| --- | --- | --- |"]
     for r in Regime:
         a, b = int(np.sum(regime == r)), int(np.sum(other == r))
@@ -449,10 +513,10 @@ def _second_run(ds, check, regime) -> list[str]:
     def kind(x):
         return np.where(np.isin(x, REGULAR), 1, np.where(np.isin(x, IRREGULAR), -1, 0))
     moved = kind(regime) != kind(other)
-    axes = list(ds[V.status].dims)
-    where = [", ".join(f"{a}={float(ds[a].values[i]):g}" for a, i in zip(axes, idx))
-             + f" ({Regime(regime[idx]).name.lower()} -> {Regime(other[idx]).name.lower()})"
-             for idx in zip(*np.nonzero(moved))]
+    labels = plots.cell_labels(ds)
+    where = [labels[i] + f" ({Regime(regime.ravel()[i]).name.lower()} -> "
+                         f"{Regime(other.ravel()[i]).name.lower()})"
+             for i in np.flatnonzero(moved.ravel())]
     out += ["", f"Verdicts of another class (regular, irregular, undetermined) with the other "
                 f"seed: {int(moved.sum())} of {regime.size} cells" + (
                     ": " + "; ".join(where[:12]) + ("; ..." if len(where) > 12 else "") + "."
@@ -531,7 +595,7 @@ def _special(ds, special, regime) -> list[str]:
                    "(`python -m survey equilibria`): its stability in the reduced space and "
                    "its normal modes in the rotating frame (cycles per unit time; Krein "
                    "sign).")
-    axes = list(ds[V.status].dims)
+    axes = plots.map_axes(ds)
     for s in equilibria:
         modes = ", ".join(f"{f:.6g} ({'+' if k > 0 else '-'})"
                           for f, k in zip(s["frequencies"], s["krein"])) or "none"

@@ -1,0 +1,158 @@
+"""Refined surveys end to end: the cells a [refine] table adds, the same archive whatever
+the workers, chunks or interruptions, verify, the report, and refused configs."""
+import numpy as np
+import pytest
+import xarray as xr
+
+from survey.analysis.refine import plan
+from survey.catalog.errors import ConfigError
+from survey.catalog.regimes import IRREGULAR, REGULAR
+from survey.catalog.variables import V
+from survey.pipeline.config import load_config
+from survey.pipeline.sweep import run_survey, verify
+from survey.presentation import report
+
+from test_faults import interrupt_after, same_data
+
+# the equilateral family across its onset at T = 300: tori up to 4.25, chaos from 4.3125
+# (measured here: the grid's 4.0 / 4.5 pair is bisected three times)
+REFINED = """
+[survey]
+name = "{name}"
+output = "{out}"
+[initial]
+family = "equilateral"
+delta = {{start = 3.5, stop = 5.0, num = 4}}
+[integration]
+t_final = 300.0
+[indicators]
+perturbations = 0
+history_points = 8
+[refine]
+max_level = 3
+[dask]
+workers = {workers}
+chunk_size = {chunk}
+"""
+
+
+def config(tmp_path, name="r", workers=1, chunk=0, extra=""):
+    path = tmp_path / f"{name}.toml"
+    path.write_text(REFINED.format(name=name, out=tmp_path / f"{name}.nc", workers=workers,
+                                   chunk=chunk) + extra)
+    return path
+
+
+@pytest.fixture(scope="module")
+def refined(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("refined")
+    return run_survey(config(tmp))
+
+
+def test_the_boundary_is_bisected_and_the_cells_lie_along_one_dimension(refined):
+    with xr.open_dataset(refined) as ds:
+        assert ds[V.regime].dims == ("cell",)
+        delta, level = ds["delta"].values, ds["level"].values
+        assert np.all(np.diff(delta) > 0) and np.all(np.diff(ds["cell"].values) > 0)
+        assert np.array_equal(delta[level == 0], [3.5, 4.0, 4.5, 5.0])
+        regular = np.isin(ds[V.regime].values, REGULAR)
+        irregular = np.isin(ds[V.regime].values, IRREGULAR)
+        assert regular[0] and irregular[-1]
+        # one boundary, bisected to the last level: the last regular and the first
+        # irregular cell are the finest step apart
+        last, first = np.flatnonzero(regular)[-1], np.flatnonzero(irregular)[0]
+        assert first == last + 1
+        assert delta[first] - delta[last] == pytest.approx(0.5 / 2 ** 3)
+        assert ds.sizes["cell"] == 4 + 3
+        # the cells are the plan of their own results
+        cfg = load_config(config(refined.parent, "again"))
+        known = dict(zip(ds["cell"].values.tolist(),
+                         zip(ds[V.regime].values.tolist(), [np.nan] * ds.sizes["cell"])))
+        p = plan(cfg.lattice(), cfg.rule(), known)
+        assert p.done and np.array_equal(p.cells, ds["cell"].values)
+
+
+def test_the_same_archive_whatever_the_workers_and_chunks(refined, tmp_path):
+    other = run_survey(config(tmp_path, "w2", workers=2, chunk=1))
+    with xr.open_dataset(refined) as a, xr.open_dataset(other) as b:
+        same_data(a, b)
+
+
+def test_an_interrupted_refinement_resumes_to_the_same_archive(refined, tmp_path,
+                                                               monkeypatch):
+    cfg = config(tmp_path, "stop", chunk=1)
+    interrupt_after(monkeypatch, 5)      # the grid's 4 cells and the first bisection
+    with pytest.raises(KeyboardInterrupt):
+        run_survey(cfg)
+    monkeypatch.undo()
+    with xr.open_dataset(refined) as a, xr.open_dataset(run_survey(cfg)) as b:
+        same_data(a, b)
+
+
+def test_verify_recomputes_cells_and_the_refinement(refined, tmp_path):
+    ok, lines = verify(refined, cells=3)
+    assert ok, lines
+    assert "by their lattice index" in lines[0]
+    # an archive without one of the cells its regimes call for
+    with xr.open_dataset(refined) as ds:
+        keep = np.flatnonzero(ds["level"].values < 3)
+        ds.isel(cell=keep).load().to_netcdf(tmp_path / "cut.nc")
+    ok, lines = verify(tmp_path / "cut.nc", cells=2)
+    assert not ok and any("not the refinement its regimes call for" in x for x in lines)
+
+
+def test_the_report_gives_the_boundary_from_the_bisection(refined, tmp_path):
+    with xr.open_dataset(refined) as ds:
+        text = report.markdown(ds)
+    assert "## Refinement" in text and "level 3: 1" in text
+    assert "| 4.25 | 4.3125 | 4.28125 | 0.031 | irregular | 3 |" in text
+    assert "half the interval the bisection ended with" in text
+
+
+AXIS = "delta = {start = 3.5, stop = 5.0, num = 4}"
+
+
+@pytest.mark.parametrize("extra, edit, key, message", [
+    ("", (AXIS, "delta = 3.0"), "[refine]", "one or two axes"),
+    ("indicator = \"megno\"\n", None, "[refine].jump", "the change that splits"),
+    ("jump = 0.1\n", None, "[refine].jump", "needs an indicator"),
+    ("indicator = \"sali\"\njump = 0.1\n", ("[indicators]\n", "[indicators]\nwhich = "
+                                            "[\"ftle\", \"megno\"]\n"),
+     "[refine].indicator", "add 'sali'"),
+    ("indicator = \"ftle\"\nratio = 0.5\n", None, "[refine].ratio", "a factor above 1"),
+    ("max_cells = 3\n", None, "[refine].max_cells", "below the 4 cells"),
+    ("by = \"verdict\"\n", None, "[refine].by", "is not one of"),
+    ("tolerance = 0.01\n", ("[initial]\n", "[initial]\nenergy = [80.0, 90.0]\n"),
+     "[refine].tolerance", "applies to one axis"),
+])
+def test_refinement_configs_that_cannot_work_are_refused(tmp_path, extra, edit, key,
+                                                         message):
+    text = REFINED.format(name="bad", out=tmp_path / "bad.nc", workers=1, chunk=0)
+    text = text.replace("[refine]\n", "[refine]\n" + extra)
+    if edit:
+        text = text.replace(*edit)
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(ConfigError) as err:
+        load_config(path)
+    assert err.value.key == key and message in str(err.value)
+
+
+@pytest.mark.parametrize("axis, message", [
+    ("delta = [4.0, 3.5, 5.0]", "must be increasing"),
+    ("delta = [4.0]", "at least two values"),
+])
+def test_refined_axes_must_be_intervals(tmp_path, axis, message):
+    text = REFINED.format(name="bad", out=tmp_path / "bad.nc", workers=1, chunk=0)
+    path = tmp_path / "bad.toml"
+    path.write_text(text.replace(AXIS, axis))
+    with pytest.raises(ConfigError, match=message):
+        load_config(path)
+
+
+def test_seeded_starts_are_not_refined(tmp_path):
+    path = tmp_path / "seeds.toml"
+    path.write_text("[initial]\nfamily = \"microcanonical\"\nenergy = {start = -2.0, stop = "
+                    "-1.0, num = 3}\nstarts_per_cell = 4\n[refine]\n")
+    with pytest.raises(ConfigError, match="a sample, not a place to bisect"):
+        load_config(path, check_output=False)
