@@ -166,6 +166,15 @@ def _refinement(ds, config, regime) -> list[str]:
            f"The finest spacing reached, {', '.join(f'{f:.3g}' for f in finest)} in "
            f"{', '.join(axes)}, would take {uniform} cells as a uniform grid: this survey "
            f"used {100 * regime.size / uniform:.0f}% of that.", ""]
+    if r.get("indicator") in ds:
+        values = ds[r["indicator"]].values
+        if np.isfinite(values).any():
+            labels = plots.cell_labels(ds)
+            lo, hi = np.nanargmin(values), np.nanargmax(values)
+            out += [f"{r['indicator']} over the cells: from {values.flat[lo]:.3g} ({labels[lo]}) "
+                    f"to {values.flat[hi]:.3g} ({labels[hi]}); the grid alone gave "
+                    f"{np.nanmin(values[level == 0]):.3g} to {np.nanmax(values[level == 0]):.3g}.",
+                    ""]
     if len(axes) == 1:
         found = boundaries(ds[axes[0]].values, regime, level)
         if found:
@@ -381,7 +390,7 @@ def _onsets(ds, axes, regime, check=None) -> list[str]:
         else:
             out.append(f"Along {axes[0]} the orbits are regular up to {found['last_regular']:g}; "
                        f"the first irregular cell is at {found['first_irregular']:g}: onset "
-                       f"{axes[0]} = {found['estimate']:.4g} +- {found['error']:.2g} (half the "
+                       f"{axes[0]} = {_pm(found['estimate'], found['error'])} (half the "
                        + ("interval the bisection ended with)." if "level" in ds.coords else
                           "grid step)."))
             out += _onset_horizons(ds, x, regime, axes[0], check)
@@ -404,7 +413,7 @@ def _onsets(ds, axes, regime, check=None) -> list[str]:
         for yb, line in _lines(ds, a, b):
             col = line[V.regime].values
             where = ["none" if found is None else
-                     f"{found['estimate']:.4g} +- {found['error']:.2g}"
+                     _pm(found['estimate'], found['error'])
                      for found in [_onset_1d(other, other[a].values) for other in
                                    [line] + ([theirs[yb]] if yb in theirs else [])]]
             if check is not None and yb not in theirs:
@@ -420,6 +429,15 @@ def _onsets(ds, axes, regime, check=None) -> list[str]:
             out[-2] += (f" Rows of the refined map at the grid's values of {b} only (the "
                         "others hold cells near a boundary alone).")
     return out
+
+
+def _pm(x: float, error: float) -> str:
+    """'4.175 +- 0.025': a value with its uncertainty, to 4 digits or as many as the
+    uncertainty needs (a bisection's 4.17312 +- 0.00062)."""
+    digits = 4
+    if x != 0 and error > 0 and np.isfinite(error):
+        digits = max(4, int(np.floor(np.log10(abs(x)))) - int(np.floor(np.log10(error))) + 2)
+    return f"{x:.{digits}g} +- {error:.2g}"
 
 
 def _seed(ds) -> int:
@@ -459,11 +477,12 @@ def _onset_horizons(ds, x, regime, axis, check=None) -> list[str]:
     if found is None:
         return []
     T = float(ds[V.regime_horizon].min())
-    moved = "; ".join(f"at {f:g} T = {f * T:g}: " + ("none" if e is None else f"{e:.4g}")
-                      for f, e in found["by_horizon"])
+    moved = "; ".join(f"at {f:g} T = {f * T:g}: " + (
+        "none" if e is None else _pm(e, found["error"]).split(" +-")[0])
+        for f, e in found["by_horizon"])
     out = [f"The onset from each cell's verdict at each horizon ({moved}). With its shift "
-           f"over the last step of the horizon: onset {axis} = {found['estimate']:.4g} +- "
-           f"{found['error']:.2g}."]
+           f"over the last step of the horizon: onset {axis} = "
+           f"{_pm(found['estimate'], found['error'])}."]
     other = None if check is None else _onset_1d(check, check[axis].values)
     if check is None:
         out[-1] += (" How the onset varies with the seed (the deviation vectors) is not in "
@@ -473,10 +492,11 @@ def _onset_horizons(ds, x, regime, axis, check=None) -> list[str]:
                     f"chaotic along {axis}: the onset does not survive another seed.")
     else:
         shift = abs(other["estimate"] - found["estimate"])
-        out[-1] += (f" With seed {_seed(check)}: onset {other['estimate']:.4g} +- "
-                    f"{other['error']:.2g}; the seed moves it by {shift:.2g}, so onset "
-                    f"{axis} = {found['estimate']:.4g} +- "
-                    f"{max(found['error'], other['error'], shift):.2g} over both.")
+        out[-1] += (f" With seed {_seed(check)}: onset "
+                    f"{_pm(other['estimate'], other['error'])}; the seed moves it by "
+                    f"{shift:.2g}, so onset {axis} = "
+                    f"{_pm(found['estimate'], max(found['error'], other['error'], shift))} "
+                    "over both.")
     return out
 
 
@@ -486,24 +506,25 @@ def _second_run(ds, check, regime) -> list[str]:
     if check is None:
         return []
     shared = ""
-    if check[V.regime].shape != regime.shape:
-        axes = list(ds[V.status].dims)
-        if not ("level" in ds.coords and "level" in check.coords and len(axes) == 1):
-            return ["## The same survey with another seed and ensemble", "",
-                    "The [check] archive has another grid: nothing is compared.", ""]
+    axes = list(ds[V.status].dims)
+    if "level" in ds.coords and "level" in check.coords and len(axes) == 1:
         a = axes[0]
         common = np.intersect1d(ds[a].values, check[a].values)
         shared = (f" Each run refined the grid by its own verdicts: they share {common.size} "
                   f"of their {ds.sizes[a]} and {check.sizes[a]} cells, compared here.")
         ds, check = ds.sel({a: common}), check.sel({a: common})
         regime = ds[V.regime].values
+    elif check[V.regime].shape != regime.shape:
+        return ["## The same survey with another seed and ensemble", "",
+                "The [check] archive has another grid: nothing is compared.", ""]
     orbits = [int(np.max(x[V.ensemble_orbits].values, initial=0)) if V.ensemble_orbits in x
               else 1 for x in (ds, check)]
     other = check[V.regime].values
     out = ["## The same survey with another seed and ensemble", "",
            f"Every cell run again with seed {_seed(check)} (here {_seed(ds)}) and {orbits[1]} "
            f"orbits per cell (here {orbits[0]}): its own deviation vectors and perturbed "
-           "starts, the same grid, thresholds and horizons." + shared, "",
+           f"starts, the same {'base ' if shared else ''}grid, thresholds and horizons."
+           + shared, "",
            "| regime | cells here | cells there |", "| --- | --- | --- |"]
     for r in Regime:
         a, b = int(np.sum(regime == r)), int(np.sum(other == r))
