@@ -269,7 +269,7 @@ def _refined(config, key, folder, workers, address, clock, progress):
                         bar = stack.enter_context(tqdm(unit="cell", disable=not progress,
                                                        desc=config.name, smoothing=0.1))
                         queue = as_completed()
-                    size = config.tables["dask"]["chunk_size"] or chunk_size(
+                    size = config.tables["dask"]["chunk_size"] or refined_chunk_size(
                         todo.size, len(client.scheduler_info()["workers"]),
                         jobs_per_cell(task))
                     for ids in _chunks(todo, size):
@@ -367,6 +367,16 @@ def chunk_size(cells: int, workers: int, per_cell: int) -> int:
     and costly cells), at most 256 cells."""
     lanes = -(-64 // per_cell)
     return max(1, min(256, max(lanes, -(-cells // (64 * workers))), -(-cells // workers)))
+
+
+def refined_chunk_size(cells: int, workers: int, per_cell: int) -> int:
+    """Cells per task of a refinement's batch: about four tasks a worker -- a cell's
+    children are submitted as soon as its task returns, so smaller tasks keep the workers
+    busy across levels -- but not fewer orbits than one round of SIMD lanes (16) where the
+    batch has them, and at least one task per worker."""
+    lanes = -(-16 // per_cell)
+    return max(1, min(chunk_size(cells, workers, per_cell),
+                      max(lanes, -(-cells // (4 * workers))), -(-cells // workers)))
 
 
 def _compute(client, task, starts, todo, folder, key, config, bar, round_):

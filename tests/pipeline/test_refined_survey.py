@@ -156,3 +156,17 @@ def test_seeded_starts_are_not_refined(tmp_path):
                     "-1.0, num = 3}\nstarts_per_cell = 4\n[refine]\n")
     with pytest.raises(ConfigError, match="a sample, not a place to bisect"):
         load_config(path, check_output=False)
+
+
+@pytest.mark.parametrize("cells, workers, per_cell", [(63, 2, 1), (5, 2, 1), (148, 2, 1),
+                                                       (7, 2, 17), (1, 2, 17), (400, 8, 3)])
+def test_refinement_batches_keep_every_worker_fed(cells, workers, per_cell):
+    """A batch of new cells goes out in at least one task per worker (where it has as many
+    cells), each holding a round of SIMD lanes of orbits where the batch has them."""
+    from survey.pipeline.sweep import _chunks, refined_chunk_size
+    size = refined_chunk_size(cells, workers, per_cell)
+    tasks = _chunks(np.arange(cells), size)
+    assert len(tasks) >= min(cells, workers)
+    assert sum(t.size for t in tasks) == cells
+    if cells * per_cell >= 16 * workers:
+        assert size * per_cell >= 16
