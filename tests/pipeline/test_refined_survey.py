@@ -170,3 +170,29 @@ def test_refinement_batches_keep_every_worker_fed(cells, workers, per_cell):
     assert sum(t.size for t in tasks) == cells
     if cells * per_cell >= 16 * workers:
         assert size * per_cell >= 16
+
+
+def test_a_refined_map_is_written_verified_drawn_and_reported(tmp_path):
+    """Two axes: the squares whose corners disagree are split; the archive holds the cells
+    along `cell` with both parameters, verify passes, the regime map is drawn (painted by
+    level) and the report gives the onset along delta for the grid's energies."""
+    from survey.analysis.classify import summary
+    from survey.presentation import plots
+    text = REFINED.format(name="map", out=tmp_path / "map.nc", workers=2, chunk=0)
+    text = text.replace(AXIS, AXIS + "\nenergy = [80.0, 100.0]").replace(
+        "max_level = 3", "max_level = 2")
+    path = tmp_path / "map.toml"
+    path.write_text(text)
+    out = run_survey(path)
+    with xr.open_dataset(out) as ds:
+        assert ds[V.regime].dims == ("cell",) and ds["energy"].dims == ("cell",)
+        assert ds.sizes["cell"] > 8 and ds["level"].max() == 2
+        figs = plots.figures(ds)
+        assert "map_regime" in figs and "scan" not in figs
+        rows, _ = np.unique(ds["energy"].values, return_counts=True)
+        text = report.markdown(ds)
+        assert len(summary(ds)) == 1          # counts only: no boundaries along `cell`
+    assert "## Where chaos sets in along delta, for each energy" in text
+    assert "| 80 |" in text and "| 100 |" in text and rows.size > 2
+    ok, lines = verify(out, cells=3)
+    assert ok, lines
