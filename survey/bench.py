@@ -822,7 +822,7 @@ def fixed_costs(folder="results/bench", repeats=3, out=print):
     out("")
     out(f"Fixed costs: a 1-cell survey ('sides', t = 10, warm cache, best of {repeats}), "
         "seconds")
-    out("in process: " + "  ".join(f"{k} {v:.2f}" for k, v in best.items()))
+    out("in process: " + "  ".join(f"{k} {v:.2f}" for k, v in best.items() if k != "tasks"))
     out(f"python -m survey run (interpreter, imports and regime summary included): "
         f"warm {command:.2f}; cold (every kernel compiled into an empty cache) {cold:.1f}, "
         f"its first word on the terminal after {first:.2f}")

@@ -15,6 +15,8 @@ def test_bench_parts_run_and_print_their_ratios(tmp_path):
     assert [(r[0], r[1], r[2]) for r in steps] == [(c[0], k, L) for c in bench.CASES
                                                    for k in (0, 1) for L in (1, 16)]
     assert all(r[3] > 0 and r[5] > 0 for r in steps)      # steps taken, RHS time measured
+    busy = bench.refined_map(t_final=20.0, levels=1, folder=str(tmp_path), out=lines.append)
+    assert busy["cells"] >= 63 and len(busy["idle"]) == 2
     newton = bench.newton_step(repeats=1, out=lines.append)
     assert [r[1] >= 2 for r in newton] == [True, True]    # converged in a few shooting runs
     text = "\n".join(lines)
@@ -24,6 +26,6 @@ def test_bench_parts_run_and_print_their_ratios(tmp_path):
                                                  "largest energy error" in text)
     assert text.count("x\n") >= 1 and "Default survey cell" in text
     assert "Where a step goes" in text and "stages+norm" in text
-    assert "Newton shooting: one step" in text
+    assert "Newton shooting: one step" in text and "largest idle share" in text
     assert "general/own" in text and "Fixed costs" in text and "shutdown" in text and "python -m survey run" in text
     assert "cold (every kernel compiled into an empty cache)" in text and "first word" in text
