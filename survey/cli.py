@@ -118,6 +118,12 @@ def orbit_workflow(path, folder) -> list:
     from .presentation import orbit_plots, plots
     written = []
     for spec in orbits.load_workflow(path):
+        if isinstance(spec, orbits.PlaneSpec):
+            run = orbits.run_plane(spec)
+            written += plots.save({"plane": orbit_plots.plane_figure(spec.name, spec, run)},
+                                  folder, spec.name)
+            print("\n".join(orbits.describe_plane(spec, run)))
+            continue
         runs = orbits.run_orbits(spec)
         written += plots.save(orbit_plots.spec_figures(spec.name, spec.zoom_until, runs),
                               folder, spec.name)

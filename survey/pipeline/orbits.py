@@ -18,6 +18,19 @@ figures to draw:
 
 A survey config is an orbit set too: `python -m survey orbit grid.toml --cell K` integrates
 cell K of its grid with its [system] and [initial] (see `from_survey_config`).
+
+A workflow may also hold [[plane]] tables: sections of the isosceles plane
+(numerics.isosceles), several orbits of one energy each drawn as the points where its
+height crosses a level upwards:
+
+    [[plane]]
+    name = "isosceles_perimetric"    # written as NAME_plane.png
+    potential = "perimetric_power"   # (or system = {...}, three unit masses in the plane)
+    energy = 1.0
+    height = 0.0                     # the section h = height
+    starts = [[0.69, 0.0], [0.1, 0.75]]   # (b, p_b) on it, p_h > 0 from the energy
+    crossings = 400                  # points per orbit, at most
+    t_final = 2000.0
 """
 from __future__ import annotations
 
@@ -33,8 +46,11 @@ import numpy as np
 
 from ..catalog import defaults
 from ..catalog.errors import ConfigError
+from ..catalog.variables import V
+from ..numerics.dop853 import RTOL_MIN
 from ..numerics.indicators import deviation_vectors
 from ..numerics.integrate import Outcome, integrate
+from ..numerics.isosceles import PlaneSection, plane_section, plane_start, plane_state
 from ..physics.geometry import area, sides
 from ..physics.system import System
 from ..physics.terms import PERIMETER, POWER
@@ -276,17 +292,131 @@ def closest(t, r) -> tuple[float, float]:
 KEYS = {f for f in OrbitSpec.__dataclass_fields__}
 
 
-def load_workflow(path) -> list[OrbitSpec]:
-    """The [[orbit]] tables of an orbit workflow file, checked."""
+@dataclass(frozen=True)
+class PlaneSpec:
+    """A section of the isosceles plane: orbits of one energy from starts (b, p_b) on the
+    section h = height, each drawn as its upward crossings of it."""
+
+    name: str
+    energy: float
+    starts: tuple
+    height: float = 0.0
+    potential: str = defaults.POTENTIAL
+    potential_params: dict = field(default_factory=dict)
+    system: dict | None = None
+    t_final: float = 2000.0
+    crossings: int = 500
+    tol: float = 1e-13
+
+    def build(self) -> System:
+        """The system (ConfigError naming the key if it is not one)."""
+        table = self.system if self.system is not None else \
+            {"potential": self.potential, "params": dict(self.potential_params)}
+        return load_config({"system": table, "initial": {"family": "isosceles"}},
+                           check_output=False).system()
+
+
+PLANE_KEYS = {f for f in PlaneSpec.__dataclass_fields__}
+
+
+def check_plane(table: dict, where: str) -> PlaneSpec:
+    """A [[plane]] table as a PlaneSpec, every key checked before any work."""
+    extra = sorted(set(table) - PLANE_KEYS)
+    if extra:
+        raise ConfigError(f"{where}.{extra[0]}", f"unknown key; keys are "
+                                                 f"{', '.join(sorted(PLANE_KEYS))}")
+    for key in ("name", V.energy, "starts"):
+        if key not in table:
+            raise ConfigError(f"{where}.{key}", "is required")
+    for key, low in ((V.energy, None), ("height", None), ("t_final", 0.0), ("tol", RTOL_MIN)):
+        value = table.get(key, getattr(PlaneSpec, key, None))
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+                not math.isfinite(value) or (low is not None and not value >= low) or \
+                (key == "t_final" and value <= 0):
+            raise ConfigError(f"{where}.{key}", f"must be a finite number"
+                                                f"{f' >= {low:.3g}' if low else ''}"
+                                                f"{' > 0' if key == 't_final' else ''}, got "
+                                                f"{value!r}")
+    crossings = table.get("crossings", PlaneSpec.crossings)
+    if isinstance(crossings, bool) or not isinstance(crossings, int) or crossings < 1:
+        raise ConfigError(f"{where}.crossings", f"must be an integer >= 1, got {crossings!r}")
+    starts = table["starts"]
+    if not isinstance(starts, list) or not starts or not all(
+            isinstance(x, list) and len(x) == 2 and all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                for v in x) for x in starts):
+        raise ConfigError(f"{where}.starts", "expected a list of [b, p_b] pairs of finite "
+                                             "numbers, e.g. [[0.69, 0.0], [0.1, 0.75]]")
+    spec = PlaneSpec(**{**table, "starts": tuple((float(b), float(p)) for b, p in starts)})
+    try:
+        system = spec.build()
+    except ConfigError as exc:
+        raise ConfigError(f"{where}.{'system' if spec.system is not None else 'potential'}",
+                          str(exc).split(": ", 1)[1]) from None
+    if system.n_bodies != 3 or system.dim != 2 or not np.all(system.masses == 1.0):
+        raise ConfigError(f"{where}.system", "the isosceles plane is of three unit masses in "
+                                             "the plane")
+    for k, (b, p_b) in enumerate(spec.starts):
+        if plane_start(system, spec.energy, spec.height, b, p_b) is None:
+            raise ConfigError(f"{where}.starts[{k}]", f"(b, p_b) = ({b:g}, {p_b:g}) is not on "
+                              f"the section h = {spec.height:g} of the energy shell E = "
+                              f"{spec.energy:g}: the potential there exceeds E - p_b^2")
+    return spec
+
+
+class PlaneRun(NamedTuple):
+    """The orbits of a PlaneSpec: their sections, the shell's edge on the section (b and
+    the largest |p_b| there) and what the run cost."""
+
+    system: System
+    sections: list[PlaneSection]
+    edge: tuple[np.ndarray, np.ndarray]
+    wall: float
+
+
+def run_plane(spec: PlaneSpec) -> PlaneRun:
+    system = spec.build()
+    with notice(COMPILING, sys.stderr.isatty()):                  # load the kernels
+        plane_section(system, plane_start(system, spec.energy, spec.height,
+                                          *spec.starts[0]), 1e-3, spec.height, 1)
+    clock = time.perf_counter()
+    sections = [plane_section(system, plane_start(system, spec.energy, spec.height, b, p_b),
+                              spec.t_final, spec.height, spec.crossings, spec.tol, spec.tol)
+                for b, p_b in spec.starts]
+    wall = time.perf_counter() - clock
+    reach = max(max(abs(b) for b, _ in spec.starts), 1e-3)
+    while plane_start(system, spec.energy, spec.height, 2 * reach, 0.0) is not None:
+        reach *= 2                                 # the shell's extent in b, bracketed
+    b = np.linspace(-2 * reach, 2 * reach, 2001)
+    room = spec.energy - system.potential_energy(
+        np.array([plane_state(x, spec.height, 0.0, 0.0) for x in b]))
+    edge = np.where(room > 0, np.sqrt(np.maximum(room, 0.0)), np.nan)
+    return PlaneRun(system, sections, (b, edge), wall)
+
+
+def describe_plane(spec: PlaneSpec, run: PlaneRun) -> list[str]:
+    lines = [f"{spec.name}: the isosceles plane under {run.system.describe()}, E = "
+             f"{spec.energy:g}, section h = {spec.height:g} crossed upwards; "
+             f"{len(run.sections)} orbits in {run.wall:.1f} s"]
+    for (b, p_b), sec in zip(spec.starts, run.sections):
+        lines.append(f"  from (b, p_b) = ({b:g}, {p_b:g}): {sec.b.size} crossings to t = "
+                     f"{sec.t_end:g} ({sec.status.name}), {sec.passages} passages through b = "
+                     f"0, |E/E0 - 1| = {sec.energy_error:.1e}")
+    return lines
+
+
+def load_workflow(path) -> list:
+    """The [[orbit]] tables (OrbitSpec) and [[plane]] tables (PlaneSpec) of an orbit
+    workflow file, checked."""
     text = Path(path).read_text()
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(str(path), f"not valid TOML ({exc}); fix the syntax") from None
-    tables = raw.get("orbit")
-    if not isinstance(tables, list) or not tables:
-        raise ConfigError(str(path), "an orbit workflow needs [[orbit]] tables")
-    specs = []
+    tables, planes = raw.get("orbit", []), raw.get("plane", [])
+    if not isinstance(tables, list) or not isinstance(planes, list) or not (tables or planes):
+        raise ConfigError(str(path), "an orbit workflow needs [[orbit]] or [[plane]] tables")
+    specs = [check_plane(table, f"[[plane]] {k + 1}") for k, table in enumerate(planes)]
     for k, table in enumerate(tables):
         where = f"[[orbit]] {k + 1}"
         extra = sorted(set(table) - KEYS)
@@ -303,6 +433,7 @@ def load_workflow(path) -> list[OrbitSpec]:
 
 def is_orbit_workflow(path) -> bool:
     try:
-        return "orbit" in tomllib.loads(Path(path).read_text())
+        raw = tomllib.loads(Path(path).read_text())
+        return "orbit" in raw or "plane" in raw
     except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError):
         return False

@@ -3,6 +3,8 @@ space, P and A against time, side lengths with near collisions; several orbits i
 space on one figure."""
 from __future__ import annotations
 
+import textwrap
+
 import numpy as np
 from matplotlib.collections import LineCollection
 from matplotlib.colors import to_rgb
@@ -169,3 +171,39 @@ def spec_figures(name: str, zoom_until: float, runs) -> dict:
                                p_max=run.p_max)
         figs["paths"], figs["sides"] = zoomed["paths"], zoomed["sides"]
     return figs
+
+
+def plane_figure(name: str, spec, run) -> Figure:
+    """A section of the isosceles plane (pipeline.orbits.PlaneSpec and its PlaneRun): each
+    orbit's crossings in its own colour -- an invariant curve, an island chain or a
+    scattered sea -- inside the energy shell's edge on the section."""
+    fig = Figure(figsize=(7.5, 6.4), layout="constrained")
+    ax = fig.add_subplot()
+    b, edge = run.edge
+    ax.plot(b, edge, color="0.6", lw=0.8)
+    ax.plot(b, -edge, color="0.6", lw=0.8, label="edge of the energy shell")
+    colours = [f"C{k % 10}" for k in range(len(run.sections))]
+    for (b0, p0), sec, colour in zip(spec.starts, run.sections, colours):
+        ax.plot(sec.b, sec.p_b, ".", ms=1.8, color=colour, rasterized=True)
+        ax.plot([b0], [p0], "x", ms=4, color=colour)
+    inside = np.isfinite(edge)
+    sides = {np.sign(b0) for b0, _ in spec.starts}
+    if not any(s.passages for s in run.sections) and len(sides) == 1:
+        inside &= np.sign(b) == sides.pop()     # the orbits stay on their side of b = 0
+    if inside.any():
+        lo, hi = b[inside].min(), b[inside].max()
+        ax.set_xlim(lo - 0.05 * (hi - lo), hi + 0.05 * (hi - lo))
+    ax.set_xlabel("base $b$ (signed: $u$ and $w$ change places at $b = 0$)")
+    ax.set_ylabel("$p_b = \\dot b / 2$")
+    worst = max(s.energy_error for s in run.sections)
+    passages = sum(s.passages for s in run.sections)
+    points = sum(s.b.size for s in run.sections)
+    early = sum(s.status.name != "OK" for s in run.sections)
+    ax.set_title(textwrap.fill(
+        f"{name}: the isosceles plane under {run.system.describe()}; E = {spec.energy:g}, "
+        f"section h = {spec.height:g} crossed upwards; {len(run.sections)} orbits (x: their "
+        f"starts), {points} crossings, {passages} passages through b = 0, |E/E0 - 1| <= "
+        f"{worst:.0e}" + (f"; {early} orbits ended early (step limit)" if early else ""),
+        110), fontsize="small")
+    ax.legend(loc="upper right", fontsize="small", framealpha=0.9)
+    return fig
