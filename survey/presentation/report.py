@@ -112,7 +112,7 @@ def markdown(ds, figure_names=(), check=None, special=()) -> str:
     out += _horizons(ds, regime, steady, integ.get("t_final", defaults.T_FINAL))
 
     out += _ensembles(ds, regime)
-    out += _refinement(ds, config, regime)
+    out += _refinement(ds, config, regime, check)
     out += _shares(ds, axes, regime)
     out += _onsets(ds, axes, regime, check)
     out += _second_run(ds, check, regime)
@@ -132,9 +132,11 @@ def markdown(ds, figure_names=(), check=None, special=()) -> str:
     return "\n".join(out)
 
 
-def _refinement(ds, config, regime) -> list[str]:
+def _refinement(ds, config, regime, check=None) -> list[str]:
     """How a refined survey's cells came about, and (one axis) the regime boundaries its
-    bisection located."""
+    bisection located: each with the bisection's half-width, whether the cells either side
+    hold their verdict class from the horizon before, and where the [check] run (another
+    seed, its own refinement) puts the nearest boundary of the same kind."""
     if "level" not in ds.coords:
         return []
     r = config.get("refine", {})
@@ -176,16 +178,40 @@ def _refinement(ds, config, regime) -> list[str]:
                     f"{np.nanmin(values[level == 0]):.3g} to {np.nanmax(values[level == 0]):.3g}.",
                     ""]
     if len(axes) == 1:
-        found = boundaries(ds[axes[0]].values, regime, level)
+        a = axes[0]
+        found = boundaries(ds[a].values, regime, level)
+        steady = ds[V.regime_stable].values == 1 if V.regime_stable in ds else None
+        theirs = [] if check is None or "level" not in check.coords else boundaries(
+            check[a].values, check[V.regime].values, check["level"].values)
         if found:
-            a = axes[0]
+            x = ds[a].values
+            head = f"| {a} from | to | boundary | +- | into | level |"
+            rule = "| --- | --- | --- | --- | --- | --- |"
+            if steady is not None:
+                head += " both sides confirmed |"
+                rule += " --- |"
+            if check is not None:
+                head += f" seed {_seed(check)}: nearest | shift |"
+                rule += " --- | --- |"
             out += [f"Boundaries between regular and irregular cells along {a}, each at the "
                     "middle of the last interval the bisection left (undetermined and failed "
-                    "cells skipped):", "",
-                    f"| {a} from | to | boundary | +- | into | level |",
-                    "| --- | --- | --- | --- | --- | --- |"]
-            out += [f"| {b['left']:.6g} | {b['right']:.6g} | {b['at']:.6g} | "
-                    f"{b['error']:.2g} | {b['into']} | {b['level']} |" for b in found]
+                    "cells skipped); confirmed: both cells beside it decided their class at "
+                    "the horizon before too; the [check] run refined its own cells and its "
+                    "nearest boundary of the same kind is given with its shift:", "",
+                    head, rule]
+            for b in found:
+                row = (f"| {b['left']:.6g} | {b['right']:.6g} | {b['at']:.6g} | "
+                       f"{b['error']:.2g} | {b['into']} | {b['level']} |")
+                if steady is not None:
+                    sides = [int(np.flatnonzero(x == b["left"])[0]),
+                             int(np.flatnonzero(x == b["right"])[0])]
+                    row += f" {'yes' if steady[sides].all() else 'no'} |"
+                if check is not None:
+                    same = [c for c in theirs if c["into"] == b["into"]]
+                    near = min(same, key=lambda c: abs(c["at"] - b["at"])) if same else None
+                    row += (" none | — |" if near is None else
+                            f" {near['at']:.6g} | {abs(near['at'] - b['at']):.2g} |")
+                out.append(row)
             out.append("")
     return out
 
