@@ -114,6 +114,12 @@ def _classes(regimes) -> list[int]:
     return [1 if r in REGULAR else 2 if r in IRREGULAR else 0 for r in regimes]
 
 
+def known_from(ids, regime, values) -> dict[int, tuple[int, float]]:
+    """What cells contribute to the decisions, by lattice id: (regime, indicator value)."""
+    return dict(zip(np.asarray(ids).tolist(), zip(np.asarray(regime).tolist(),
+                                                  np.asarray(values, dtype=float).tolist())))
+
+
 class Plan(NamedTuple):
     cells: np.ndarray       # ids of the refined set, sorted, as far as it is decided
     needed: np.ndarray      # ids in it not known yet
@@ -133,6 +139,7 @@ def plan(lattice: Lattice, rule: Rule, known: Known) -> Plan:
     if len(cells) > rule.max_cells:
         raise ValueError(f"the base grid has {len(cells)} cells, more than max_cells")
     items = _base_items(lattice)
+    x = lattice.axis_values(0) if rule.tolerance > 0 and len(lattice.base) == 1 else None
     pending = False
     for level in range(lattice.levels):
         size = lattice.step >> level
@@ -142,7 +149,7 @@ def plan(lattice: Lattice, rule: Rule, known: Known) -> Plan:
             if any(c not in known for c in corners):
                 pending = True
                 continue
-            if rule.disagree([known[c] for c in corners]) and _wide(item, size, lattice, rule):
+            if rule.disagree([known[c] for c in corners]) and _wide(item, size, x, rule):
                 kids, sub = _split(item, size, lattice)
                 new.update(kids)
                 nxt += sub
@@ -170,12 +177,10 @@ def _corners(item, size, lattice) -> list[int]:
     return [i * n + j, (i + size) * n + j, i * n + j + size, (i + size) * n + j + size]
 
 
-def _wide(item, size, lattice, rule) -> bool:
-    """Whether an interval is still wider than the tolerance (squares: always)."""
-    if len(item) != 1 or rule.tolerance <= 0:
-        return True
-    x = lattice.axis_values(0)
-    return x[item[0] + size] - x[item[0]] > rule.tolerance
+def _wide(item, size, x, rule) -> bool:
+    """Whether an interval (of the lattice's coordinates x) is still wider than the
+    tolerance (squares, or no tolerance: always)."""
+    return x is None or x[item[0] + size] - x[item[0]] > rule.tolerance
 
 
 def _split(item, size, lattice):

@@ -23,7 +23,7 @@ from ..catalog.errors import ArchiveError, ConfigError, SurveyError
 from ..catalog.status import Status
 from ..catalog.variables import BY_NAME, V
 from . import archive
-from ..analysis.refine import plan
+from ..analysis.refine import known_from, plan
 from .cells import CellTask, build_starts, classify_rows, jobs_per_cell, run_cells, warm_up
 from .checkpoints import (
     checkpoint_dir,
@@ -243,8 +243,8 @@ def _refined(config, key, folder, workers, address, clock, progress):
 
     def learn(ids, result):
         regime, _ = classify_rows(task, system, result)
-        value = result[rule.indicator] if rule.indicator else np.full(len(ids), np.nan)
-        known.update(zip(map(int, ids), zip(map(int, regime), map(float, value))))
+        known.update(known_from(ids, regime, result[rule.indicator] if rule.indicator
+                                else np.full(len(ids), np.nan)))
 
     done = scan_checkpoints(folder, fine, starts, key)
     for path, ids in done.items():
@@ -264,8 +264,8 @@ def _refined(config, key, folder, workers, address, clock, progress):
                     if client is None:
                         first = starts(todo)
                         pick = todo[~np.isnan(first[:, 0])][:1]
-                        client = _start(stack, config, task, pick, lambda ids: starts(ids),
-                                        workers, address, clock, progress)
+                        client = _start(stack, config, task, pick, starts, workers, address,
+                                        clock, progress)
                         bar = stack.enter_context(tqdm(unit="cell", disable=not progress,
                                                        desc=config.name, smoothing=0.1))
                         queue = as_completed()
@@ -468,13 +468,13 @@ def _refinement_problem(ds, config, ids) -> str:
     """Why a refined archive's cells are not the refinement its own regimes call for
     (analysis.refine.plan under its stored config), or ""."""
     rule = config.rule()
-    values = ds[rule.indicator].values if rule.indicator else np.full(ids.size, np.nan)
-    known = dict(zip(ids.tolist(), zip(ds[V.regime].values.tolist(), values.tolist())))
-    p = plan(config.lattice(), rule, known)
+    p = plan(config.lattice(), rule, known_from(
+        ids, ds[V.regime].values, ds[rule.indicator].values if rule.indicator
+        else np.full(ids.size, np.nan)))
     if p.done and np.array_equal(p.cells, ids):
         return ""
     extra = np.setdiff1d(ids, p.cells).size
-    missing = np.setdiff1d(p.cells, ids).size + p.needed.size
+    missing = np.setdiff1d(p.cells, ids).size
     return (f"cell: not the refinement its regimes call for ({missing} cells missing, "
             f"{extra} not called for)")
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from survey.analysis.refine import plan
+from survey.analysis.refine import known_from, plan
 from survey.catalog.errors import ConfigError
 from survey.catalog.regimes import IRREGULAR, REGULAR
 from survey.catalog.variables import V
@@ -66,8 +66,8 @@ def test_the_boundary_is_bisected_and_the_cells_lie_along_one_dimension(refined)
         assert ds.sizes["cell"] == 4 + 3
         # the cells are the plan of their own results
         cfg = load_config(config(refined.parent, "again"))
-        known = dict(zip(ds["cell"].values.tolist(),
-                         zip(ds[V.regime].values.tolist(), [np.nan] * ds.sizes["cell"])))
+        known = known_from(ds["cell"].values, ds[V.regime].values,
+                           np.full(ds.sizes["cell"], np.nan))
         p = plan(cfg.lattice(), cfg.rule(), known)
         assert p.done and np.array_equal(p.cells, ds["cell"].values)
 
