@@ -82,34 +82,44 @@ def plane_section(system: System, start, t_final: float, height: float = 0.0,
     if system.n_bodies != 3 or system.dim != 2 or not np.all(system.masses == 1.0):
         raise ValueError("the isosceles plane is of three unit masses in the plane")
     y = plane_state(*start)
+    if y[WX] == y[UX]:      # a start at the pair collision: on the side p_b goes to
+        y[WX], y[UX] = np.copysign(APART, start[2]), -np.copysign(APART, start[2])
     E0 = system.energy(y)
     base = np.zeros(system.n)
     base[WX], base[UX] = 1.0, -1.0
     rise = np.zeros(system.n)
     rise[VY], rise[UY] = 1.0, -1.0
-    section = Event(Linear(rise, offset=-float(height)), direction=+1)
     t, ts, bs, pbs, passages = 0.0, [], [], [], 0
     status = Status.OK
     run = dict(rtol=rtol, atol=atol)
     while True:
         side = 1.0 if y[WX] - y[UX] > 0 or (y[WX] == y[UX] and y[6 + WX] >= y[6 + UX]) else -1.0
+        need = crossings - len(ts)         # the last one asked for ends the integration
+        section = Event(Linear(rise, offset=-float(height)), direction=+1,
+                        terminal=need == 1)
         kink = Event(Linear(base), direction=-int(side), terminal=True)
-        out = integrate(system, y, (t, t_final), events=[section, kink],
-                        max_events=crossings - len(ts) + 1, **run)
-        hit = out.status == Status.EVENT and out.t - t > 2 * LEAD
+        out = integrate(system, y, (t, t_final), events=[section, kink], max_events=need + 1,
+                        **run)
+        collided = out.status == Status.EVENT and out.crossings.index[-1] == 1
+        hit = collided and out.t - t > 2 * LEAD
         if hit:     # again, to just before the collision: no step across the jump
-            out = integrate(system, y, (t, out.t - LEAD), events=[section],
-                            max_events=crossings - len(ts) + 1, **run)
+            out = integrate(system, y, (t, out.t - LEAD), events=[section], max_events=need,
+                            **run)
         keep = out.crossings.index == 0
         b, _, p_b, _ = plane_coordinates(out.crossings.y[keep])
         ts += out.crossings.t[keep].tolist()
         bs += b.tolist()
         pbs += p_b.tolist()
-        status, t, y = out.status, out.t, out.y.copy()
-        if hit and status == Status.OK:
-            status = Status.EVENT
-            t, y = _to_collision(system, t, y)
-        if status != Status.EVENT or len(ts) >= crossings or passages >= max_passages:
+        t, y = out.t, out.y.copy()
+        if hit and out.status == Status.OK and len(ts) < crossings:
+            t, y, crossing = _to_collision(system, t, y, height)
+            if crossing is not None:            # h passed the level in the Taylor step
+                ts.append(crossing[0])
+                bs.append(crossing[1])
+                pbs.append(crossing[2])
+        status = Status.EVENT if hit and out.status == Status.OK else out.status
+        if not collided or status != Status.EVENT or len(ts) >= crossings or \
+                passages >= max_passages:
             break
         passages += 1
         # the other side of b = 0, mirrored exactly about the axis
@@ -120,18 +130,148 @@ def plane_section(system: System, start, t_final: float, height: float = 0.0,
                         abs(system.energy(y) / E0 - 1.0))
 
 
-def _to_collision(system: System, t: float, y: np.ndarray) -> tuple[float, np.ndarray]:
+def _to_collision(system: System, t: float, y: np.ndarray, height: float):
     """From a state just before the pair collision to the collision: the time tau at
-    which b + b' tau + b'' tau^2 / 2 vanishes, and the state a second-order Taylor step of
-    the near side's (smooth) motion reaches there."""
+    which b + b' tau + b'' tau^2 / 2 vanishes, the state a second-order Taylor step of the
+    near side's (smooth) motion reaches there, and (t, b, p_b) where the same step crosses
+    h = height upwards (None if it does not)."""
     dy = np.zeros_like(y)
     rhs(t, y, dy, *system.kernel_args, 0)       # unit masses: dq/dt = p, dp/dt = F
     b, v, a = y[WX] - y[UX], dy[WX] - dy[UX], dy[6 + WX] - dy[6 + UX]
-    disc = v * v - 2.0 * a * b
-    tau = -b / v if a == 0.0 or disc < 0.0 else 2.0 * b / (-v + np.copysign(
-        np.sqrt(disc), -v))                     # the root nearest 0, without cancellation
-    tau = max(tau, 0.0)
+    tau = max(_first_root(b, v, a), 0.0)
+    h, w, c = y[VY] - y[UY] - height, dy[VY] - dy[UY], dy[6 + VY] - dy[6 + UY]
+    crossing = None
+    if h < 0.0 <= h + w * tau + 0.5 * c * tau * tau:
+        s = min(max(_first_root(h, w, c), 0.0), tau)
+        crossing = (t + s, b + v * s + 0.5 * a * s * s,
+                    0.5 * (y[6 + WX] - y[6 + UX] + a * s))
     out = y.copy()
     out[:6] += tau * dy[:6] + 0.5 * tau * tau * dy[6:]
     out[6:] += tau * dy[6:]
-    return t + tau, out
+    return t + tau, out, crossing
+
+
+def _first_root(x, v, a) -> float:
+    """The root of x + v s + a s^2 / 2 nearest s = 0 (x and v of opposite signs), without
+    cancellation."""
+    disc = v * v - 2.0 * a * x
+    if a == 0.0 or disc < 0.0:
+        return -x / v
+    return 2.0 * x / (-v + np.copysign(np.sqrt(disc), -v))
+
+
+class PlaneOrbit(NamedTuple):
+    """A periodic orbit of the isosceles plane as a fixed point of the k-th power of its
+    section map (b, p_b) -> (b, p_b): its k points on the section, and the map's Jacobian
+    there, whose trace says how nearby orbits go round it."""
+
+    b: np.ndarray           # its points on the section, in the order the orbit meets them
+    p_b: np.ndarray
+    crossings: int          # k: the points it has on the section (its least period there)
+    period: float           # the time it takes to close
+    residual: float         # |P^k(x) - x| at the last point Newton reached
+    residuals: np.ndarray   # the same before each Newton step
+    jacobian: np.ndarray    # dP^k/dx (2, 2) at (b[0], p_b[0]), by central differences
+    #                         (its determinant is 1 where they are accurate: area kept)
+    converged: bool
+
+    @property
+    def trace(self) -> float:
+        return float(np.trace(self.jacobian))
+
+    @property
+    def kind(self) -> str:
+        """elliptic (|trace| < 2: nearby orbits circle it on islands), hyperbolic
+        (trace > 2) or inverse hyperbolic (trace < -2: they leave it, flipping sides)."""
+        tr = self.trace
+        return "elliptic" if abs(tr) < 2 else "hyperbolic" if tr > 2 else "inverse hyperbolic"
+
+    @property
+    def multipliers(self) -> np.ndarray:
+        """The eigenvalues of the Jacobian (the orbit's non-trivial Floquet multipliers):
+        e^(+-2 pi i nu) with nu the rotation number if elliptic, lambda and 1/lambda if
+        not."""
+        return np.linalg.eigvals(self.jacobian)
+
+    def same_as(self, other: "PlaneOrbit", tol: float = 1e-7) -> bool:
+        """Whether two converged orbits are one: the other's first point is one of ours."""
+        return self.converged and other.converged and self.crossings == other.crossings \
+            and bool(np.min(np.hypot(self.b - other.b[0], self.p_b - other.p_b[0])) <= tol)
+
+
+def plane_periodic(system: System, energy: float, height: float, guess, crossings: int = 1,
+                   t_final: float = 1000.0, tol: float = 1e-10, max_iter: int = 30,
+                   rtol: float = 1e-13, step: float = 1e-5) -> PlaneOrbit:
+    """The periodic orbit with `crossings` points on the section h = height of the energy
+    shell nearest the guess (b, p_b): Newton's method on P^k(x) - x = 0 for the section
+    map P, its Jacobian by central differences of width `step` (the map is not smooth
+    enough at the pair collision for variational equations without jump terms; at the
+    end step / max|J| where the orbit stretches its neighbourhood), each
+    correction halved until it stays on the shell and lowers the residual. converged:
+    |P^k(x) - x| <= tol (absolute; b and p_b are of order one on the shells drawn); an
+    orbit that does not come back k times by t_final ends the search."""
+    def image(x, k=crossings):
+        start = plane_start(system, energy, height, x[0], x[1])
+        if start is None:
+            return None
+        sec = plane_section(system, start, t_final, height, k, rtol, rtol)
+        if sec.b.size < k:
+            return None
+        return np.column_stack((sec.b, sec.p_b)), sec.t
+
+    def residual(x):
+        out = image(x)
+        return (np.inf, None) if out is None else (float(np.hypot(*(out[0][-1] - x))), out)
+
+    def jacobian(x):
+        J = np.empty((2, 2))
+        for j in range(2):
+            e = np.zeros(2)
+            e[j] = step
+            ends = [image(x + s * e) for s in (1, -1)]
+            ok = [end is not None for end in ends]
+            if not any(ok):
+                return None
+            hi = ends[0][0][-1] if ok[0] else image(x)[0][-1]
+            lo = ends[1][0][-1] if ok[1] else image(x)[0][-1]
+            J[:, j] = (hi - lo) / (step * (ok[0] + ok[1]))
+        return J
+
+    x = np.array(guess, dtype=np.float64)
+    r, out = residual(x)
+    history = []
+    J = None
+    while out is not None and r > tol and len(history) < max_iter:
+        history.append(r)
+        J = jacobian(x)
+        if J is None:
+            break
+        dx = np.linalg.lstsq(J - np.eye(2), out[0][-1] - x, rcond=None)[0]
+        for _ in range(30):                 # halve the correction until it helps
+            r_new, out_new = residual(x - dx)
+            if r_new < r:
+                break
+            dx = dx / 2
+        else:
+            break
+        x, r, out = x - dx, r_new, out_new
+    converged = out is not None and r <= tol
+    if out is None:
+        return PlaneOrbit(np.array([x[0]]), np.array([x[1]]), crossings, np.nan, np.inf,
+                          np.array(history), np.full((2, 2), np.nan), False)
+    points, t = out
+    least = next((k + 1 for k in range(crossings - 1)
+                  if np.hypot(*(points[k] - x)) <= max(100 * tol, 1e-8)), crossings)
+    if converged and least == crossings:
+        J = jacobian(x)
+        stretch = np.abs(J).max() if J is not None else 1.0
+        if stretch > 1.0:                   # an unstable orbit: a narrower difference
+            step /= stretch
+            J = jacobian(x)
+    if least < crossings:                   # a fixed point of a lower power
+        return plane_periodic(system, energy, height, x, least, t_final, tol, max_iter, rtol,
+                              step)
+    return PlaneOrbit(np.concatenate(([x[0]], points[:-1, 0])),
+                      np.concatenate(([x[1]], points[:-1, 1])), crossings, float(t[-1]), r,
+                      np.array(history), J if J is not None else np.full((2, 2), np.nan),
+                      converged)

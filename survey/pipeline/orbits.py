@@ -31,6 +31,9 @@ height crosses a level upwards:
     starts = [[0.69, 0.0], [0.1, 0.75]]   # (b, p_b) on it, p_h > 0 from the energy
     crossings = 400                  # points per orbit, at most
     t_final = 2000.0
+    periodic = [[0.0, 0.7], [0.18, 0.0, 2]]   # guesses (b, p_b[, k]) of periodic orbits
+    #   with k points on the section (default 1), found by Newton's method on the
+    #   section map and marked with their stability (numerics.isosceles.plane_periodic)
 """
 from __future__ import annotations
 
@@ -50,7 +53,14 @@ from ..catalog.variables import V
 from ..numerics.dop853 import RTOL_MIN
 from ..numerics.indicators import deviation_vectors
 from ..numerics.integrate import Outcome, integrate
-from ..numerics.isosceles import PlaneSection, plane_section, plane_start, plane_state
+from ..numerics.isosceles import (
+    PlaneOrbit,
+    PlaneSection,
+    plane_periodic,
+    plane_section,
+    plane_start,
+    plane_state,
+)
 from ..physics.geometry import area, sides
 from ..physics.system import System
 from ..physics.terms import PERIMETER, POWER
@@ -307,6 +317,7 @@ class PlaneSpec:
     t_final: float = 2000.0
     crossings: int = 500
     tol: float = 1e-13
+    periodic: tuple = ()        # guesses (b, p_b, k) of periodic orbits
 
     def build(self) -> System:
         """The system (ConfigError naming the key if it is not one)."""
@@ -347,7 +358,19 @@ def check_plane(table: dict, where: str) -> PlaneSpec:
                 for v in x) for x in starts):
         raise ConfigError(f"{where}.starts", "expected a list of [b, p_b] pairs of finite "
                                              "numbers, e.g. [[0.69, 0.0], [0.1, 0.75]]")
-    spec = PlaneSpec(**{**table, "starts": tuple((float(b), float(p)) for b, p in starts)})
+    guesses = table.get("periodic", [])
+    if not isinstance(guesses, list) or not all(
+            isinstance(x, list) and len(x) in (2, 3) and all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                for v in x[:2]) and (len(x) == 2 or (
+                    isinstance(x[2], int) and not isinstance(x[2], bool) and x[2] >= 1))
+            for x in guesses):
+        raise ConfigError(f"{where}.periodic", "expected a list of guesses [b, p_b] or "
+                                               "[b, p_b, k] (k >= 1 points on the section), "
+                                               "e.g. [[0.0, 0.7], [0.18, 0.0, 2]]")
+    spec = PlaneSpec(**{**table, "starts": tuple((float(b), float(p)) for b, p in starts),
+                        "periodic": tuple((float(x[0]), float(x[1]), int(x[2]) if len(x) > 2
+                                           else 1) for x in guesses)})
     try:
         system = spec.build()
     except ConfigError as exc:
@@ -361,17 +384,24 @@ def check_plane(table: dict, where: str) -> PlaneSpec:
             raise ConfigError(f"{where}.starts[{k}]", f"(b, p_b) = ({b:g}, {p_b:g}) is not on "
                               f"the section h = {spec.height:g} of the energy shell E = "
                               f"{spec.energy:g}: the potential there exceeds E - p_b^2")
+    for k, (b, p_b, _) in enumerate(spec.periodic):
+        if plane_start(system, spec.energy, spec.height, b, p_b) is None:
+            raise ConfigError(f"{where}.periodic[{k}]", f"(b, p_b) = ({b:g}, {p_b:g}) is not "
+                              f"on the section h = {spec.height:g} of the energy shell E = "
+                              f"{spec.energy:g}")
     return spec
 
 
 class PlaneRun(NamedTuple):
     """The orbits of a PlaneSpec: their sections, the shell's edge on the section (b and
-    the largest |p_b| there) and what the run cost."""
+    the largest |p_b| there), the periodic orbits found from its guesses (one per guess,
+    converged or not) and what the run cost."""
 
     system: System
     sections: list[PlaneSection]
     edge: tuple[np.ndarray, np.ndarray]
     wall: float
+    periodic: list[PlaneOrbit]
 
 
 def run_plane(spec: PlaneSpec) -> PlaneRun:
@@ -383,6 +413,8 @@ def run_plane(spec: PlaneSpec) -> PlaneRun:
     sections = [plane_section(system, plane_start(system, spec.energy, spec.height, b, p_b),
                               spec.t_final, spec.height, spec.crossings, spec.tol, spec.tol)
                 for b, p_b in spec.starts]
+    periodic = [plane_periodic(system, spec.energy, spec.height, (b, p_b), k, spec.t_final,
+                               rtol=spec.tol) for b, p_b, k in spec.periodic]
     wall = time.perf_counter() - clock
     reach = max(max(abs(b) for b, _ in spec.starts), 1e-3)
     while plane_start(system, spec.energy, spec.height, 2 * reach, 0.0) is not None:
@@ -391,7 +423,7 @@ def run_plane(spec: PlaneSpec) -> PlaneRun:
     room = spec.energy - system.potential_energy(
         np.array([plane_state(x, spec.height, 0.0, 0.0) for x in b]))
     edge = np.where(room > 0, np.sqrt(np.maximum(room, 0.0)), np.nan)
-    return PlaneRun(system, sections, (b, edge), wall)
+    return PlaneRun(system, sections, (b, edge), wall, periodic)
 
 
 def describe_plane(spec: PlaneSpec, run: PlaneRun) -> list[str]:
@@ -402,7 +434,37 @@ def describe_plane(spec: PlaneSpec, run: PlaneRun) -> list[str]:
         lines.append(f"  from (b, p_b) = ({b:g}, {p_b:g}): {sec.b.size} crossings to t = "
                      f"{sec.t_end:g} ({sec.status.name}), {sec.passages} passages through b = "
                      f"0, |E/E0 - 1| = {sec.energy_error:.1e}")
+    seen = []
+    for (b, p_b, k), orbit in zip(spec.periodic, run.periodic):
+        lines.append(f"  periodic orbit from the guess ({b:g}, {p_b:g}), k = {k}: "
+                     + describe_periodic(orbit, seen))
+        seen.append(orbit)
     return lines
+
+
+def describe_periodic(orbit: PlaneOrbit, seen=()) -> str:
+    """One line on a periodic orbit of the plane: where it is, its period, its stability
+    and how well Newton's method and the Jacobian did."""
+    if not orbit.converged:
+        return (f"not found (Newton's residual {orbit.residual:.1e} after "
+                f"{orbit.residuals.size} steps, last at ({orbit.b[0]:.6g}, {orbit.p_b[0]:.6g}))")
+    same = next((j for j, o in enumerate(seen) if o.same_as(orbit)), None)
+    if same is not None:
+        return f"the same orbit as guess {same + 1}"
+    points = ", ".join(f"({round(b, 8) + 0.0:.8f}, {round(p, 8) + 0.0:.8f})"   # no -0
+                       for b, p in zip(orbit.b, orbit.p_b))
+    mu = orbit.multipliers
+    if orbit.kind == "elliptic":
+        nu = np.arccos(np.clip(orbit.trace / 2, -1, 1)) / (2 * np.pi)
+        stability = f"elliptic, rotation number {nu:.6f} (trace {orbit.trace:.6f})"
+    else:
+        lam = float(np.max(np.abs(mu)))
+        stability = (f"{orbit.kind}, multipliers {-lam if orbit.trace < 0 else lam:.6g} and "
+                     f"its inverse, ln|mu| / T = {np.log(lam) / orbit.period:.4g}")
+    return (f"{orbit.crossings} point{'s' if orbit.crossings > 1 else ''} {points}, period "
+            f"T = {orbit.period:.10f}, {stability}; |P^k(x) - x| = {orbit.residual:.0e}, "
+            f"det J - 1 = {np.linalg.det(orbit.jacobian) - 1:.0e}")
+
 
 
 def load_workflow(path) -> list:

@@ -173,6 +173,9 @@ def spec_figures(name: str, zoom_until: float, runs) -> dict:
     return figs
 
 
+MARKS = {"elliptic": "o", "hyperbolic": "X", "inverse hyperbolic": "P"}
+
+
 def plane_figure(name: str, spec, run) -> Figure:
     """A section of the isosceles plane (pipeline.orbits.PlaneSpec and its PlaneRun): each
     orbit's crossings in its own colour -- an invariant curve, an island chain or a
@@ -186,6 +189,18 @@ def plane_figure(name: str, spec, run) -> Figure:
     for (b0, p0), sec, colour in zip(spec.starts, run.sections, colours):
         ax.plot(sec.b, sec.p_b, ".", ms=1.8, color=colour, rasterized=True)
         ax.plot([b0], [p0], "x", ms=4, color=colour)
+    marked = []
+    for orbit in run.periodic:
+        if not orbit.converged or any(o.same_as(orbit) for o in marked):
+            continue
+        elliptic = orbit.kind == "elliptic"
+        ax.plot(orbit.b, orbit.p_b, MARKS[orbit.kind], ms=7 if elliptic else 6,
+                mfc="none" if elliptic else "k", mec="k", mew=1.4, ls="none",
+                label=None if any(o.kind == orbit.kind for o in marked) else
+                f"{orbit.kind} periodic orbit" + (" (its k points)" if
+                                                  max(o.crossings for o in run.periodic
+                                                      if o.converged) > 1 else ""))
+        marked.append(orbit)
     inside = np.isfinite(edge)
     sides = {np.sign(b0) for b0, _ in spec.starts}
     if not any(s.passages for s in run.sections) and len(sides) == 1:
@@ -203,7 +218,9 @@ def plane_figure(name: str, spec, run) -> Figure:
         f"{name}: the isosceles plane under {run.system.describe()}; E = {spec.energy:g}, "
         f"section h = {spec.height:g} crossed upwards; {len(run.sections)} orbits (x: their "
         f"starts), {points} crossings, {passages} passages through b = 0, |E/E0 - 1| <= "
-        f"{worst:.0e}" + (f"; {early} orbits ended early (step limit)" if early else ""),
+        f"{worst:.0e}" + (f"; {early} orbits ended early (step limit)" if early else "")
+        + (f"; {len(marked)} periodic orbits marked (Newton on the section map, stability "
+           f"from its Jacobian's trace)" if marked else ""),
         110), fontsize="small")
     ax.legend(loc="upper right", fontsize="small", framealpha=0.9)
     return fig

@@ -3,11 +3,12 @@ reduced Hamiltonian H = p_b^2 + 3/4 p_h^2 + U (paper, Special Solutions): scipy'
 (b, h, p_b, p_h), switching sgn(b) at each pair collision by a terminal event."""
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
+from scipy.integrate import quad, solve_ivp
 
 from survey.catalog.errors import ConfigError
 from survey.numerics.isosceles import (
     plane_coordinates,
+    plane_periodic,
     plane_section,
     plane_start,
     plane_state,
@@ -119,15 +120,91 @@ def test_passing_the_collision_exactly_is_what_keeps_the_energy():
     assert plain.n_rejected > 0.3 * plain.n_steps      # every jump: a cascade of rejections
 
 
+@pytest.mark.parametrize("sign", [1, -1])
+def test_the_equilateral_breathing_through_triple_collision_is_elliptic(sign):
+    """Under U = P^2/2 at E = 1 the equilateral triangle breathes through the triple
+    collision (h = +-(sqrt 3 / 2) b, b = (sqrt 2 / 3) sin 3t): a fixed point of the
+    section map at (0, +-1/sqrt 2) with period 2 pi / 3. Along its ray the Hessian is
+    constant (U is homogeneous of degree 2) with transverse frequency 3/sqrt 2 in
+    mass-weighted coordinates, so the map's trace is 2 cos(pi sqrt 2) = -0.5325."""
+    system = System.create()
+    orbit = plane_periodic(system, 1.0, 0.0, (0.02 * sign, 0.69 * sign))
+    assert orbit.converged and orbit.crossings == 1 and orbit.residual < 1e-10
+    assert abs(orbit.b[0]) < 1e-9 and abs(orbit.p_b[0] - sign / np.sqrt(2)) < 1e-9
+    assert orbit.period == pytest.approx(2 * np.pi / 3, abs=1e-9)
+    assert orbit.kind == "elliptic"
+    assert orbit.trace == pytest.approx(2 * np.cos(np.pi * np.sqrt(2)), abs=1e-4)
+    assert np.linalg.det(orbit.jacobian) == pytest.approx(1.0, abs=1e-4)   # area kept
+    # asked for two points on the section, it says the orbit has one
+    twice = plane_periodic(system, 1.0, 0.0, (0.0, 0.7 * sign), crossings=2)
+    assert twice.converged and twice.crossings == 1 and twice.same_as(orbit)
+
+
+def test_the_areal_equilateral_breathing_has_the_quadrature_period():
+    """Under the areal barrier the equilateral triangle breathes between the barrier's
+    walls: on the section h = 1.5 at b = sqrt 3, p_b = sqrt((E - U)/2) (the breathing's
+    kinetic energy b'^2/2 is 2 p_b^2), period 2 int db / sqrt(2 (E - U(b))) with
+    A = sqrt(3) b^2 / 4."""
+    system = System.create(potential="areal_barrier")
+    E = 3.5
+
+    def U(b):
+        A = np.sqrt(3) * b * b / 4
+        return 2 / A + A * A
+    orbit = plane_periodic(system, E, 1.5, (1.7, 0.35))
+    assert orbit.converged and orbit.kind == "elliptic"
+    assert orbit.b[0] == pytest.approx(np.sqrt(3), abs=1e-9)
+    assert orbit.p_b[0] == pytest.approx(np.sqrt((E - U(np.sqrt(3))) / 2), abs=1e-9)
+    from scipy.optimize import brentq
+    b_min, b_max = (brentq(lambda b: U(b) - E, lo, hi) for lo, hi in ((0.5, 1.5), (1.6, 3)))
+    def dt(theta):      # b = b_min + (b_max - b_min)(1 - cos theta)/2: no end singularity
+        b = b_min + (b_max - b_min) * (1 - np.cos(theta)) / 2
+        return (b_max - b_min) * np.sin(theta) / 2 / np.sqrt(2 * (E - U(b)))
+    period = 2 * quad(dt, 0, np.pi, epsabs=1e-12, epsrel=1e-12)[0]
+    assert orbit.period == pytest.approx(period, rel=1e-8)
+
+
+def test_periodic_orbits_close_in_the_reduced_integration():
+    """The hyperbolic fixed point on p_b = 0 and the elliptic period-2 orbit of the
+    perimetric plane at E = 1 come back to where they started (and the period-2 orbit's
+    two points swap) in the independent reduced integration."""
+    system = System.create()
+    saddle = plane_periodic(system, 1.0, 0.0, (0.57, 0.0))
+    assert saddle.converged and saddle.kind == "hyperbolic" and saddle.trace > 2.5
+    mu = np.sort(np.abs(saddle.multipliers))
+    assert mu[0] * mu[1] == pytest.approx(1.0, abs=1e-6)
+    pair = plane_periodic(system, 1.0, 0.0, (0.18, 0.0), crossings=2)
+    assert pair.converged and pair.crossings == 2 and pair.kind == "elliptic"
+    for orbit in (saddle, pair):
+        ref = reduced_section(plane_start(system, 1.0, 0.0, orbit.b[0], orbit.p_b[0]),
+                              orbit.crossings, 20.0, perimetric)
+        assert ref[-1, 0] == pytest.approx(orbit.period, abs=1e-8)
+        assert np.abs(ref[:, 1] - np.roll(orbit.b, -1)).max() < 1e-8
+        assert np.abs(ref[:, 2] - np.roll(orbit.p_b, -1)).max() < 1e-8
+
+
+def test_a_guess_newton_cannot_use_is_reported_not_raised():
+    system = System.create()
+    orbit = plane_periodic(system, 1.0, 0.0, (0.3, 0.45), crossings=3, max_iter=1)
+    assert not orbit.converged and orbit.residual > 1e-10
+    from survey.pipeline.orbits import describe_periodic
+    assert describe_periodic(orbit).startswith("not found")
+
+
 def test_a_plane_workflow_draws_its_section(tmp_path, capsys):
     from survey.cli import orbit_workflow
     path = tmp_path / "plane.toml"
     path.write_text('[[plane]]\nname = "iso"\nenergy = 1.0\nstarts = [[0.69, 0.0], '
-                    '[0.3, 0.2]]\ncrossings = 40\nt_final = 100.0\n')
+                    '[0.3, 0.2]]\ncrossings = 40\nt_final = 100.0\n'
+                    'periodic = [[0.0, 0.7], [0.0, 0.71], [0.57, 0.0]]\n')
     written = orbit_workflow(path, tmp_path)
     assert [p.name for p in written] == ["iso_plane.png"]
     out = capsys.readouterr().out
     assert "from (b, p_b) = (0.69, 0)" in out and "passages through b = 0" in out
+    assert "guess (0, 0.7), k = 1: 1 point (0.00000000, 0.70710678)" in out
+    assert "period T = 2.0943951024, elliptic" in out
+    assert "guess (0, 0.71), k = 1: the same orbit as guess 1" in out
+    assert "guess (0.57, 0), k = 1: 1 point (0.56590170, 0.00000000)" in out
 
 
 @pytest.mark.parametrize("text, key, message", [
@@ -137,6 +214,11 @@ def test_a_plane_workflow_draws_its_section(tmp_path, capsys):
     ('starts = [[0.1, 0.0]]\nsystem = {masses = [1.0, 2.0, 1.0]}', "[[plane]] 1.system",
      "three unit masses"),
     ('starts = [[0.1, 0.0]]\ntol = 0.0', "[[plane]] 1.tol", "finite number >="),
+    ('starts = [[0.1, 0.0]]\nperiodic = [[0.1, 0.0, 0]]', "[[plane]] 1.periodic",
+     "[b, p_b, k]"),
+    ('starts = [[0.1, 0.0]]\nperiodic = [0.1, 0.0]', "[[plane]] 1.periodic", "guesses"),
+    ('starts = [[0.1, 0.0]]\nperiodic = [[0.1, 0.0], [0.9, 0.0]]',
+     "[[plane]] 1.periodic[1]", "not on the section"),
 ])
 def test_plane_tables_that_cannot_work_are_refused(tmp_path, text, key, message):
     from survey.pipeline.orbits import load_workflow
