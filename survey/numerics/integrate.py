@@ -626,8 +626,9 @@ def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol,
     out = RawOutcome(
         np.full(M, OK_, dtype=np.int64), np.full(M, t0), y0s.copy(),
         np.zeros((M, 4), dtype=np.int64), np.zeros((M, 2)),
-        np.full((Me, max_events), -1, dtype=np.int64), np.full((Me, max_events), np.nan),
-        np.full((Me, max_events, n), np.nan), np.full((Ms, T, n_eval), np.nan),
+        # crossings are read only up to the count recorded: no need to touch the rest
+        np.empty((Me, max_events), dtype=np.int64), np.empty((Me, max_events)),
+        np.empty((Me, max_events, n)), np.full((Ms, T, n_eval), np.nan),
         np.full((Ms, T, n_tan), np.nan), np.zeros((M, n_tan)), np.zeros((M, n_tan)),
         np.full((Mf, Tf, n), np.nan), np.zeros((M, 2)), np.zeros((M, 2)),
         np.full((Ms, T, 2), np.nan))
@@ -749,6 +750,8 @@ def integrate_batch(system: System, starts, t_span, *, tangents=None, record=Non
         rows[r, which] = np.arange(which.sum())
     n_eval = y0s.shape[1] if sample_tangents else n
     n_err = n * (1 + n_tan) if control_tangents else n
+    if not events:
+        max_events = 0                  # nothing to record: no room for it
     masses, d, measure, prof, par = system.kernel_args
     res = dop853(y0s=y0s, rows=rows, t0=t0, t1=t1, masses=masses, d=d, measure=measure,
                  prof=prof, par=par, n_tan=n_tan, megno=megno, rtol=float(rtol),
