@@ -464,7 +464,8 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
         error_norms(ln.Y, ln.YN, ln.K, L, n_err, rtol, atol, ln.h, ln.err, ln.S)
         rhs_lanes(0.0, ln.YN, ln.K[12], L, masses, d, measure, prof, par, n_tan, ln.W)
         _finite_lanes(ln.YN, ln.K[12], L, nf, ln.YT, ln.NW)
-        dense = False
+        dense = 0
+        n = 2 * masses.size * d
         for k in range(L):
             j = ln.job[k]
             ln.flags[k, 3] = 0
@@ -490,10 +491,11 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
                 ln.flags[k, 0] = 1
                 continue
             ln.flags[k, 3] = 1          # accepted
-            dense = dense or _needs_dense(k, ln, rows, t1, direction, events, t_eval,
-                                          t_fine)
-        if dense:
-            dense_prepare(masses, d, measure, prof, par, n_tan, L, nf, True, ln.Y, ln.YN,
+            dense = max(dense, _needs_dense(k, ln, rows, t1, direction, events, t_eval,
+                                            t_fine, n_eval > n))
+        if dense:       # the interpolant of the orbits alone where no lane needs more
+            dense_prepare(masses, d, measure, prof, par, n_tan, L,
+                          nf if dense == 2 else n, dense == 2, ln.Y, ln.YN,
                           ln.HH, ln.K, ln.YT, ln.F, ln.W)
         for k in range(L):
             if ln.flags[k, 3] and _record(k, ln, out, rows, t0, t1, masses, d, megno,
@@ -574,18 +576,21 @@ def _tangent_norms(Y, L, n, n_tan, scratch, NW):
 
 
 @helper
-def _needs_dense(k, ln, rows, t1, direction, events, t_eval, t_fine):
-    """Whether lane k's accepted step needs the dense output: it watches events (then every
-    step is screened, and may be scanned), or holds a sample time."""
+def _needs_dense(k, ln, rows, t1, direction, events, t_eval, t_fine, tangent_samples):
+    """What of the dense output lane k's accepted step needs: 2 all of it (it watches
+    events -- every step is screened, may be scanned, and a terminal event takes the whole
+    state there -- or holds a sample time and samples carry tangents), 1 the orbit's (it
+    holds an orbit-only sample time), 0 none."""
     j = ln.job[k]
     if rows[0, j] >= 0 and events[0].size > 1:
-        return True
+        return 2
     t_new = t1 if ln.flags[k, 2] else ln.t[k] + ln.h[k]
     i = ln.i_eval[k]
     if rows[1, j] >= 0 and i < t_eval.size and direction * (t_eval[i] - t_new) <= 0.0:
-        return True
+        return 2 if tangent_samples else 1
     i = ln.i_fine[k]
-    return rows[2, j] >= 0 and i < t_fine.size and direction * (t_fine[i] - t_new) <= 0.0
+    return 1 if rows[2, j] >= 0 and i < t_fine.size and \
+        direction * (t_fine[i] - t_new) <= 0.0 else 0
 
 
 def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol,
