@@ -157,8 +157,9 @@ def test_changed_config_never_reuses_checkpoints(tmp_path):
 
 def test_a_killed_worker_does_not_lose_cells(tmp_path):
     """SIGKILL one worker process mid-survey: dask reschedules its tasks and the archive
-    equals an undisturbed run's. The victim is a worker (a multiprocessing spawn_main
-    child), never dask's resource tracker, killed while most chunks are still to come."""
+    equals an undisturbed run's. The victim is a worker (forked from the driver, so with
+    its command line, or a multiprocessing spawn_main child), never dask's resource
+    tracker, killed while most chunks are still to come; its replacement is spawned."""
     import psutil
     cfg = write_config(tmp_path, "killed", num=24, t_final=150.0, chunk=1, workers=2)
     proc = subprocess.Popen([sys.executable, "-m", "survey", str(cfg), "--no-progress"],
@@ -169,9 +170,12 @@ def test_a_killed_worker_does_not_lose_cells(tmp_path):
     deadline = time.time() + 300
     while time.time() < deadline and proc.poll() is None and victim is None:
         workers = []
-        for p in psutil.Process(proc.pid).children(recursive=True):
+        driver = psutil.Process(proc.pid)
+        for p in driver.children(recursive=True):
             try:
-                if "spawn_main" in " ".join(p.cmdline()) and p.status() != "zombie":
+                line = p.cmdline()
+                if (line == driver.cmdline() or "spawn_main" in " ".join(line)) and \
+                        p.status() != "zombie":
                     workers.append(p)
             except psutil.Error:       # gone or a zombie meanwhile
                 pass
