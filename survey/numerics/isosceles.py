@@ -206,16 +206,17 @@ def plane_periodic(system: System, energy: float, height: float, guess, crossing
     shell nearest the guess (b, p_b): Newton's method on P^k(x) - x = 0 for the section
     map P, its Jacobian by central differences of width `step` (the map is not smooth
     enough at the pair collision for variational equations without jump terms; at the
-    end step / max|J| where the orbit stretches its neighbourhood), each
-    correction halved until it stays on the shell and lowers the residual. converged:
+    end step / max|J| where the orbit stretches its neighbourhood; one-sided at the
+    shell's edge), each correction halved until it stays on the shell and lowers the
+    residual. converged:
     |P^k(x) - x| <= tol (absolute; b and p_b are of order one on the shells drawn); an
     orbit that does not come back k times by t_final ends the search."""
-    def image(x, k=crossings):
+    def image(x):       # P(x), ..., P^k(x) and their times, or None
         start = plane_start(system, energy, height, x[0], x[1])
         if start is None:
             return None
-        sec = plane_section(system, start, t_final, height, k, rtol, rtol)
-        if sec.b.size < k:
+        sec = plane_section(system, start, t_final, height, crossings, rtol, rtol)
+        if sec.b.size < crossings:
             return None
         return np.column_stack((sec.b, sec.p_b)), sec.t
 
