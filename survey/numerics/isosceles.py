@@ -208,9 +208,8 @@ def plane_periodic(system: System, energy: float, height: float, guess, crossing
     enough at the pair collision for variational equations without jump terms; at the
     end step / max|J| where the orbit stretches its neighbourhood; one-sided at the
     shell's edge), each correction halved until it stays on the shell and lowers the
-    residual. converged:
-    |P^k(x) - x| <= tol (absolute; b and p_b are of order one on the shells drawn); an
-    orbit that does not come back k times by t_final ends the search."""
+    residual. converged: |P^k(x) - x| <= tol (absolute; b and p_b are of order one on the
+    shells drawn); an orbit that does not come back k times by t_final ends the search."""
     def image(x):       # P(x), ..., P^k(x) and their times, or None
         start = plane_start(system, energy, height, x[0], x[1])
         if start is None:
@@ -224,7 +223,7 @@ def plane_periodic(system: System, energy: float, height: float, guess, crossing
         out = image(x)
         return (np.inf, None) if out is None else (float(np.hypot(*(out[0][-1] - x))), out)
 
-    def jacobian(x):
+    def jacobian(x, centre):        # centre: P^k(x)
         J = np.empty((2, 2))
         for j in range(2):
             e = np.zeros(2)
@@ -233,8 +232,8 @@ def plane_periodic(system: System, energy: float, height: float, guess, crossing
             ok = [end is not None for end in ends]
             if not any(ok):
                 return None
-            hi = ends[0][0][-1] if ok[0] else image(x)[0][-1]
-            lo = ends[1][0][-1] if ok[1] else image(x)[0][-1]
+            hi = ends[0][0][-1] if ok[0] else centre
+            lo = ends[1][0][-1] if ok[1] else centre
             J[:, j] = (hi - lo) / (step * (ok[0] + ok[1]))
         return J
 
@@ -244,7 +243,7 @@ def plane_periodic(system: System, energy: float, height: float, guess, crossing
     J = None
     while out is not None and r > tol and len(history) < max_iter:
         history.append(r)
-        J = jacobian(x)
+        J = jacobian(x, out[0][-1])
         if J is None:
             break
         dx = np.linalg.lstsq(J - np.eye(2), out[0][-1] - x, rcond=None)[0]
@@ -264,11 +263,11 @@ def plane_periodic(system: System, energy: float, height: float, guess, crossing
     least = next((k + 1 for k in range(crossings - 1)
                   if np.hypot(*(points[k] - x)) <= max(100 * tol, 1e-8)), crossings)
     if converged and least == crossings:
-        J = jacobian(x)
+        J = jacobian(x, points[-1])
         stretch = np.abs(J).max() if J is not None else 1.0
         if stretch > 1.0:                   # an unstable orbit: a narrower difference
             step /= stretch
-            J = jacobian(x)
+            J = jacobian(x, points[-1])
     if least < crossings:                   # a fixed point of a lower power
         return plane_periodic(system, energy, height, x, least, t_final, tol, max_iter, rtol,
                               step)

@@ -330,6 +330,10 @@ class PlaneSpec:
 PLANE_KEYS = {f for f in PlaneSpec.__dataclass_fields__}
 
 
+def _finite(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
 def check_plane(table: dict, where: str) -> PlaneSpec:
     """A [[plane]] table as a PlaneSpec, every key checked before any work."""
     extra = sorted(set(table) - PLANE_KEYS)
@@ -341,8 +345,7 @@ def check_plane(table: dict, where: str) -> PlaneSpec:
             raise ConfigError(f"{where}.{key}", "is required")
     for key, low in ((V.energy, None), ("height", None), ("t_final", 0.0), ("tol", RTOL_MIN)):
         value = table.get(key, getattr(PlaneSpec, key, None))
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or \
-                not math.isfinite(value) or (low is not None and not value >= low) or \
+        if not _finite(value) or (low is not None and not value >= low) or \
                 (key == "t_final" and value <= 0):
             raise ConfigError(f"{where}.{key}", f"must be a finite number"
                                                 f"{f' >= {low:.3g}' if low else ''}"
@@ -353,16 +356,13 @@ def check_plane(table: dict, where: str) -> PlaneSpec:
         raise ConfigError(f"{where}.crossings", f"must be an integer >= 1, got {crossings!r}")
     starts = table["starts"]
     if not isinstance(starts, list) or not starts or not all(
-            isinstance(x, list) and len(x) == 2 and all(
-                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-                for v in x) for x in starts):
+            isinstance(x, list) and len(x) == 2 and all(map(_finite, x)) for x in starts):
         raise ConfigError(f"{where}.starts", "expected a list of [b, p_b] pairs of finite "
                                              "numbers, e.g. [[0.69, 0.0], [0.1, 0.75]]")
     guesses = table.get("periodic", [])
     if not isinstance(guesses, list) or not all(
-            isinstance(x, list) and len(x) in (2, 3) and all(
-                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-                for v in x[:2]) and (len(x) == 2 or (
+            isinstance(x, list) and len(x) in (2, 3) and all(map(_finite, x[:2])) and (
+                len(x) == 2 or (
                     isinstance(x[2], int) and not isinstance(x[2], bool) and x[2] >= 1))
             for x in guesses):
         raise ConfigError(f"{where}.periodic", "expected a list of guesses [b, p_b] or "
@@ -379,16 +379,13 @@ def check_plane(table: dict, where: str) -> PlaneSpec:
     if system.n_bodies != 3 or system.dim != 2 or not np.all(system.masses == 1.0):
         raise ConfigError(f"{where}.system", "the isosceles plane is of three unit masses in "
                                              "the plane")
-    for k, (b, p_b) in enumerate(spec.starts):
-        if plane_start(system, spec.energy, spec.height, b, p_b) is None:
-            raise ConfigError(f"{where}.starts[{k}]", f"(b, p_b) = ({b:g}, {p_b:g}) is not on "
-                              f"the section h = {spec.height:g} of the energy shell E = "
-                              f"{spec.energy:g}: the potential there exceeds E - p_b^2")
-    for k, (b, p_b, _) in enumerate(spec.periodic):
-        if plane_start(system, spec.energy, spec.height, b, p_b) is None:
-            raise ConfigError(f"{where}.periodic[{k}]", f"(b, p_b) = ({b:g}, {p_b:g}) is not "
-                              f"on the section h = {spec.height:g} of the energy shell E = "
-                              f"{spec.energy:g}")
+    for key, points in (("starts", spec.starts), ("periodic", spec.periodic)):
+        for k, (b, p_b, *_) in enumerate(points):
+            if plane_start(system, spec.energy, spec.height, b, p_b) is None:
+                raise ConfigError(f"{where}.{key}[{k}]", f"(b, p_b) = ({b:g}, {p_b:g}) is not "
+                                  f"on the section h = {spec.height:g} of the energy shell "
+                                  f"E = {spec.energy:g}: the potential there exceeds "
+                                  f"E - p_b^2")
     return spec
 
 
