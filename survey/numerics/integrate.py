@@ -57,6 +57,9 @@ OK_, EVENT_, COLLISION_, STEP_LIMIT_, NONFINITE_, TIME_LIMIT_ = (
     int(s) for s in (Status.OK, Status.EVENT, Status.COLLISION, Status.STEP_LIMIT,
                      Status.NONFINITE, Status.TIME_LIMIT))
 RUNNING = -1
+# _run's returns besides the next job: every job has ended; the jobs are all started and at
+# most half the lanes still run one (the rest go on one lane each: `dop853`)
+DONE, HANDOFF = -1, -2
 # what a job records besides its end state: crossings of the watched events, samples at
 # t_eval, orbit samples at t_fine
 EVENTS, EVAL, FINE = 1, 2, 4
@@ -420,7 +423,8 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
          n_err, max_steps, h0, h_max, h_min, events, max_events, n_sub, t_eval, n_eval,
          renorm_dt, time_limit, t_fine, next_job, iterations, now):
     """At most `iterations` steps of every lane (the kernel checks the clock between
-    calls); returns the next job to start, or -1 when every job has ended."""
+    calls); returns the next job to start, DONE when every job has ended, or HANDOFF
+    when every job has started and at most half the lanes run one."""
     L = ln.job.size
     nf = y0s.shape[1]
     M = y0s.shape[0]
@@ -455,8 +459,10 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
                 ln.h[k] = t1 - ln.t[k]
         if active == 0:
             if next_job >= M:
-                return -1
+                return DONE
             continue
+        if next_job >= M and 2 * active <= L:
+            return HANDOFF
         _spread(ln.h, ln.HH, L, nf)
         # ---- one attempt of every lane's step
         stages(masses, d, measure, prof, par, n_tan, L, ln.Y, ln.HH, ln.K, ln.YT, ln.YN,
@@ -575,6 +581,26 @@ def _tangent_norms(Y, L, n, n_tan, scratch, NW):
             NW[t * L + k] = math.sqrt(s)
 
 
+@leaf
+def _adopt(one, ln, k):
+    """Lane k of ln into the one-lane `one`: everything a lane carries from step to step
+    (its state and derivative, time, step, budgets, flags, samples' and events' places,
+    MEGNO sums, clock), so it goes on with the same bits."""
+    L = ln.job.size
+    for i in range(one.Y.size):
+        one.Y[i] = ln.Y[i * L + k]
+        one.K[0, i] = ln.K[0, i * L + k]
+    one.job[0], one.t[0], one.h[0], one.h_max[0] = ln.job[k], ln.t[k], ln.h[k], ln.h_max[k]
+    one.err_old[0], one.t_next_renorm[0] = ln.err_old[k], ln.t_next_renorm[k]
+    one.i_eval[0], one.i_fine[0] = ln.i_eval[k], ln.i_fine[k]
+    for f in range(4):
+        one.flags[0, f] = ln.flags[k, f]
+        one.acc[0, f] = ln.acc[k, f]
+    for e in range(ln.g_old.shape[1]):
+        one.g_old[0, e] = ln.g_old[k, e]
+        one.s_old[0, e] = ln.s_old[k, e]
+
+
 @helper
 def _needs_dense(k, ln, rows, t1, direction, events, t_eval, t_fine, tangent_samples):
     """What of the dense output lane k's accepted step needs: 2 all of it (it watches
@@ -637,28 +663,41 @@ def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol,
         np.full((Ms, T, n_tan), np.nan), np.zeros((M, n_tan)), np.zeros((M, n_tan)),
         np.full((Mf, Tf, n), np.nan), np.zeros((M, 2)), np.zeros((M, 2)),
         np.full((Ms, T, 2), np.nan))
-    ln = Lanes(
-        np.zeros(nf * L), np.zeros((16, nf * L)), np.zeros(nf * L), np.zeros(nf * L),
-        np.zeros((7, nf * L)), np.zeros(nf * L), np.zeros(workspace_size(L, nf)),
-        np.zeros(2 * nf * L),
-        np.zeros(2 * L), np.zeros(max(1, n_tan) * L), np.zeros(L),
-        np.full(L, -1, dtype=np.int64),
-        np.zeros(L), np.zeros(L),
-        np.zeros(L), np.zeros(L), np.zeros((L, 4), dtype=np.int64),
-        np.zeros(L, dtype=np.int64), np.zeros(L, dtype=np.int64), np.zeros(L),
-        np.zeros((L, 4)), np.zeros((L, max(m, 1))), np.zeros((L, max(m, 1))),
-        np.zeros(max(m, 1)), np.zeros(max(m, 1)), np.zeros(max(m, 1), dtype=np.int64),
-        np.zeros(max(1, m * n_sub)), np.zeros(max(1, m * n_sub), dtype=np.int64),
-        np.zeros(nf), np.zeros(nf), np.zeros((2, nf)))
-    # with a time limit, back every 256 rounds to read the clock
-    rounds = 256 if time_limit > 0.0 else 1 << 62
-    next_job = 0
-    while next_job >= 0:
-        now = time.perf_counter() if time_limit > 0.0 else 0.0
-        next_job = _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan,
-                        megno, rtol, atol, n_err, max_steps, h0, h_max, h_min, events,
-                        max_events, n_sub, t_eval, n_eval, renorm_dt, time_limit, t_fine,
-                        next_job, rounds, now)
+
+    def lanes(L):
+        return Lanes(
+            np.zeros(nf * L), np.zeros((16, nf * L)), np.zeros(nf * L), np.zeros(nf * L),
+            np.zeros((7, nf * L)), np.zeros(nf * L), np.zeros(workspace_size(L, nf)),
+            np.zeros(2 * nf * L),
+            np.zeros(2 * L), np.zeros(max(1, n_tan) * L), np.zeros(L),
+            np.full(L, -1, dtype=np.int64),
+            np.zeros(L), np.zeros(L),
+            np.zeros(L), np.zeros(L), np.zeros((L, 4), dtype=np.int64),
+            np.zeros(L, dtype=np.int64), np.zeros(L, dtype=np.int64), np.zeros(L),
+            np.zeros((L, 4)), np.zeros((L, max(m, 1))), np.zeros((L, max(m, 1))),
+            np.zeros(max(m, 1)), np.zeros(max(m, 1)), np.zeros(max(m, 1), dtype=np.int64),
+            np.zeros(max(1, m * n_sub)), np.zeros(max(1, m * n_sub), dtype=np.int64),
+            np.zeros(nf), np.zeros(nf), np.zeros((2, nf)))
+
+    def drive(ln, next_job):
+        # with a time limit, back every 256 rounds to read the clock
+        rounds = 256 if time_limit > 0.0 else 1 << 62
+        while next_job >= 0:
+            now = time.perf_counter() if time_limit > 0.0 else 0.0
+            next_job = _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par,
+                            n_tan, megno, rtol, atol, n_err, max_steps, h0, h_max, h_min,
+                            events, max_events, n_sub, t_eval, n_eval, renorm_dt,
+                            time_limit, t_fine, next_job, rounds, now)
+        return next_job
+
+    ln = lanes(L)
+    if drive(ln, 0) == HANDOFF:
+        # the SIMD loops cost all L lanes whether they run a job or not: the last few jobs
+        # (their lengths differ 2x and more) go on one after another in one lane
+        one = lanes(1)
+        for k in np.flatnonzero(ln.job >= 0):
+            _adopt(one, ln, k)
+            drive(one, M)
     return out
 
 
