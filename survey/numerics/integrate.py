@@ -461,8 +461,6 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
             if next_job >= M:
                 return DONE
             continue
-        if next_job >= M and 2 * active <= L:
-            return HANDOFF
         _spread(ln.h, ln.HH, L, nf)
         # ---- one attempt of every lane's step
         stages(masses, d, measure, prof, par, n_tan, L, ln.Y, ln.HH, ln.K, ln.YT, ln.YN,
@@ -529,6 +527,12 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
                 fac = min(fac, 1.0)
             ln.flags[k, 0] = 0
             ln.h[k] = direction * min(abs(ln.h[k]) * fac, ln.h_max[k])
+        if next_job >= M and L > 1:
+            running = 0
+            for k in range(L):
+                running += ln.job[k] >= 0
+            if 0 < running and 2 * running <= L:
+                return HANDOFF
     return next_job
 
 
@@ -694,9 +698,11 @@ def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol,
     if drive(ln, 0) == HANDOFF:
         # the SIMD loops cost all L lanes whether they run a job or not: the last few jobs
         # (their lengths differ 2x and more) go on one after another in one lane
-        one = lanes(1)
+        one, handed = lanes(1), time.perf_counter()
         for k in np.flatnonzero(ln.job >= 0):
             _adopt(one, ln, k)
+            if time_limit > 0.0:    # a job's budget does not run while it waits its turn
+                one.acc[0, 3] += time.perf_counter() - handed
             drive(one, M)
     return out
 
