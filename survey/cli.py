@@ -263,9 +263,7 @@ def _survey(config, command, summary=False, write_report=True, **kw) -> Path:
 
     from .analysis.classify import summary as summarise
     from .catalog.variables import V
-    from .pipeline.special import section_slice, special_cells
     from .pipeline.sweep import run_survey
-    from .presentation import report
     path = run_survey(config, command=command, **kw)
     if summary:
         with xr.open_dataset(path) as ds:
@@ -286,7 +284,9 @@ def _survey(config, command, summary=False, write_report=True, **kw) -> Path:
         other = stack.enter_context(xr.open_dataset(check)) if check else None
         if summary:
             print("\n".join(summarise(ds)))
-        if write_report:
+        if write_report:      # imported here: matplotlib alone takes 0.3 s to import
+            from .pipeline.special import section_slice, special_cells
+            from .presentation import report
             written = report.write(ds, path.parent, path.stem, check=other,
                                    special=special_cells(ds), slice_at=section_slice(ds))
             if summary:
