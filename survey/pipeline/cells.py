@@ -97,26 +97,79 @@ class CellTask:
 
 
 def run_cells(task: CellTask, cell_ids, starts) -> dict[str, np.ndarray]:
-    """Integrate a chunk of cells (the unit of work a dask task does): the orbits of all its
-    cells -- nominal orbits, their deviation vectors, perturbed starts -- as SIMD lanes of
-    one batch per System (cells differ in System only along interaction-term axes); one
+    """Integrate a chunk of cells (the unit of work a dask task does) and decide their
+    verdicts, those in doubt on longer runs too (first_runs, then extend_cells, here); one
     result row per cell in every array of the task's layout."""
+    res, doubt = first_runs(task, cell_ids, starts)
+    if doubt.size:
+        rows = extend_cells(task, np.asarray(cell_ids)[doubt], np.asarray(starts)[doubt],
+                            res[V.regime_history][doubt])
+        merge_rows(res, doubt, rows)
+    return res
+
+
+def first_runs(task: CellTask, cell_ids, starts) -> tuple[dict, np.ndarray]:
+    """The cells' runs to t_final: the orbits of all of them -- nominal orbits, their
+    deviation vectors, perturbed starts -- as SIMD lanes of one batch per System (cells
+    differ in System only along interaction-term axes), each cell's verdicts at T/2 and T.
+    Returns the result rows and the rows whose verdict is in doubt (for extend_cells;
+    their rows are as of this run until then)."""
     clock = time.perf_counter()
-    res = archive.empty_results(task.slots, len(cell_ids))
-    groups: dict = {}
-    for k, (cell, y0) in enumerate(zip(cell_ids, starts)):
-        groups.setdefault(task.term_values(int(cell)), []).append(k)
     results = [CellResult(Status.INACCESSIBLE, 0.0)] * len(cell_ids)
+    doubt = []
+    decide = bool(task.indicators["which"] or task.tori["analyse"])
+    longer = len(horizon_factors(task.tori["extend"], task.tori["extend_rounds"])) > 2
+    for system, events, rows in _systems(task, cell_ids, starts):
+        ran = _run(task, system, events, [starts[k] for k in rows], 1)
+        if decide:
+            verdicts, in_doubt = _first_verdicts(task, system, ran)
+            ran = [r._replace(verdicts=v) for r, v in zip(ran, verdicts)]
+            doubt += [k for k, d in zip(rows, in_doubt) if d and longer]
+        for k, result in zip(rows, ran):
+            results[k] = result
+    return _rows(task, results, clock), np.array(sorted(doubt), dtype=np.int64)
+
+
+def extend_cells(task: CellTask, cell_ids, starts, history) -> dict[str, np.ndarray]:
+    """Cells whose verdict first_runs left in doubt, run again from their start to
+    extend x T and decided there -- and again, up to extend_rounds times, while still in
+    doubt (history: their regime_history rows so far). A cell's result depends on itself
+    alone, so these may run in any task, with any others, and verify reproduces them."""
+    clock = time.perf_counter()
+    results = [None] * len(cell_ids)
+    for system, events, rows in _systems(task, cell_ids, starts):
+        verdicts = np.array(history)[rows]
+        for k, result in zip(rows, _extend(task, system, events, [starts[k] for k in rows],
+                                           verdicts)):
+            results[k] = result
+    return _rows(task, results, clock)
+
+
+def merge_rows(res: dict, at: np.ndarray, rows: dict):
+    """The rows `at` of first_runs' arrays replaced by extend_cells' rows of those cells (the
+    wall time the sum of both)."""
+    for name, values in rows.items():
+        res[name][at] = values + res[name][at] if name == V.wall_time else values
+
+
+def _systems(task: CellTask, cell_ids, starts):
+    """(System, its events, the rows of the cells with a start on it) of a chunk's cells."""
+    groups: dict = {}
+    for k, cell in enumerate(cell_ids):
+        groups.setdefault(task.term_values(int(cell)), []).append(k)
     for at, rows in groups.items():
         system = build_system(task.system, dict(at))
         events = [section_event_for({"section": task.section}, system)] if task.section \
             else []
         rows = [k for k in rows if not np.isnan(starts[k][0])]
-        for k, result in zip(rows, _compute(task, system, events, [int(cell_ids[k]) for k in
-                                                                   rows],
-                                            [starts[k] for k in rows])):
-            results[k] = result
-    wall = (time.perf_counter() - clock) / max(len(cell_ids), 1)
+        if rows:
+            yield system, events, rows
+
+
+def _rows(task: CellTask, results, clock) -> dict[str, np.ndarray]:
+    """The result arrays of a task's cells, each with its share of the task's wall time."""
+    res = archive.empty_results(task.slots, len(results))
+    wall = (time.perf_counter() - clock) / max(len(results), 1)
     for k, result in enumerate(results):
         archive.fill_row(res, k, result._replace(wall_time=wall))
     return res
@@ -131,33 +184,27 @@ def jobs_per_cell(task: CellTask) -> int:
     return nominal + ind["perturbations"]
 
 
-def _compute(task: CellTask, system, events, cells, starts) -> list[CellResult]:
-    """The CellResults of cells with a start, one batch for all their orbits; then the
-    verdicts in doubt decided again on longer runs (_extend)."""
-    if not cells:
-        return []
-    results = _run(task, system, events, starts, 1)
-    if not (task.indicators["which"] or task.tori["analyse"]):
-        return results
-    return _extend(task, system, events, starts, results)
-
-
-def _extend(task: CellTask, system, events, starts, results) -> list[CellResult]:
-    """Verdicts against a longer horizon. Each cell's regime is decided at T/2 and T from
-    its run; a cell whose verdict changed class between them, or whose evidence did not
-    all vote for it (a line between its thresholds, or against it), runs again from its
-    start to extend x T and is decided there -- and again, up to extend_rounds times, while
-    still in doubt. Every cell carries its verdicts (regime_history) and the horizon of the
-    run its evidence comes from; a cell's result depends on itself alone, so verify and any
-    chunking reproduce it."""
-    tor = task.tori
-    factors = horizon_factors(tor["extend"], tor["extend_rounds"])
+def _first_verdicts(task: CellTask, system, results):
+    """Each cell's verdicts from its first run, at T/2 and T (-1 at the longer horizons),
+    and whether it is in doubt: its verdict changed class between them, or its evidence did
+    not all vote for it (a line between its thresholds, or against it)."""
+    factors = horizon_factors(task.tori["extend"], task.tori["extend_rounds"])
     half, _ = _verdicts(task, system, results, half=True)
     end, confidence = _verdicts(task, system, results)
     verdicts = np.full((len(results), len(factors)), -1, dtype=np.int8)
     verdicts[:, 0], verdicts[:, 1] = half, end
-    todo = [k for k, r in enumerate(results)
-            if _in_doubt(r, half[k], end[k], confidence[k])]
+    return verdicts, [_in_doubt(r, h, e, c) for r, h, e, c in zip(results, half, end,
+                                                                    confidence)]
+
+
+def _extend(task: CellTask, system, events, starts, verdicts) -> list[CellResult]:
+    """Verdicts against a longer horizon: cells in doubt at T run again from their start to
+    extend x T, are decided there, and run again while still in doubt, up to extend_rounds
+    times. Every cell carries its verdicts (regime_history) and the horizon of the run its
+    evidence comes from."""
+    factors = horizon_factors(task.tori["extend"], task.tori["extend_rounds"])
+    results = [None] * len(starts)
+    todo = list(range(len(starts)))
     for level in range(2, len(factors)):
         if not todo:
             break

@@ -25,7 +25,17 @@ from ..catalog.status import Status
 from ..catalog.variables import BY_NAME, V
 from . import archive
 from ..analysis.refine import known_from, plan
-from .cells import CellTask, build_starts, classify_rows, jobs_per_cell, run_cells, warm_up
+from .cells import (
+    CellTask,
+    build_starts,
+    classify_rows,
+    extend_cells,
+    first_runs,
+    jobs_per_cell,
+    merge_rows,
+    run_cells,
+    warm_up,
+)
 from .checkpoints import (
     checkpoint_dir,
     chunk_path,
@@ -389,20 +399,45 @@ def refined_chunk_size(cells: int, workers: int, per_cell: int) -> int:
 
 
 def _compute(client, task, starts, todo, folder, key, config, bar, round_):
+    """The cells `todo` in chunks, one task each (first_runs); a chunk's cells whose
+    verdict is in doubt then run longer in a task each (extend_cells), ahead of the chunks
+    still waiting, so that no worker is left alone with one chunk's extensions at the end.
+    A chunk is saved when all its cells are final."""
     from dask.distributed import as_completed
     size = config.tables["dask"]["chunk_size"] or chunk_size(
         todo.size, len(client.scheduler_info()["workers"]), jobs_per_cell(task))
-    futures = {client.submit(run_cells, task, ids, starts[ids], pure=False,
-                             key=f"cells-{key}-{round_}-{int(ids[0])}",
-                             retries=config.tables["dask"]["retries"]): ids
-               for ids in _chunks(todo, size)}
+    retries = config.tables["dask"]["retries"]
+    # a chunk by its first cell: its ids, result rows, extensions pending
+    chunks = {int(ids[0]): [ids, None, 0] for ids in _chunks(todo, size)}
+    futures = {client.submit(first_runs, task, ids, starts[ids], pure=False,
+                             key=f"cells-{key}-{round_}-{first}",
+                             retries=retries): (first, None)
+               for first, (ids, _, _) in chunks.items()}
     saved = {}
-    for future in as_completed(futures):
-        ids = futures.pop(future)
-        save_chunk(folder, key, ids, future.result())
-        saved[chunk_path(folder, ids)] = ids
+    queue = as_completed(futures)
+    for future in queue:
+        first, k = futures.pop(future)
+        chunk = chunks[first]
+        if k is None:                   # first_runs: (rows, rows in doubt)
+            chunk[1], doubt = future.result()
+            chunk[2] = doubt.size
+            for k in doubt:
+                cell, history = chunk[0][k:k + 1], chunk[1][V.regime_history][k:k + 1]
+                extension = client.submit(
+                    extend_cells, task, cell, starts[cell], history, pure=False, priority=1,
+                    retries=retries,
+                    key=f"longer-{key}-{round_}-{int(cell[0])}")
+                futures[extension] = (first, k)
+                queue.add(extension)
+        else:
+            merge_rows(chunk[1], np.array([k]), future.result())
+            chunk[2] -= 1
         future.release()
-        bar.update(len(ids))
+        if chunk[2] == 0:
+            ids, rows, _ = chunks.pop(first)
+            save_chunk(folder, key, ids, rows)
+            saved[chunk_path(folder, ids)] = ids
+            bar.update(len(ids))
     return saved
 
 

@@ -1,11 +1,12 @@
 """Verdicts against a longer horizon, as a survey runs them: a cell whose verdict changed
 from T/2 to T, or that not every line of evidence supports, is integrated again to k T
-and decided there; its stored evidence is then that run's, bit for bit."""
+and decided there; its stored evidence is then that run's, bit for bit -- whether it ran
+longer in a task of its own (a survey) or in its chunk's (verify)."""
 import numpy as np
 
 from survey.analysis.classify import verdict_class
 from survey.catalog.variables import BY_NAME, V
-from survey.pipeline.sweep import run
+from survey.pipeline.sweep import run, verify
 
 
 def survey(tmp_path, name, t_final, **extra):
@@ -49,6 +50,9 @@ def test_a_verdict_in_doubt_is_decided_again_on_a_run_four_times_longer(tmp_path
         assert a.tobytes() == b.tobytes(), name
     np.testing.assert_array_equal(ds[V.regime].values[extended],
                                   longer[V.regime].values[extended])
+    # the survey ran the extensions as tasks of their own; verify runs them in the cells'
+    ok, lines = verify(tmp_path / "v.nc", cells=4)
+    assert ok, lines
 
 
 def test_extend_zero_decides_at_t_only(tmp_path):
