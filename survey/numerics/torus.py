@@ -145,13 +145,22 @@ def naff(z: np.ndarray, count: int):
     against it."""
     z = np.array(z, dtype=complex)
     N = z.size
-    w = _window(N)
+    w = _window_of(N)
     freqs, amps = np.zeros(count), np.zeros(count, dtype=complex)
     for line in range(count):
         k = int(np.argmax(np.abs(np.fft.fft(z * w))))
         f = k / N if k <= N // 2 else k / N - 1.0
         freqs[line], amps[line] = _line(z, w, f)
     return freqs, amps
+
+
+@lru_cache(maxsize=4)
+def _window_of(N: int) -> np.ndarray:
+    """_window(N), computed once per length (every line of every signal of every cell of a
+    task has one of two: the orbit's halves), read-only."""
+    w = _window(N)
+    w.flags.writeable = False
+    return w
 
 
 @kernel
