@@ -11,6 +11,8 @@ budget, status, events, samples and accumulators; every decision is taken lane b
 with the arithmetic of one orbit, so a lane gives the bits one orbit alone gives (L = 1),
 whatever the lane count and whatever the other lanes hold (tests/numerics/test_lanes.py).
 A lane whose orbit ends takes the next start of the batch: no lane waits for the slowest.
+Once every start is taken and at most half the lanes still run, those orbits go on one
+after another in one lane (`_adopt`): idle lanes cost the SIMD loops as much as busy ones.
 
 The kernel is one compiled function for every system, potential and event set (all chosen
 by integer codes and parameter arrays), so it is cached on disk. Nothing raises inside it:
