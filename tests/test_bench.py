@@ -24,7 +24,7 @@ def test_bench_parts_run_and_print_their_ratios(tmp_path):
     assert "python -m survey run" in text and "the same with [tori]" in text
     assert "heyoka is not installed" in text or ("survey / heyoka: compute" in text and
                                                  "largest energy error" in text)
-    assert text.count("x\n") >= 1 and "Default survey cell" in text
+    assert text.count("x\n") >= 1 and "Default survey cell" in text and "per orbit" in text
     assert "Where a step goes" in text and "stages+norm" in text
     assert "Newton shooting: one step" in text and "largest idle share" in text
     assert "general/own" in text and "Fixed costs" in text and "shutdown" in text and "python -m survey run" in text
