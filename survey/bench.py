@@ -646,8 +646,8 @@ def default_cell(t_final=2000.0, repeats=5, folder="results/bench", out=print):
     """A default survey cell (the README's defaults: 2 deviation vectors, 16 perturbed
     orbits, the phi section, histories, the torus analysis) through the worker's code path,
     against the same orbit with one tangent vector alone (`integrate`), best of `repeats`
-    interleaved runs (the issue's target: at most 1.5x), and per orbit of the cell (its 17
-    orbits run as SIMD lanes)."""
+    interleaved runs (the issue's target: at most 1.5x), and per orbit of the cell (its 18
+    orbits -- 2 deviation vectors' and 16 perturbed -- run as SIMD lanes)."""
     from .pipeline.cells import CellTask, build_starts, jobs_per_cell, run_cells
     from .pipeline.config import load_config
     system = System.create()
