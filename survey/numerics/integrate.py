@@ -19,7 +19,10 @@ by integer codes and parameter arrays), so it is cached on disk. Nothing raises 
 failures come back as a `Status`. Error control covers the first `n_err` components of
 each orbit (the orbit by default; the tangent vectors optionally). Dense output is built
 only for steps that need it -- a step holding requested output times, and every step while
-events are watched -- for all lanes at once when any lane needs it.
+events are watched -- for all lanes at once when any lane needs it now. A step that holds
+only orbit samples at t_fine (the torus analysis': every few steps of every lane) needs it
+later: its stages wait in `Deferred` until a batch of such steps fills, whose dense output
+is then built in SIMD loops over the batch, not over every lane at every round.
 """
 from __future__ import annotations
 
@@ -62,6 +65,8 @@ RUNNING = -1
 # _run's returns besides the next job: every job has ended; the jobs are all started and at
 # most half the lanes still run one (the rest go on one lane each: `dop853`)
 DONE, HANDOFF = -1, -2
+# what an accepted step needs of the dense output (`_needs_dense`)
+DENSE_LATER, DENSE_ORBIT, DENSE_ALL = 1, 2, 3
 # what a job records besides its end state: crossings of the watched events, samples at
 # t_eval, orbit samples at t_fine
 EVENTS, EVAL, FINE = 1, 2, 4
@@ -91,6 +96,28 @@ class RawOutcome(NamedTuple):
     #                           s; Sander & Meiss 2025)
     megno_sums: np.ndarray    # (M, 2) (s L - int L, int Y) at t: ratios to s are Y/2, <Y>
     sample_megno: np.ndarray  # (Ms, T, 2) the same at t_eval
+
+
+class Deferred(NamedTuple):
+    """Accepted steps whose orbit samples at t_fine wait for their dense output: P slots,
+    variable-major like Lanes over the orbit's n components (slot p of component i at
+    Y[i * P + p]), each with what `dense_prepare` reads -- the states at the step's ends and
+    stages 1 and 6-13 -- and which samples it holds."""
+
+    Y: np.ndarray             # (n P,) state at the step's start
+    YN: np.ndarray            # (n P,) at its end
+    K: np.ndarray             # (16, n P) stages (14-16 computed when the batch is built)
+    F: np.ndarray             # (7, n P) dense-output coefficients
+    HH: np.ndarray            # (n P,) each slot's step at each of its components
+    YT: np.ndarray            # (n P,) stage states
+    W: np.ndarray             # rhs_lanes workspace
+    t: np.ndarray             # (P,) the step's start, size, end
+    h: np.ndarray
+    t_new: np.ndarray
+    row: np.ndarray           # (P,) the job's row of the fine output
+    first: np.ndarray         # (P,) its samples first .. end - 1
+    end: np.ndarray
+    count: np.ndarray         # (1,) slots filled
 
 
 class Lanes(NamedTuple):
@@ -128,6 +155,7 @@ class Lanes(NamedTuple):
     yd: np.ndarray            # (nf,) scratch of one lane
     y1: np.ndarray            # (nf,) contiguous copy of one lane (starts)
     k1: np.ndarray            # (2, nf)
+    wait: Deferred
 
 
 @helper
@@ -253,11 +281,11 @@ def _start(k, j, ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_ta
 
 @helper
 def _record(k, ln, out, rows, t0, t1, masses, d, megno, events, max_events, n_sub, t_eval,
-            n_eval, t_fine):
+            n_eval, t_fine, later):
     """What lane k's accepted step [t, t + h] records, before the lane takes its new state
-    (its dense output prepared if it needs one): counters, event crossings, samples.
-    Returns EVENT_ at a terminal event (the state and time then the event's), else
-    RUNNING."""
+    (its dense output prepared if it needs one now): counters, event crossings, samples;
+    with `later`, its samples at t_fine wait in ln.wait. Returns EVENT_ at a terminal event
+    (the state and time then the event's), else RUNNING."""
     L = ln.job.size
     nf = ln.Y.size // L
     n = 2 * masses.size * d
@@ -352,14 +380,15 @@ def _record(k, ln, out, rows, t0, t1, masses, d, megno, events, max_events, n_su
             out.sample_megno[rs, i_eval, 0] = elapsed * L_at - int_at
             out.sample_megno[rs, i_eval, 1] = megno_sums[1] + 0.5 * part * (Y_prev + Y_at)
         i_eval += 1
+    if later:
+        first = i_fine
+        while rf >= 0 and i_fine < t_fine.size and \
+                direction * (t_fine[i_fine] - t_stop) <= 0.0:
+            i_fine += 1
+        if i_fine > first:
+            _defer(ln, k, rf, first, i_fine, t, h, t_new)
     while rf >= 0 and i_fine < t_fine.size and direction * (t_fine[i_fine] - t_stop) <= 0.0:
-        if t_fine[i_fine] == t_new:
-            for i in range(n):
-                out.fine[rf, i_fine, i] = ynew[i]
-        else:
-            dense_eval(F, y, (t_fine[i_fine] - t) / h, n, yd)
-            for i in range(n):
-                out.fine[rf, i_fine, i] = yd[i]
+        _fine_sample(out.fine[rf, i_fine], t_fine[i_fine], F, y, ynew, t, h, t_new, n, yd)
         i_fine += 1
     ln.i_eval[k], ln.i_fine[k] = i_eval, i_fine
     if terminal_hit:
@@ -369,6 +398,61 @@ def _record(k, ln, out, rows, t0, t1, masses, d, megno, events, max_events, n_su
         ln.t[k] = t_stop
         return EVENT_
     return RUNNING
+
+
+@helper
+def _fine_sample(sample, at, F, y, ynew, t, h, t_new, n, yd):
+    """The orbit's state at time `at` of the step [t, t_new] (t + h but for the last) from
+    its dense output (F, y), into `sample`."""
+    if at == t_new:
+        for i in range(n):
+            sample[i] = ynew[i]
+    else:
+        dense_eval(F, y, (at - t) / h, n, yd)
+        for i in range(n):
+            sample[i] = yd[i]
+
+
+@helper
+def _defer(ln, k, row, first, end, t, h, t_new):
+    """Lane k's accepted step into a slot of ln.wait: its samples first .. end - 1 at t_fine
+    (row `row` of the fine output) are taken when the batch is built (`_flush`)."""
+    w = ln.wait
+    P = w.t.size
+    L = ln.job.size
+    p = w.count[0]
+    for i in range(w.Y.size // P):
+        a, b = i * P + p, i * L + k
+        w.Y[a] = ln.Y[b]
+        w.YN[a] = ln.YN[b]
+        w.K[0, a] = ln.K[0, b]
+        for s in range(5, 13):
+            w.K[s, a] = ln.K[s, b]
+    w.t[p], w.h[p], w.t_new[p] = t, h, t_new
+    w.row[p], w.first[p], w.end[p] = row, first, end
+    w.count[0] = p + 1
+
+
+@leaf
+def _flush(ln, out, masses, d, measure, prof, par, t_fine):
+    """The waiting steps' dense output, all P slots in SIMD loops (slots past the count
+    hold stale values, computed and ignored), and their samples at t_fine."""
+    w = ln.wait
+    P = w.t.size
+    c = w.count[0]
+    if c == 0:
+        return
+    n = w.Y.size // P
+    _spread(w.h, w.HH, P, n)
+    dense_prepare(masses, d, measure, prof, par, 0, P, n, False, w.Y, w.YN, w.HH, w.K,
+                  w.YT, w.F, w.W)
+    for p in range(c):
+        F, y, ynew = w.F[:, p::P], w.Y[p::P], w.YN[p::P]
+        fine = out.fine[w.row[p]]
+        for i in range(w.first[p], w.end[p]):
+            _fine_sample(fine[i], t_fine[i], F, y, ynew, w.t[p], w.h[p], w.t_new[p], n,
+                         ln.yd)
+    w.count[0] = 0
 
 
 @helper
@@ -461,6 +545,7 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
                 ln.h[k] = t1 - ln.t[k]
         if active == 0:
             if next_job >= M:
+                _flush(ln, out, masses, d, measure, prof, par, t_fine)
                 return DONE
             continue
         _spread(ln.h, ln.HH, L, nf)
@@ -499,17 +584,19 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
             ln.flags[k, 3] = 1          # accepted
             dense = max(dense, _needs_dense(k, ln, rows, t1, direction, events, t_eval,
                                             t_fine, n_eval > n))
-        if dense:       # the interpolant of the orbits alone where no lane needs more
+        if dense >= DENSE_ORBIT:    # the orbits' interpolant where no lane needs more
             dense_prepare(masses, d, measure, prof, par, n_tan, L,
-                          nf if dense == 2 else n, dense == 2, ln.Y, ln.YN,
+                          nf if dense == DENSE_ALL else n, dense == DENSE_ALL, ln.Y, ln.YN,
                           ln.HH, ln.K, ln.YT, ln.F, ln.W)
         for k in range(L):
             if ln.flags[k, 3] and _record(k, ln, out, rows, t0, t1, masses, d, megno,
                                           events, max_events, n_sub, t_eval, n_eval,
-                                          t_fine) == EVENT_:
+                                          t_fine, dense == DENSE_LATER) == EVENT_:
                 _finish(k, ln, out, EVENT_, rows)
                 ln.flags[k, 3] = 0
             ln.taken[k] = ln.flags[k, 3]
+        if ln.wait.count[0] > ln.wait.t.size - L:      # room for every lane's next step
+            _flush(ln, out, masses, d, measure, prof, par, t_fine)
         # ---- accepted lanes take their new states, then their tangent vectors' norms
         _take(ln.Y, ln.YN, ln.K[0], ln.K[12], ln.taken, ln.HH, L, nf)
         _tangent_norms(ln.Y, L, 2 * masses.size * d, n_tan, ln.YT, ln.NW)
@@ -534,7 +621,9 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
             for k in range(L):
                 running += ln.job[k] >= 0
             if 0 < running and 2 * running <= L:
+                _flush(ln, out, masses, d, measure, prof, par, t_fine)
                 return HANDOFF
+    _flush(ln, out, masses, d, measure, prof, par, t_fine)
     return next_job
 
 
@@ -609,19 +698,20 @@ def _adopt(one, ln, k):
 
 @helper
 def _needs_dense(k, ln, rows, t1, direction, events, t_eval, t_fine, tangent_samples):
-    """What of the dense output lane k's accepted step needs: 2 all of it (it watches
+    """What of the dense output lane k's accepted step needs: DENSE_ALL now (it watches
     events -- every step is screened, may be scanned, and a terminal event takes the whole
-    state there -- or holds a sample time and samples carry tangents), 1 the orbit's (it
-    holds an orbit-only sample time), 0 none."""
+    state there -- or holds a sample time and samples carry tangents), DENSE_ORBIT now (it
+    holds an orbit-only sample time of t_eval, recorded with the accumulators of the
+    moment), DENSE_LATER (only orbit samples of t_fine), 0 none."""
     j = ln.job[k]
     if rows[0, j] >= 0 and events[0].size > 1:
-        return 2
+        return DENSE_ALL
     t_new = t1 if ln.flags[k, 2] else ln.t[k] + ln.h[k]
     i = ln.i_eval[k]
     if rows[1, j] >= 0 and i < t_eval.size and direction * (t_eval[i] - t_new) <= 0.0:
-        return 2 if tangent_samples else 1
+        return DENSE_ALL if tangent_samples else DENSE_ORBIT
     i = ln.i_fine[k]
-    return 1 if rows[2, j] >= 0 and i < t_fine.size and \
+    return DENSE_LATER if rows[2, j] >= 0 and i < t_fine.size and \
         direction * (t_fine[i] - t_new) <= 0.0 else 0
 
 
@@ -683,7 +773,15 @@ def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol,
             np.zeros((L, 4)), np.zeros((L, max(m, 1))), np.zeros((L, max(m, 1))),
             np.zeros(max(m, 1)), np.zeros(max(m, 1)), np.zeros(max(m, 1), dtype=np.int64),
             np.zeros(max(1, m * n_sub)), np.zeros(max(1, m * n_sub), dtype=np.int64),
-            np.zeros(nf), np.zeros(nf), np.zeros((2, nf)))
+            np.zeros(nf), np.zeros(nf), np.zeros((2, nf)), deferred(2 * max(L, SIMD_LANES)))
+
+    def deferred(P):
+        return Deferred(
+            np.zeros(n * P), np.zeros(n * P), np.zeros((16, n * P)), np.zeros((7, n * P)),
+            np.zeros(n * P), np.zeros(n * P), np.zeros(workspace_size(P, n)), np.zeros(P),
+            np.zeros(P), np.zeros(P), np.zeros(P, dtype=np.int64),
+            np.zeros(P, dtype=np.int64), np.zeros(P, dtype=np.int64),
+            np.zeros(1, dtype=np.int64))
 
     def drive(ln, next_job):
         # with a time limit, back every 256 rounds to read the clock

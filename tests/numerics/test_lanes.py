@@ -49,6 +49,7 @@ def test_the_paper_system_in_lanes_with_every_ending_and_record():
     tangents = np.array([deviation_vectors(system, y if np.isfinite(y).all() else starts[0],
                                            1, 0, c) for c, y in enumerate(starts)])
     record = np.zeros(len(starts), dtype=np.int64)
+    record[2::5] = FINE                 # their samples wait for a batch's dense output
     record[::4] = EVENTS | EVAL | FINE
     record[1::7] = EVENTS                                  # terminal events end these early
     events = [section_event(system), Event(Sides(offset=-11.0), direction=1, terminal=True)]
@@ -93,3 +94,21 @@ def test_other_systems_in_lanes(case):
                                     0.2 * rng.normal(size=(N, 2))) for _ in range(17)])
     tangents = np.array([deviation_vectors(system, y, 1, 2) for y in starts])
     check(system, starts, tangents, np.zeros(17, dtype=np.int64), 5.0, (1, 17), megno=True)
+
+
+@pytest.mark.parametrize("t_final", [60.0, -25.0])
+def test_waiting_fine_samples_are_the_dense_output_of_their_steps(t_final):
+    """Orbit samples at t_fine, built in batches after their steps (the steps' stages
+    copied and kept), are the bits of the same times sampled at t_eval, whose dense output
+    is built at the step itself -- in lanes, alone, and at a grid's last time, which is the
+    last step's end."""
+    system = System.create()
+    starts = np.array([initial_state(system, "equilateral", delta=float(d))
+                       for d in np.linspace(0.0, 9.0, 20)])
+    grid = np.linspace(0.0, t_final, 1201)
+    for lanes in (1, 16):
+        fine = integrate_batch(system, starts, t_final, record=FINE, t_fine=grid, lanes=lanes)
+        now = integrate_batch(system, starts, t_final, record=EVAL, t_eval=grid, lanes=lanes)
+        for a, b in zip(fine, now):
+            assert np.isfinite(a.fine).all() and a.fine.shape == (grid.size, system.n)
+            assert a.fine.tobytes() == b.samples.tobytes()
