@@ -49,17 +49,35 @@ from ..physics.jit import kernel
 TWO_PI = 2.0 * math.pi
 
 
-@kernel
 def birkhoff_average(h):
     """Weighted Birkhoff average of samples h taken at equal intervals, midpoint rule with
     g(s) = exp(-1/(s(1-s))) (its integral is then spectrally accurate)."""
-    n = h.size
-    total, weight = 0.0, 0.0
+    return _weighted_mean(h, _birkhoff_weights(h.size))
+
+
+@lru_cache(maxsize=8)
+def _birkhoff_weights(n: int) -> np.ndarray:
+    """g at the n midpoints, computed once per length (a cell's averages use four)."""
+    g = _weights(n)
+    g.flags.writeable = False
+    return g
+
+
+@kernel
+def _weights(n):
+    g = np.empty(n)
     for i in range(n):
         s = (i + 0.5) / n
-        g = portable.exp(-1.0 / (s * (1.0 - s)))
-        total += h[i] * g
-        weight += g
+        g[i] = portable.exp(-1.0 / (s * (1.0 - s)))
+    return g
+
+
+@kernel
+def _weighted_mean(h, g):
+    total, weight = 0.0, 0.0
+    for i in range(h.size):
+        total += h[i] * g[i]
+        weight += g[i]
     return total / weight
 
 
@@ -82,14 +100,30 @@ def log10(x: float) -> float:
 
 
 def observable(name: str, system, states: np.ndarray) -> np.ndarray:
-    q, _ = system.split(states)
     if name == "perimeter":
-        N = system.n_bodies
-        i, j = np.triu_indices(N, 1)
-        return np.linalg.norm(q[..., i, :] - q[..., j, :], axis=-1).sum(axis=-1)
+        states = np.ascontiguousarray(states, dtype=np.float64)
+        out = np.empty(states.shape[0])
+        _pair_distances(states, system.n_bodies, system.dim, out)
+        return out
     if name == "inertia":
         return system.moment_of_inertia(states)
     raise ValueError(f"unknown observable {name!r}; choose from {', '.join(OBSERVABLES)}")
+
+
+@kernel
+def _pair_distances(y, N, d, out):
+    """The sum of the N(N-1)/2 distances between bodies of states y (M, n), pairs in
+    np.triu_indices order, each distance and the total summed from 0.0 (NumPy's order)."""
+    for r in range(y.shape[0]):
+        total = 0.0
+        for i in range(N):
+            for j in range(i + 1, N):
+                s = 0.0
+                for c in range(d):
+                    x = y[r, i * d + c] - y[r, j * d + c]
+                    s += x * x
+                total += math.sqrt(s)
+        out[r] = total
 
 
 def _rms(x):

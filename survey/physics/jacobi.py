@@ -10,13 +10,14 @@ p_phi + mu2 eta^2 J / I; the two agree when J = 0.)
 """
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
 
 from . import portable
 from .forces import profile
-from .geometry import cross
+from .jit import kernel
 from .system import System, weighted_sum
 from .terms import PERIMETER
 
@@ -78,19 +79,45 @@ def jacobi(system: System, y):
 def reduced(system: System, y) -> Reduced:
     """Reduced coordinates of Cartesian states (..., n)."""
     m = JacobiMasses.of(system)
-    s, h, ps, ph = jacobi(system, y)
-    sigma = np.linalg.norm(s, axis=-1)
-    eta = np.linalg.norm(h, axis=-1)
-    Ls, Lh = cross(s, ps), cross(h, ph)
-    a, b = m.mu1 * sigma ** 2, m.mu2 * eta ** 2
-    return Reduced(
-        sigma=sigma, eta=eta,
-        phi=portable.vatan2(cross(s, h), np.sum(s * h, axis=-1)),
-        theta=portable.vatan2(s[..., 1], s[..., 0]),
-        p_sigma=np.sum(ps * s, axis=-1) / sigma,
-        p_eta=np.sum(ph * h, axis=-1) / eta,
-        p_phi=(a * Lh - b * Ls) / (a + b),
-        J=Ls + Lh)
+    y = np.asarray(y, dtype=np.float64)
+    rows = np.ascontiguousarray(y.reshape(-1, y.shape[-1]))
+    out = np.empty((len(Reduced._fields), rows.shape[0]))
+    _reduced_rows(rows, *jacobi_weights(system), m.mu1, m.mu2, out)
+    shape = y.shape[:-1]
+    return Reduced(*(x.reshape(shape) if shape else x[0] for x in out))
+
+
+@kernel
+def _reduced_rows(y, S, H, Ps, Ph, mu1, mu2, out):
+    """`reduced` of states y (M, 12) into out (8, M), in one pass: the Jacobi vectors as
+    `jacobi` sums them (body by body), then NumPy's operations on them in NumPy's order
+    (a sum over a vector's components starts from 0.0), so the bits are those of the same
+    formulas on arrays -- 3x faster on the torus analysis' 10^4 samples of a half orbit."""
+    for r in range(y.shape[0]):
+        q0x, q0y, q1x, q1y, q2x, q2y = y[r, 0], y[r, 1], y[r, 2], y[r, 3], y[r, 4], y[r, 5]
+        p0x, p0y, p1x, p1y, p2x, p2y = y[r, 6], y[r, 7], y[r, 8], y[r, 9], y[r, 10], y[r, 11]
+        sx = S[0] * q0x + S[1] * q1x + S[2] * q2x
+        sy = S[0] * q0y + S[1] * q1y + S[2] * q2y
+        hx = H[0] * q0x + H[1] * q1x + H[2] * q2x
+        hy = H[0] * q0y + H[1] * q1y + H[2] * q2y
+        psx = Ps[0] * p0x + Ps[1] * p1x + Ps[2] * p2x
+        psy = Ps[0] * p0y + Ps[1] * p1y + Ps[2] * p2y
+        phx = Ph[0] * p0x + Ph[1] * p1x + Ph[2] * p2x
+        phy = Ph[0] * p0y + Ph[1] * p1y + Ph[2] * p2y
+        sigma = math.sqrt(0.0 + sx * sx + sy * sy)
+        eta = math.sqrt(0.0 + hx * hx + hy * hy)
+        Ls = sx * psy - sy * psx
+        Lh = hx * phy - hy * phx
+        a = mu1 * (sigma * sigma)
+        b = mu2 * (eta * eta)
+        out[0, r] = sigma
+        out[1, r] = eta
+        out[2, r] = portable.atan2(sx * hy - sy * hx, 0.0 + sx * hx + sy * hy)
+        out[3, r] = portable.atan2(sy, sx)
+        out[4, r] = (0.0 + psx * sx + psy * sy) / sigma
+        out[5, r] = (0.0 + phx * hx + phy * hy) / eta
+        out[6, r] = (a * Lh - b * Ls) / (a + b)
+        out[7, r] = Ls + Lh
 
 
 def reduced_sides(system: System, sigma, eta, phi):

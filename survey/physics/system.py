@@ -176,9 +176,11 @@ class System:
 
     def moment_of_inertia(self, y):
         """Moment of inertia about the centre of mass, sum m_i |r_i - R|^2."""
-        q, _ = self.split(y)
-        r = q - self.centre_of_mass(y)[..., None, :]
-        return weighted_sum(self.masses, np.sum(r * r, axis=-1)[..., None])[..., 0]
+        y = np.asarray(y, dtype=np.float64)
+        rows = np.ascontiguousarray(y.reshape(-1, y.shape[-1]))
+        out = np.empty(rows.shape[0])
+        _inertia_rows(rows, self.masses, self.dim, out)
+        return out.reshape(y.shape[:-1]) if y.ndim > 1 else out[0]
 
     def triangle(self, y, triplet=(0, 1, 2)):
         """Positions (u, v, w) of one triplet, each of shape (..., d)."""
@@ -189,6 +191,32 @@ class System:
 def centre_of_mass(masses: np.ndarray, q: np.ndarray) -> np.ndarray:
     """sum m_i q_i / sum m_i of positions (..., N, d)."""
     return weighted_sum(masses, q) / masses.sum()
+
+
+@kernel
+def _inertia_rows(y, masses, d, out):
+    """sum m_i |q_i - R|^2 of states y (M, n) into out: R = `centre_of_mass`, and the sums
+    over bodies and components in the order and from the start the array formulas have
+    (weighted_sum body by body; a sum over components from 0.0), so the same bits."""
+    N = masses.size
+    total_mass = 0.0
+    for i in range(N):
+        total_mass += masses[i]
+    R = np.empty(d)
+    for r in range(y.shape[0]):
+        for c in range(d):
+            t = masses[0] * y[r, c]
+            for i in range(1, N):
+                t = t + masses[i] * y[r, i * d + c]
+            R[c] = t / total_mass
+        total = 0.0
+        for i in range(N):
+            rr = 0.0
+            for c in range(d):
+                x = y[r, i * d + c] - R[c]
+                rr += x * x
+            total = masses[0] * rr if i == 0 else total + masses[i] * rr
+        out[r] = total
 
 
 def weighted_sum(weights: np.ndarray, x: np.ndarray) -> np.ndarray:

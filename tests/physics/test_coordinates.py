@@ -208,3 +208,49 @@ def test_section_sample_below_the_shells_minimum_is_inaccessible(paper_system):
         initial_state(paper_system, "section_sample", energy=60.0, angular_momentum=J)
     y = initial_state(paper_system, "section_sample", energy=62.0, angular_momentum=J)
     assert reduced(paper_system, y).sigma < 1.0
+
+
+def test_compiled_passes_give_the_bits_of_the_array_formulas():
+    """reduced, moment_of_inertia and the torus analysis' pair-distance sum run as compiled
+    loops over states; each gives the bits of its formula on arrays (the formulas the
+    archives in results/ were made with), for any leading shape, and a scalar for one
+    state."""
+    from survey.numerics.torus import observable
+    from survey.physics import portable
+    from survey.physics.geometry import cross
+    from survey.physics.system import centre_of_mass, weighted_sum
+    from survey.physics.terms import make_potential
+
+    def same(a, b):
+        return np.shape(a) == np.shape(b) and np.asarray(a).tobytes() == np.asarray(b).tobytes()
+
+    system = System.create(masses=(1.0, 2.3, 0.6))
+    y = random_states(system, 120, seed=4).reshape(4, 30, -1)
+    y[0, 0, 6:] = -0.0                                  # signed zeros: sums start from 0.0
+    s, h, ps, ph = jacobi(system, y)
+    m = system.masses
+    mu1, mu2 = m[0] * m[1] / (m[0] + m[1]), (m[0] + m[1]) * m[2] / m.sum()
+    sigma, eta = np.linalg.norm(s, axis=-1), np.linalg.norm(h, axis=-1)
+    Ls, Lh = cross(s, ps), cross(h, ph)
+    a, b = mu1 * sigma ** 2, mu2 * eta ** 2
+    arrays = dict(sigma=sigma, eta=eta, phi=portable.vatan2(cross(s, h), np.sum(s * h, axis=-1)),
+                  theta=portable.vatan2(s[..., 1], s[..., 0]),
+                  p_sigma=np.sum(ps * s, axis=-1) / sigma, p_eta=np.sum(ph * h, axis=-1) / eta,
+                  p_phi=(a * Lh - b * Ls) / (a + b), J=Ls + Lh)
+    r = reduced(system, y)
+    assert [f for f in r._fields if not same(getattr(r, f), arrays[f])] == []
+    one = reduced(system, y[1, 2])
+    assert all(isinstance(v, float) and v == arrays[f][1, 2] for f, v in one._asdict().items())
+    for sys_ in (system, System(np.array([1.0, 1.3, 0.7, 2.1]), 3,
+                                make_potential("perimetric_power"))):
+        states = random_states(sys_, 60, seed=5).reshape(3, 20, -1)
+        q, _ = sys_.split(states)
+        rel = q - centre_of_mass(sys_.masses, q)[..., None, :]
+        inertia = weighted_sum(sys_.masses, np.sum(rel * rel, axis=-1)[..., None])[..., 0]
+        assert same(sys_.moment_of_inertia(states), inertia)
+        assert sys_.moment_of_inertia(states[0, 0]) == inertia[0, 0]
+        i, j = np.triu_indices(sys_.n_bodies, 1)
+        flat = states.reshape(-1, sys_.n)
+        qf = sys_.split(flat)[0]
+        assert same(observable("perimeter", sys_, flat),
+                    np.linalg.norm(qf[:, i, :] - qf[:, j, :], axis=-1).sum(axis=-1))
