@@ -259,12 +259,11 @@ def _survey(config, command, summary=False, write_report=True, **kw) -> Path:
     size, if it has one -- then write its report beside the archive."""
     import contextlib
 
-    import xarray as xr
-
     from .analysis.classify import summary as summarise
     from .catalog.variables import V
     from .pipeline.sweep import run_survey
     path = run_survey(config, command=command, **kw)
+    import xarray as xr
     if summary:
         with xr.open_dataset(path) as ds:
             refined = f", {int((ds['level'] > 0).sum())} of them added by refinement" \

@@ -15,6 +15,7 @@ import os
 import shutil
 import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -404,9 +405,13 @@ def _compute(client, task, starts, todo, folder, key, config, bar, round_):
     still waiting, so that no worker is left alone with one chunk's extensions at the end.
     A chunk is saved when all its cells are final."""
     from dask.distributed import as_completed
-    size = config.tables["dask"]["chunk_size"] or chunk_size(
-        todo.size, len(client.scheduler_info()["workers"]), jobs_per_cell(task))
+    workers = len(client.scheduler_info()["workers"])
+    size = config.tables["dask"]["chunk_size"] or chunk_size(todo.size, workers,
+                                                            jobs_per_cell(task))
     retries = config.tables["dask"]["retries"]
+    # the archive's imports, in this process, once a worker has nothing left to do (fewer
+    # tasks than workers): on a core the survey no longer uses
+    prefetch = threading.Thread(target=archive.prefetch, name="prefetch", daemon=True)
     # a chunk by its first cell: its ids, result rows, extensions pending
     chunks = {int(ids[0]): [ids, None, 0] for ids in _chunks(todo, size)}
     futures = {client.submit(first_runs, task, ids, starts[ids], pure=False,
@@ -438,6 +443,9 @@ def _compute(client, task, starts, todo, folder, key, config, bar, round_):
             save_chunk(folder, key, ids, rows)
             saved[chunk_path(folder, ids)] = ids
             bar.update(len(ids))
+        if prefetch is not None and len(futures) < workers:
+            prefetch.start()
+            prefetch = None
     return saved
 
 
