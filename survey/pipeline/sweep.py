@@ -401,16 +401,17 @@ def refined_chunk_size(cells: int, workers: int, per_cell: int) -> int:
 
 def _compute(client, task, starts, todo, folder, key, config, bar, round_):
     """The cells `todo` in chunks, one task each (first_runs); a chunk's cells whose
-    verdict is in doubt then run longer in a task each (extend_cells), ahead of the chunks
-    still waiting, so that no worker is left alone with one chunk's extensions at the end.
-    A chunk is saved when all its cells are final."""
+    verdict is in doubt then run longer in a task each (extend_cells): ahead of the chunks
+    still waiting while some wait, and at the end each on a worker with nothing to do (the
+    scheduler would queue two on the worker that just finished, while another finishes
+    soon after and idles). A chunk is saved when all its cells are final."""
     from dask.distributed import as_completed
-    workers = len(client.scheduler_info()["workers"])
-    size = config.tables["dask"]["chunk_size"] or chunk_size(todo.size, workers,
+    slots = {w: info["nthreads"] for w, info in client.scheduler_info()["workers"].items()}
+    size = config.tables["dask"]["chunk_size"] or chunk_size(todo.size, len(slots),
                                                             jobs_per_cell(task))
     retries = config.tables["dask"]["retries"]
     # the archive's imports, in this process, once a worker has nothing left to do (fewer
-    # tasks than workers): on a core the survey no longer uses
+    # tasks than threads): on a core the survey no longer uses
     prefetch = threading.Thread(target=archive.prefetch, name="prefetch", daemon=True)
     # a chunk by its first cell: its ids, result rows, extensions pending
     chunks = {int(ids[0]): [ids, None, 0] for ids in _chunks(todo, size)}
@@ -418,22 +419,26 @@ def _compute(client, task, starts, todo, folder, key, config, bar, round_):
                              key=f"cells-{key}-{round_}-{first}",
                              retries=retries): (first, None)
                for first, (ids, _, _) in chunks.items()}
-    saved = {}
     queue = as_completed(futures)
+
+    def extend(first, k, worker=None):
+        cell = chunks[first][0][k:k + 1]
+        history = chunks[first][1][V.regime_history][k:k + 1]
+        extension = client.submit(extend_cells, task, cell, starts[cell], history,
+                                  pure=False, priority=1, retries=retries,
+                                  workers=worker, allow_other_workers=worker is not None,
+                                  key=f"longer-{key}-{round_}-{int(cell[0])}")
+        futures[extension] = (first, k)
+        queue.add(extension)
+
+    saved, held = {}, []
     for future in queue:
         first, k = futures.pop(future)
         chunk = chunks[first]
         if k is None:                   # first_runs: (rows, rows in doubt)
             chunk[1], doubt = future.result()
             chunk[2] = doubt.size
-            for k in doubt:
-                cell, history = chunk[0][k:k + 1], chunk[1][V.regime_history][k:k + 1]
-                extension = client.submit(
-                    extend_cells, task, cell, starts[cell], history, pure=False, priority=1,
-                    retries=retries,
-                    key=f"longer-{key}-{round_}-{int(cell[0])}")
-                futures[extension] = (first, k)
-                queue.add(extension)
+            held += [(first, int(k)) for k in doubt]
         else:
             merge_rows(chunk[1], np.array([k]), future.result())
             chunk[2] -= 1
@@ -443,7 +448,19 @@ def _compute(client, task, starts, todo, folder, key, config, bar, round_):
             save_chunk(folder, key, ids, rows)
             saved[chunk_path(folder, ids)] = ids
             bar.update(len(ids))
-        if prefetch is not None and len(futures) < workers:
+        if held:
+            waiting = sum(k is None for _, k in futures.values()) > sum(slots.values())
+            if waiting or not futures:
+                for first, k in held:
+                    extend(first, k)
+                held = []
+            else:
+                busy = client.processing()
+                for w in slots:
+                    for _ in range(slots[w] - len(busy.get(w, ()))):
+                        if held:
+                            extend(*held.pop(0), worker=[w])
+        if prefetch is not None and len(futures) < sum(slots.values()):
             prefetch.start()
             prefetch = None
     return saved
