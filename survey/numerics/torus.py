@@ -55,21 +55,28 @@ def birkhoff_average(h):
     return _weighted_mean(h, _birkhoff_weights(h.size))
 
 
-@lru_cache(maxsize=8)
-def _birkhoff_weights(n: int) -> np.ndarray:
-    """g at the n midpoints, computed once per length (a cell's averages use four)."""
-    g = _weights(n)
-    g.flags.writeable = False
-    return g
+def _once_per_length(make):
+    """make(n), computed once per length n and read-only: every cell of a task analyses
+    orbit halves (and quarters) of the same lengths."""
+    @lru_cache(maxsize=8)
+    def cached(n: int) -> np.ndarray:
+        w = make(n)
+        w.flags.writeable = False
+        return w
+    return cached
 
 
 @kernel
 def _weights(n):
+    """g at the n midpoints."""
     g = np.empty(n)
     for i in range(n):
         s = (i + 0.5) / n
         g[i] = portable.exp(-1.0 / (s * (1.0 - s)))
     return g
+
+
+_birkhoff_weights = _once_per_length(_weights)
 
 
 @kernel
@@ -188,15 +195,6 @@ def naff(z: np.ndarray, count: int):
     return freqs, amps
 
 
-@lru_cache(maxsize=4)
-def _window_of(N: int) -> np.ndarray:
-    """_window(N), computed once per length (every line of every signal of every cell of a
-    task has one of two: the orbit's halves), read-only."""
-    w = _window(N)
-    w.flags.writeable = False
-    return w
-
-
 @kernel
 def _window(N):
     """(1 - cos(2 pi (n + 1/2) / N))^2, n = 0..N-1: the Hann window squared."""
@@ -205,6 +203,9 @@ def _window(N):
         c = 1.0 - portable.cos(TWO_PI * (n + 0.5) / N)
         w[n] = c * c
     return w
+
+
+_window_of = _once_per_length(_window)
 
 
 @kernel
