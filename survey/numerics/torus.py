@@ -169,8 +169,8 @@ def signals(system, states: np.ndarray):
         # spurious one near 0 whose change between halves looks like diffusion)
         turns = np.ptp(theta) > 1e-9
         return [z for z in shape if z is not None], _unit(r.theta) if turns else None
-    shape = [_centred(observable(name, system, states), np.gradient(
-        observable(name, system, states))) for name in OBSERVABLES]
+    values = (observable(name, system, states) for name in OBSERVABLES)
+    shape = [_centred(h, np.gradient(h)) for h in values]
     return [z for z in shape if z is not None], None
 
 
