@@ -27,7 +27,7 @@ from .forces import (
 )
 from .geometry import cross
 from .portable import power, vnorm
-from .jit import helper, kernel, leaf
+from .jit import helper, kernel, lanes, leaf
 from .terms import (
     AREA,
     BARRIER,
@@ -506,9 +506,10 @@ def _planar_areal(y, dy, masses, prof, par, n_tan):
 
 # The loops over the lanes below are separate compiled functions, not inlined helpers:
 # numba vectorises each alone, but not all of them inlined into one function (measured:
-# the tangent loop 1.7 ns per orbit alone, 8 ns inside the whole right-hand side).
+# the tangent loop 1.7 ns per orbit alone, 8 ns inside the whole right-hand side). Each is
+# given distinct arrays (`lanes`: compiled as such, so vectorised from 8 lanes on).
 
-@leaf
+@lanes
 def _lanes_velocities(Y, dY, L, masses, n_tan):
     """dq/dt = p/m of the orbits and d dq/dt = dp/m of their tangent vectors, three bodies
     in the plane."""
@@ -522,7 +523,7 @@ def _lanes_velocities(Y, dY, L, masses, n_tan):
                 dy[c * L + k] = y[(6 + c) * L + k] * inv
 
 
-@leaf
+@lanes
 def _lanes_profile(prof, par, W, x, L):
     """U'(v) into W[x + L + k] and U''(v) into W[x + 2 L + k] from v = W[x + k], lane by
     lane: the paper's P^2/2 and barrier in loops the compiler vectorises (a branch on the
@@ -559,7 +560,7 @@ def _lanes_perimetric(Y, dY, L, prof, par, n_tan, W):
         _perimetric_tangent(Y[12 * L * (1 + t):], dY[12 * L * (1 + t):], L, W)
 
 
-@leaf
+@lanes
 def _perimetric_sides(Y, L, W):
     for k in range(L):
         ax, ay = Y[2 * L + k] - Y[k], Y[3 * L + k] - Y[L + k]       # v - u
@@ -576,7 +577,7 @@ def _perimetric_sides(Y, L, W):
         W[9 * L + k] = L1 + L2 + L3
 
 
-@leaf
+@lanes
 def _perimetric_forces(dY, L, W):
     for k in range(L):
         U1 = W[10 * L + k]
@@ -593,7 +594,7 @@ def _perimetric_forces(dY, L, W):
         dY[11 * L + k] = 0.0 + U1 * (e3y - e2y)
 
 
-@leaf
+@lanes
 def _perimetric_tangent(y, dy, L, W):
     """One tangent vector's block (y, dy start at it)."""
     for k in range(L):
@@ -631,7 +632,7 @@ def _lanes_areal(Y, dY, L, prof, par, n_tan, W):
         _areal_tangent(Y, Y[12 * L * (1 + t):], dY[12 * L * (1 + t):], L, W)
 
 
-@leaf
+@lanes
 def _areal_area(Y, L, W):
     for k in range(L):
         ax, ay = Y[2 * L + k] - Y[k], Y[3 * L + k] - Y[L + k]        # v - u
@@ -642,7 +643,7 @@ def _areal_area(Y, L, W):
         W[k], W[L + k], W[2 * L + k] = Az * inv, inv, absA
 
 
-@leaf
+@lanes
 def _areal_forces(Y, dY, L, W):
     for k in range(L):
         hz, f = W[k], -0.5 * W[3 * L + k]
@@ -658,7 +659,7 @@ def _areal_forces(Y, dY, L, W):
         dY[11 * L + k] = 0.0 + f * -(sux * hz)
 
 
-@leaf
+@lanes
 def _areal_tangent(Y, y, dy, L, W):
     """One tangent vector's block (y, dy start at it; Y is the orbit)."""
     for k in range(L):
