@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from ..physics.jit import helper, leaf
+from ..physics.jit import helper, lanes, leaf
 from ..physics.system import rhs, rhs_lanes
 
 EPS = np.finfo(np.float64).eps
@@ -512,7 +512,7 @@ def _rhs(y, dy, L, masses, d, measure, prof, par, n_tan, W):
         rhs_lanes(0.0, y, dy, L, masses, d, measure, prof, par, n_tan, W)
 
 
-@leaf
+@lanes
 def stages(masses, d, measure, prof, par, n_tan, L, y, hh, K, yt, ynew, W):
     """Stages 2..12 of L lanes (variable-major; K[0] holds f(y)) and their 8th-order
     solutions ynew; hh holds each lane's step at each of its components (one flat loop per
@@ -556,7 +556,7 @@ def stages(masses, d, measure, prof, par, n_tan, L, y, hh, K, yt, ynew, W):
         ynew[i] = y[i] + hh[i] * (B1 * K[0, i] + B6 * K[5, i] + B7 * K[6, i] + B8 * K[7, i] + B9 * K[8, i] + B10 * K[9, i] + B11 * K[10, i] + B12 * K[11, i])
 
 
-@leaf
+@lanes
 def error_norms(y, ynew, K, L, n_err, rtol, atol, h, err, scratch):
     """Hairer's blended 5th/3rd-order error estimate of each lane (into err), RMS over its
     first n_err components: the squared terms of all lanes in one flat loop (vectorised),
@@ -581,7 +581,7 @@ def error_norms(y, ynew, K, L, n_err, rtol, atol, h, err, scratch):
             err[k] = abs(h[k]) * e5 / math.sqrt(n_err * (e5 + 0.01 * e3))
 
 
-@leaf
+@lanes
 def dense_prepare(masses, d, measure, prof, par, n_tan, L, nd, full, y, ynew, hh, K, yt, F,
                   W):
     """Coefficients of the 7th-order interpolants of L lanes over their last steps for

@@ -34,7 +34,7 @@ import numpy as np
 from ..catalog import defaults
 from ..catalog.status import Status
 from ..physics import portable
-from ..physics.jit import helper, kernel, leaf
+from ..physics.jit import helper, kernel, lanes, leaf
 from ..physics.system import SIMD_LANES, System, rhs, rhs_lanes, workspace_size
 from .dop853 import (
     BETA_ROOTS,
@@ -630,15 +630,15 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
 # Work on every lane at once: flat loops over all components of all lanes, which the
 # compiler vectorises, then per-lane sums in the components' order (as one orbit sums).
 
-@leaf
+@lanes
 def _spread(h, HH, L, nf):
     """Each lane's value h[k] at each of its components."""
-    for k in range(L):
-        for i in range(nf):
+    for i in range(nf):
+        for k in range(L):
             HH[i * L + k] = h[k]
 
 
-@leaf
+@lanes
 def _finite_lanes(Y, K, L, nf, scratch, out):
     """out[k]: finite iff every component of lane k in Y and K is (x * 0 is NaN for inf and
     NaN, and NaN survives the sum)."""
@@ -651,7 +651,7 @@ def _finite_lanes(Y, K, L, nf, scratch, out):
         out[k] = acc
 
 
-@leaf
+@lanes
 def _take(Y, YN, K0, K12, take, mask, L, nf):
     """Lanes with take[k] != 0 adopt their new state YN and its derivative K12 (mask:
     scratch)."""
@@ -662,7 +662,7 @@ def _take(Y, YN, K0, K12, take, mask, L, nf):
             K0[j] = K12[j]
 
 
-@leaf
+@lanes
 def _tangent_norms(Y, L, n, n_tan, scratch, NW):
     """NW[t * L + k]: the norm of lane k's tangent vector t, summed in its components' order
     as numerics.dop853.norm_block does."""
