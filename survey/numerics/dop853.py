@@ -559,8 +559,9 @@ def stages(masses, d, measure, prof, par, n_tan, L, y, hh, K, yt, ynew, W):
 @lanes
 def error_norms(y, ynew, K, L, n_err, rtol, atol, h, err, scratch):
     """Hairer's blended 5th/3rd-order error estimate of each lane (into err), RMS over its
-    first n_err components: the squared terms of all lanes in one flat loop (vectorised),
-    then each lane's sums in the components' order, as for one orbit. scratch: 2 n_err L."""
+    first n_err components: the squared terms of all lanes in one flat loop, then each
+    lane's sums in the components' order, as for one orbit, in loops over the lanes (both
+    vectorised). scratch: 2 (n_err + 1) L."""
     M = n_err * L
     for i in range(M):
         isk = 1.0 / (atol + rtol * max(abs(y[i]), abs(ynew[i])))
@@ -569,16 +570,22 @@ def error_norms(y, ynew, K, L, n_err, rtol, atol, h, err, scratch):
         er5 = (ER1 * K[0, i] + ER6 * K[5, i] + ER7 * K[6, i] + ER8 * K[7, i] + ER9 * K[8, i] + ER10 * K[9, i] + ER11 * K[10, i] + ER12 * K[11, i]) * isk
         scratch[i] = er3 * er3
         scratch[M + i] = er5 * er5
+    e3, e5 = scratch[2 * M:2 * M + L], scratch[2 * M + L:2 * M + 2 * L]
     for k in range(L):
-        e3 = 0.0
-        e5 = 0.0
-        for i in range(n_err):
-            e3 += scratch[i * L + k]
-            e5 += scratch[M + i * L + k]
-        if e5 == 0.0 and e3 == 0.0:
+        e3[k] = 0.0
+        e5[k] = 0.0
+    for i in range(n_err):
+        # views at each component: an index offset by the outer loop keeps the compiler
+        # from vectorising the inner one
+        s3, s5 = scratch[i * L:], scratch[M + i * L:]
+        for k in range(L):
+            e3[k] += s3[k]
+            e5[k] += s5[k]
+    for k in range(L):
+        if e5[k] == 0.0 and e3[k] == 0.0:
             err[k] = 0.0
         else:
-            err[k] = abs(h[k]) * e5 / math.sqrt(n_err * (e5 + 0.01 * e3))
+            err[k] = abs(h[k]) * e5[k] / math.sqrt(n_err * (e5[k] + 0.01 * e3[k]))
 
 
 @lanes

@@ -131,8 +131,9 @@ class Lanes(NamedTuple):
     F: np.ndarray             # (7, nf L) dense-output coefficients
     HH: np.ndarray            # (nf L,) each lane's step at each of its components
     W: np.ndarray             # rhs_lanes workspace
-    S: np.ndarray             # (2 nf L,) scratch
-    err: np.ndarray           # (2 L,) error norms
+    S: np.ndarray             # (2 (nf + 1) L,) the error norms' scratch
+    err: np.ndarray           # (L,) error norms
+    roots: np.ndarray         # (2 L,) their 8th and 128th roots (the step control's)
     NW: np.ndarray            # (n_tan L,) tangent vectors' norms; (L,) finiteness
     taken: np.ndarray         # (L,) 1.0 where the lane takes its new state
     job: np.ndarray           # (L,) the job a lane runs, -1: idle
@@ -553,8 +554,9 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
         stages(masses, d, measure, prof, par, n_tan, L, ln.Y, ln.HH, ln.K, ln.YT, ln.YN,
                ln.W)
         error_norms(ln.Y, ln.YN, ln.K, L, n_err, rtol, atol, ln.h, ln.err, ln.S)
+        _step_roots(ln.err, L, ln.roots)
         rhs_lanes(0.0, ln.YN, ln.K[12], L, masses, d, measure, prof, par, n_tan, ln.W)
-        _finite_lanes(ln.YN, ln.K[12], L, nf, ln.YT, ln.NW)
+        _finite_lanes(ln.YN, ln.K[12], L, nf, ln.NW)
         dense = 0
         n = 2 * masses.size * d
         for k in range(L):
@@ -578,7 +580,7 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
             ln.flags[k, 1] = 0
             if err > 1.0:
                 counts[1] += 1
-                ln.h[k] *= max(1.0 / 3.0, 0.9 / portable.root8(err)[0])
+                ln.h[k] *= max(1.0 / 3.0, 0.9 / ln.roots[k])
                 ln.flags[k, 0] = 1
                 continue
             ln.flags[k, 3] = 1          # accepted
@@ -599,7 +601,7 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
             _flush(ln, out, masses, d, measure, prof, par, t_fine)
         # ---- accepted lanes take their new states, then their tangent vectors' norms
         _take(ln.Y, ln.YN, ln.K[0], ln.K[12], ln.taken, ln.HH, L, nf)
-        _tangent_norms(ln.Y, L, 2 * masses.size * d, n_tan, ln.YT, ln.NW)
+        _tangent_norms(ln.Y, L, 2 * masses.size * d, n_tan, ln.NW)
         for k in range(L):
             if not ln.flags[k, 3]:
                 continue
@@ -608,7 +610,7 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
                 _finish(k, ln, out, OK_, rows)
                 continue
             err = ln.err[k]
-            r8, r128 = portable.root8(max(err, 1e-10))
+            r8, r128 = ln.roots[k], ln.roots[L + k]
             fac = 0.9 * r128 / r8 * portable.ipow(ln.err_old[k], BETA_ROOTS)
             ln.err_old[k] = r128 if err >= 1e-4 else ERR_FLOOR_ROOT
             fac = min(6.0, max(1.0 / 3.0, fac))
@@ -639,16 +641,24 @@ def _spread(h, HH, L, nf):
 
 
 @lanes
-def _finite_lanes(Y, K, L, nf, scratch, out):
+def _finite_lanes(Y, K, L, nf, out):
     """out[k]: finite iff every component of lane k in Y and K is (x * 0 is NaN for inf and
     NaN, and NaN survives the sum)."""
-    for j in range(nf * L):
-        scratch[j] = Y[j] * 0.0 + K[j] * 0.0
     for k in range(L):
-        acc = 0.0
-        for i in range(nf):
-            acc += scratch[i * L + k]
-        out[k] = acc
+        out[k] = 0.0
+    for i in range(nf):
+        y, dy = Y[i * L:], K[i * L:]
+        for k in range(L):
+            out[k] += y[k] * 0.0 + dy[k] * 0.0
+
+
+@lanes
+def _step_roots(err, L, roots):
+    """roots[k], roots[L + k]: max(err[k], 1e-10) to the powers 1/8 and 1/128 (the step
+    control's: seven chained square roots, ~150 cycles of latency for one lane, the same
+    in SIMD for 8). Meaningful for finite errors only."""
+    for k in range(L):
+        roots[k], roots[L + k] = portable.root8(max(err[k], 1e-10))
 
 
 @lanes
@@ -663,17 +673,19 @@ def _take(Y, YN, K0, K12, take, mask, L, nf):
 
 
 @lanes
-def _tangent_norms(Y, L, n, n_tan, scratch, NW):
+def _tangent_norms(Y, L, n, n_tan, NW):
     """NW[t * L + k]: the norm of lane k's tangent vector t, summed in its components' order
     as numerics.dop853.norm_block does."""
-    for j in range(n * L, n * (1 + n_tan) * L):
-        scratch[j] = Y[j] * Y[j]
     for t in range(n_tan):
+        nw = NW[t * L:(t + 1) * L]
         for k in range(L):
-            s = 0.0
-            for i in range(n * (1 + t), n * (2 + t)):
-                s += scratch[i * L + k]
-            NW[t * L + k] = math.sqrt(s)
+            nw[k] = 0.0
+        for i in range(n * (1 + t), n * (2 + t)):
+            w = Y[i * L:]
+            for k in range(L):
+                nw[k] += w[k] * w[k]
+        for k in range(L):
+            nw[k] = math.sqrt(nw[k])
 
 
 @leaf
@@ -764,8 +776,8 @@ def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol,
         return Lanes(
             np.zeros(nf * L), np.zeros((16, nf * L)), np.zeros(nf * L), np.zeros(nf * L),
             np.zeros((7, nf * L)), np.zeros(nf * L), np.zeros(workspace_size(L, nf)),
-            np.zeros(2 * nf * L),
-            np.zeros(2 * L), np.zeros(max(1, n_tan) * L), np.zeros(L),
+            np.zeros(2 * (nf + 1) * L),
+            np.zeros(L), np.zeros(2 * L), np.zeros(max(1, n_tan) * L), np.zeros(L),
             np.full(L, -1, dtype=np.int64),
             np.zeros(L), np.zeros(L),
             np.zeros(L), np.zeros(L), np.zeros((L, 4), dtype=np.int64),
