@@ -135,8 +135,6 @@ class Lanes(NamedTuple):
     err: np.ndarray           # (L,) error norms
     roots: np.ndarray         # (2 L,) their 8th and 128th roots (the step control's)
     NW: np.ndarray            # (n_tan L,) tangent vectors' norms; (L,) finiteness
-    LNW: np.ndarray           # (n_tan L,) their logarithms
-    g: np.ndarray             # (L,) the WBA weight of each lane's last step
     taken: np.ndarray         # (L,) 1.0 where the lane takes its new state
     job: np.ndarray           # (L,) the job a lane runs, -1: idle
     t: np.ndarray
@@ -459,30 +457,10 @@ def _flush(ln, out, masses, d, measure, prof, par, t_fine):
 
 
 @helper
-def _logs_and_weights(ln, t0, t1, n_tan):
-    """For every lane that takes its step: the logarithms of its tangent vectors' norms and
-    the WBA weight g(s) = exp(-1/(s(1-s))) at the step's mid-time (for `_advance`). In a
-    loop of their own the portable log's and exp's latency chains (~70 cycles each)
-    overlap across lanes instead of holding up each lane's bookkeeping."""
-    L = ln.job.size
-    if n_tan == 0:
-        return
-    for k in range(L):
-        if ln.flags[k, 3]:
-            t_old = ln.t[k]
-            t = t1 if ln.flags[k, 2] == 1 else t_old + ln.h[k]
-            x = (0.5 * (t_old + t) - t0) / (t1 - t0)
-            ln.g[k] = portable.exp(-1.0 / (x * (1.0 - x))) if 0.0 < x < 1.0 else 0.0
-            for tt in range(n_tan):
-                ln.LNW[tt * L + k] = portable.log(ln.NW[tt * L + k])
-
-
-@helper
 def _advance(k, ln, out, t0, t1, n, n_tan, megno, renorm_dt, NW):
     """Lane k after its accepted step (its state already the new one): the time, and its
-    tangent vectors' growth (FLI), renormalisation, MEGNO and WBA, from their norms NW, the
-    norms' logarithms and the step's WBA weight (`_logs_and_weights`). Returns OK_ if the
-    job reached t1, else RUNNING."""
+    tangent vectors' growth (FLI), renormalisation, MEGNO and WBA, from their norms NW.
+    Returns OK_ if the job reached t1, else RUNNING."""
     L = ln.job.size
     j = ln.job[k]
     last = ln.flags[k, 2] == 1
@@ -500,11 +478,12 @@ def _advance(k, ln, out, t0, t1, n, n_tan, megno, renorm_dt, NW):
             ln.t_next_renorm[k] = t + direction * renorm_dt
         for tt in range(n_tan):
             off = n * (1 + tt)
-            wn, log_wn = NW[tt * L + k], ln.LNW[tt * L + k]
-            Lw = log_growth[tt] + log_wn
+            wn = NW[tt * L + k]
+            Lw = log_growth[tt] + portable.log(wn)
             out.max_log[j, tt] = max(out.max_log[j, tt], Lw)
             if tt == 0:
-                g = ln.g[k]
+                x = (0.5 * (t_old + t) - t0) / (t1 - t0)
+                g = portable.exp(-1.0 / (x * (1.0 - x))) if 0.0 < x < 1.0 else 0.0
                 out.wba[j, 0] += g * (Lw - L_prev)
                 out.wba[j, 1] += g * (t - t_old)
                 if megno:
@@ -521,7 +500,7 @@ def _advance(k, ln, out, t0, t1, n, n_tan, megno, renorm_dt, NW):
                 for a in range(off, off + n):
                     y[a] *= inv
                     K0[a] *= inv
-                log_growth[tt] += log_wn
+                log_growth[tt] += portable.log(wn)
     ln.acc[k, 0], ln.acc[k, 1], ln.acc[k, 2] = L_prev, int_L, Y_prev
     return OK_ if last else RUNNING
 
@@ -623,7 +602,6 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
         # ---- accepted lanes take their new states, then their tangent vectors' norms
         _take(ln.Y, ln.YN, ln.K[0], ln.K[12], ln.taken, ln.HH, L, nf)
         _tangent_norms(ln.Y, L, 2 * masses.size * d, n_tan, ln.NW)
-        _logs_and_weights(ln, t0, t1, n_tan)
         for k in range(L):
             if not ln.flags[k, 3]:
                 continue
@@ -799,8 +777,7 @@ def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol,
             np.zeros(nf * L), np.zeros((16, nf * L)), np.zeros(nf * L), np.zeros(nf * L),
             np.zeros((7, nf * L)), np.zeros(nf * L), np.zeros(workspace_size(L, nf)),
             np.zeros(2 * (nf + 1) * L),
-            np.zeros(L), np.zeros(2 * L), np.zeros(max(1, n_tan) * L),
-            np.zeros(max(1, n_tan) * L), np.zeros(L), np.zeros(L),
+            np.zeros(L), np.zeros(2 * L), np.zeros(max(1, n_tan) * L), np.zeros(L),
             np.full(L, -1, dtype=np.int64),
             np.zeros(L), np.zeros(L),
             np.zeros(L), np.zeros(L), np.zeros((L, 4), dtype=np.int64),
