@@ -14,7 +14,7 @@ import os
 from pathlib import Path
 
 from numba import njit
-from numba.core import cpu, options
+from numba.core import compiler, cpu, options
 
 PACKAGE = Path(__file__).parents[1]
 # the modules whose source compiled code depends on, and the folders that hold kernels
@@ -78,11 +78,15 @@ leaf = njit(cache=True, error_model="numpy", _nrt=False)
 # the checks cost under a tenth of the loop: with 16 lanes the tangent ran scalar, 6.5 ns
 # per lane against 1.6. numba's `noalias` flag (which its parallel backend sets once it
 # has proven a gufunc's arguments distinct) declares the arrays a function is given
-# disjoint; it is not a decorator option, so it is mapped to one here. Only for functions
-# whose arguments are distinct arrays (or disjoint rows of one) at every call.
-if not hasattr(cpu.CPUTargetOptions, "noalias"):
-    cpu.CPUTargetOptions.noalias = options.TargetOptions.Mapping("noalias")
-lanes = njit(cache=True, error_model="numpy", _nrt=False, noalias=True)
+# disjoint; it is not a decorator option, so it is mapped to one here (a numba without
+# the flag compiles them as leaves: slower, the same bits). Only for functions whose
+# arguments are distinct arrays (or disjoint rows of one) at every call.
+if hasattr(compiler.Flags, "noalias"):
+    if not hasattr(cpu.CPUTargetOptions, "noalias"):
+        cpu.CPUTargetOptions.noalias = options.TargetOptions.Mapping("noalias")
+    lanes = njit(cache=True, error_model="numpy", _nrt=False, noalias=True)
+else:
+    lanes = leaf
 # small helpers are inlined at numba-IR level: calls between separately compiled functions
 # otherwise cost more than the arithmetic (3x on the right-hand side). Large bodies called
 # once per triplet or evaluation stay `leaf`s: inlining them buys nothing measurable and
