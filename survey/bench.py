@@ -700,7 +700,7 @@ def _stage_loop(Y, reps, h, L, masses, d, measure, prof, par, n_tan):
     nf = Y.size // L
     K, YT, YN = np.zeros((16, Y.size)), np.zeros(Y.size), np.zeros(Y.size)
     W, S = np.zeros(workspace_size(L, nf)), np.zeros(2 * (nf + 1) * L)
-    H, err = np.full(L, h), np.zeros(2 * L)
+    H, err = np.full(L, h), np.zeros(L)
     HH = np.full(Y.size, h)
     if L == 1:
         rhs(0.0, Y, K[0], masses, d, measure, prof, par, n_tan)

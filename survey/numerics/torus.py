@@ -396,7 +396,7 @@ def analyse(system, fine: np.ndarray, dt: float, energy_error: float, observable
     """The torus evidence of one orbit sampled every dt (fine: states (k, n), NaN past the
     end reached)."""
     ended = np.isnan(fine[:, 0])
-    done = fine[~ended] if ended.any() else fine       # no copy of a complete orbit's
+    done = fine[~ended] if ended.any() else fine       # a complete orbit: no copy
     cap = -log10(max(energy_error, 16 * np.finfo(float).eps)) \
         if np.isfinite(energy_error) else np.nan
     values = [observable(o, system, done) for o in observables]
