@@ -11,7 +11,7 @@ as in fdlibm) with series long enough for about one ulp.
 Scalar versions inline into kernels; `vexp`, `vlog`, `vsin`, `vcos`, `vatan2` are their
 numpy ufuncs for Python code, and `vnorm` and `vdot` the Euclidean norm and the dot product
 along the last axis summed in order (numpy's and BLAS's sums change their order with the
-CPU). `symmetric_eigen` and `orthonormal` replace LAPACK's eigh and QR, whose blocked
+CPU), each made on first use (`portable.vexp`, not `from .portable import vexp`). `symmetric_eigen` and `orthonormal` replace LAPACK's eigh and QR, whose blocked
 kernels round by the CPU.
 """
 from __future__ import annotations
@@ -276,34 +276,52 @@ def power(x, y):
     return exp(y * log(x))
 
 
-_UFUNC = dict(cache=True)
-vexp = vectorize(["float64(float64)"], **_UFUNC)(exp.py_func)
-vlog = vectorize(["float64(float64)"], **_UFUNC)(log.py_func)
-vsin = vectorize(["float64(float64)"], **_UFUNC)(sin.py_func)
-vcos = vectorize(["float64(float64)"], **_UFUNC)(cos.py_func)
-vatan2 = vectorize(["float64(float64, float64)"], **_UFUNC)(atan2.py_func)
-
-
-@guvectorize(["void(float64[:], float64[:])"], "(n)->()", cache=True)
-def vnorm(a, out):
+def _norm(a, out):
     s = 0.0
     for i in range(a.size):
         s += a[i] * a[i]
     out[0] = math.sqrt(s)
 
 
-@guvectorize(["void(float64[:], float64[:], float64[:])"], "(n),(n)->()", cache=True)
-def vdot(a, b, out):
+def _dot(a, b, out):
     s = 0.0
     for i in range(a.size):
         s += a[i] * b[i]
     out[0] = s
 
 
+# numpy ufuncs of the scalar functions, made on first use (PEP 562): loading the seven from
+# numba's cache at import cost the command line ~0.3 s (0.2 s of import, the rest in
+# forking workers that inherit the extra objects), and a survey's driver needs none of them
+UFUNCS = {"vexp": lambda: vectorize(["float64(float64)"], cache=True)(exp.py_func),
+          "vlog": lambda: vectorize(["float64(float64)"], cache=True)(log.py_func),
+          "vsin": lambda: vectorize(["float64(float64)"], cache=True)(sin.py_func),
+          "vcos": lambda: vectorize(["float64(float64)"], cache=True)(cos.py_func),
+          "vatan2": lambda: vectorize(["float64(float64, float64)"], cache=True)(atan2.py_func),
+          "vnorm": lambda: guvectorize(["void(float64[:], float64[:])"], "(n)->()",
+                                       cache=True)(_norm),
+          "vdot": lambda: guvectorize(["void(float64[:], float64[:], float64[:])"],
+                                      "(n),(n)->()", cache=True)(_dot)}
+
+
+def ufunc(name: str):
+    """The ufunc `name` of UFUNCS (made now if not yet)."""
+    if name not in globals():
+        globals()[name] = UFUNCS[name]()
+    return globals()[name]
+
+
+def __getattr__(name):
+    if name not in UFUNCS:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return ufunc(name)
+
+
 def orthonormal(rows: np.ndarray) -> np.ndarray:
     """An orthonormal basis of the rows' span by modified Gram-Schmidt (sums in order, so
     the same bits on every CPU, unlike LAPACK's QR); a row whose remainder is below 1e-12
     of the largest row adds nothing."""
+    vnorm, vdot = ufunc("vnorm"), ufunc("vdot")
     basis, floor = [], 1e-12 * float(np.max(vnorm(rows)))
     for v in rows:
         v = v.copy()
