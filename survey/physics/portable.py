@@ -8,10 +8,10 @@ root and exact scaling by powers of two -- each correctly rounded, so every CPU 
 compiler target returns the same bits -- in the classic argument reductions (Cody-Waite,
 as in fdlibm) with series long enough for about one ulp.
 
-Scalar versions inline into kernels; `vexp`, `vlog`, `vsin`, `vcos`, `vatan2` are their
-numpy ufuncs for Python code, and `vnorm` and `vdot` the Euclidean norm and the dot product
-along the last axis summed in order (numpy's and BLAS's sums change their order with the
-CPU), each made on first use (`portable.vexp`, not `from .portable import vexp`). `symmetric_eigen` and `orthonormal` replace LAPACK's eigh and QR, whose blocked
+Scalar versions inline into kernels; `vexp`, `vlog`, `vsin`, `vcos`, `vatan2` apply them
+elementwise to arrays for Python code, and `vnorm` and `vdot` are the Euclidean norm and the
+dot product along the last axis summed in order (numpy's and BLAS's sums change their order
+with the CPU). `symmetric_eigen` and `orthonormal` replace LAPACK's eigh and QR, whose blocked
 kernels round by the CPU.
 """
 from __future__ import annotations
@@ -19,7 +19,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import guvectorize, vectorize
 
 from .jit import helper, kernel
 
@@ -276,52 +275,86 @@ def power(x, y):
     return exp(y * log(x))
 
 
-def _norm(a, out):
-    s = 0.0
-    for i in range(a.size):
-        s += a[i] * a[i]
-    out[0] = math.sqrt(s)
+EXP, LOG, SIN, COS, ATAN2 = range(5)
 
 
-def _dot(a, b, out):
-    s = 0.0
-    for i in range(a.size):
-        s += a[i] * b[i]
-    out[0] = s
+@kernel
+def _elementwise(code, x, y, out):
+    """out[i] = f(x[i]) (atan2: f(x[i], y[i])) for the function of `code`."""
+    for i in range(out.size):
+        if code == EXP:
+            out[i] = exp(x[i])
+        elif code == LOG:
+            out[i] = log(x[i])
+        elif code == SIN:
+            out[i] = sin(x[i])
+        elif code == COS:
+            out[i] = cos(x[i])
+        else:
+            out[i] = atan2(x[i], y[i])
 
 
-# numpy ufuncs of the scalar functions, made on first use (PEP 562): loading the seven from
-# numba's cache at import cost the command line ~0.3 s (0.2 s of import, the rest in
-# forking workers that inherit the extra objects), and a survey's driver needs none of them
-UFUNCS = {"vexp": lambda: vectorize(["float64(float64)"], cache=True)(exp.py_func),
-          "vlog": lambda: vectorize(["float64(float64)"], cache=True)(log.py_func),
-          "vsin": lambda: vectorize(["float64(float64)"], cache=True)(sin.py_func),
-          "vcos": lambda: vectorize(["float64(float64)"], cache=True)(cos.py_func),
-          "vatan2": lambda: vectorize(["float64(float64, float64)"], cache=True)(atan2.py_func),
-          "vnorm": lambda: guvectorize(["void(float64[:], float64[:])"], "(n)->()",
-                                       cache=True)(_norm),
-          "vdot": lambda: guvectorize(["void(float64[:], float64[:], float64[:])"],
-                                      "(n),(n)->()", cache=True)(_dot)}
+@kernel
+def _row_dots(a, b, out):
+    """out[r] = sum_i a[r, i] b[r, i], summed in order."""
+    for r in range(a.shape[0]):
+        s = 0.0
+        for i in range(a.shape[1]):
+            s += a[r, i] * b[r, i]
+        out[r] = s
 
 
-def ufunc(name: str):
-    """The ufunc `name` of UFUNCS (made now if not yet)."""
-    if name not in globals():
-        globals()[name] = UFUNCS[name]()
-    return globals()[name]
+def _apply(code, *args):
+    """The function of `code` over broadcast arrays: an array of their shape (a numpy
+    scalar for scalars, as a ufunc gives). A kernel rather than numba's vectorize: a ufunc
+    builds its wrapper anew in every process (~35 ms each), a kernel loads from the cache."""
+    arrays = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in args))
+    flat = [np.ascontiguousarray(a).reshape(-1) for a in arrays]
+    out = np.empty(flat[0].size)
+    _elementwise(code, flat[0], flat[-1], out)
+    return out.reshape(arrays[0].shape)[()]
 
 
-def __getattr__(name):
-    if name not in UFUNCS:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    return ufunc(name)
+def vexp(x):
+    return _apply(EXP, x)
+
+
+def vlog(x):
+    return _apply(LOG, x)
+
+
+def vsin(x):
+    return _apply(SIN, x)
+
+
+def vcos(x):
+    return _apply(COS, x)
+
+
+def vatan2(y, x):
+    return _apply(ATAN2, y, x)
+
+
+def vdot(a, b):
+    """The dot products of a and b along their last axis (broadcast), summed in order."""
+    a, b = np.broadcast_arrays(np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64))
+    shape, n = a.shape[:-1], a.shape[-1]
+    rows = int(np.prod(shape))
+    out = np.empty(rows)
+    _row_dots(np.ascontiguousarray(a).reshape(rows, n), np.ascontiguousarray(b).reshape(rows, n),
+              out)
+    return out.reshape(shape)[()]
+
+
+def vnorm(a):
+    """The Euclidean norms along the last axis, summed in order."""
+    return np.sqrt(vdot(a, a))
 
 
 def orthonormal(rows: np.ndarray) -> np.ndarray:
     """An orthonormal basis of the rows' span by modified Gram-Schmidt (sums in order, so
     the same bits on every CPU, unlike LAPACK's QR); a row whose remainder is below 1e-12
     of the largest row adds nothing."""
-    vnorm, vdot = ufunc("vnorm"), ufunc("vdot")
     basis, floor = [], 1e-12 * float(np.max(vnorm(rows)))
     for v in rows:
         v = v.copy()
