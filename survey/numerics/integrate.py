@@ -35,7 +35,9 @@ from ..catalog import defaults
 from ..catalog.status import Status
 from ..physics import portable
 from ..physics.jit import helper, kernel, lanes, leaf
-from ..physics.system import SIMD_LANES, System, rhs, rhs_lanes, workspace_size
+from ..physics.system import (
+    SIMD_LANES, SIMD_MIN, System, rhs, rhs_lanes, workspace_size,
+)
 from .dop853 import (
     BETA_ROOTS,
     EPS,
@@ -689,23 +691,24 @@ def _tangent_norms(Y, L, n, n_tan, NW):
 
 
 @leaf
-def _adopt(one, ln, k):
-    """Lane k of ln into the one-lane `one`: everything a lane carries from step to step
+def _adopt(to, slot, ln, k):
+    """Lane k of ln into lane `slot` of `to`: everything a lane carries from step to step
     (its state and derivative, time, step, budgets, flags, samples' and events' places,
     MEGNO sums, clock), so it goes on with the same bits."""
-    L = ln.job.size
-    for i in range(one.Y.size):
-        one.Y[i] = ln.Y[i * L + k]
-        one.K[0, i] = ln.K[0, i * L + k]
-    one.job[0], one.t[0], one.h[0], one.h_max[0] = ln.job[k], ln.t[k], ln.h[k], ln.h_max[k]
-    one.err_old[0], one.t_next_renorm[0] = ln.err_old[k], ln.t_next_renorm[k]
-    one.i_eval[0], one.i_fine[0] = ln.i_eval[k], ln.i_fine[k]
+    L, Lt = ln.job.size, to.job.size
+    for i in range(ln.Y.size // L):
+        to.Y[i * Lt + slot] = ln.Y[i * L + k]
+        to.K[0, i * Lt + slot] = ln.K[0, i * L + k]
+    to.job[slot], to.t[slot], to.h[slot], to.h_max[slot] = ln.job[k], ln.t[k], ln.h[k], \
+        ln.h_max[k]
+    to.err_old[slot], to.t_next_renorm[slot] = ln.err_old[k], ln.t_next_renorm[k]
+    to.i_eval[slot], to.i_fine[slot] = ln.i_eval[k], ln.i_fine[k]
     for f in range(4):
-        one.flags[0, f] = ln.flags[k, f]
-        one.acc[0, f] = ln.acc[k, f]
+        to.flags[slot, f] = ln.flags[k, f]
+        to.acc[slot, f] = ln.acc[k, f]
     for e in range(ln.g_old.shape[1]):
-        one.g_old[0, e] = ln.g_old[k, e]
-        one.s_old[0, e] = ln.s_old[k, e]
+        to.g_old[slot, e] = ln.g_old[k, e]
+        to.s_old[slot, e] = ln.s_old[k, e]
 
 
 @helper
@@ -806,16 +809,25 @@ def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol,
                             time_limit, t_fine, next_job, rounds, now)
         return next_job
 
-    ln = lanes(L)
-    if drive(ln, 0) == HANDOFF:
-        # the SIMD loops cost all L lanes whether they run a job or not: the last few jobs
-        # (their lengths differ 2x and more) go on one after another in one lane
+    # The SIMD loops cost all L lanes whether they run a job or not: once every job has
+    # started and at most half the lanes run one (their lengths differ 2x and more), those
+    # go on in half as many lanes, and below SIMD_MIN one after another in one lane.
+    ln, next_job = lanes(L), 0
+    while drive(ln, next_job) == HANDOFF:
+        next_job, running = M, np.flatnonzero(ln.job >= 0)
+        if ln.job.size // 2 >= SIMD_MIN:
+            fewer = lanes(ln.job.size // 2)
+            for slot, k in enumerate(running):
+                _adopt(fewer, slot, ln, k)
+            ln = fewer
+            continue
         one, handed = lanes(1), time.perf_counter()
-        for k in np.flatnonzero(ln.job >= 0):
-            _adopt(one, ln, k)
+        for k in running:
+            _adopt(one, 0, ln, k)
             if time_limit > 0.0:    # a job's budget does not run while it waits its turn
                 one.acc[0, 3] += time.perf_counter() - handed
             drive(one, M)
+        break
     return out
 
 
@@ -858,11 +870,14 @@ class Outcome(NamedTuple):
 
 
 def lanes_for(jobs: int) -> int:
-    """The lane count for a batch of jobs: SIMD_LANES, the fewest with which the compiler's
-    SIMD loops run (32 lanes cost 8% less per orbit, but a lane that finishes idles unless
-    the batch has a job left, and orbits differ 2x and more in length); fewer jobs run one
-    after another in one lane, where one state's values stay in registers."""
-    return SIMD_LANES if jobs >= SIMD_LANES else 1
+    """The lane count for a batch of jobs: SIMD_LANES, or for fewer jobs the largest power
+    of two they fill, from SIMD_MIN (the fewest with which the compiler's SIMD loops run);
+    fewer still run one after another in one lane, where one state's values stay in
+    registers."""
+    L = SIMD_LANES
+    while L > jobs and L > SIMD_MIN:
+        L //= 2
+    return L if jobs >= L else 1
 
 
 def integrate_batch(system: System, starts, t_span, *, tangents=None, record=None,

@@ -366,11 +366,13 @@ def rhs(t, y, dy, masses, d, measure, prof, par, n_tan):
     velocities_and_forces(y, dy, masses, d, measure, prof, par, n_tan)
 
 
-# lanes from which the compiler's SIMD loops run (its vector width, 8 doubles, times its
-# interleave of 2); with fewer, rhs_lanes runs `rhs` lane by lane, which keeps one
-# state's values in registers (27 ns with a tangent, against 72 ns in the lanes' loops for
-# one lane and 8.6 ns per lane for 32)
+# A batch's lanes: 16 (32 cost 8% less per orbit, but a lane that finishes idles unless the
+# batch has a job left, and orbits differ 2x and more in length). The compiler's loops over
+# the lanes run as SIMD instructions from SIMD_MIN lanes on (4 doubles a vector, the 8 of
+# AVX-512 from 8); with fewer, rhs_lanes runs `rhs` lane by lane, which keeps one state's
+# values in registers.
 SIMD_LANES = 16
+SIMD_MIN = 4
 
 
 @helper
@@ -384,15 +386,15 @@ def rhs_lanes(t, Y, dY, L, masses, d, measure, prof, par, n_tan, W):
     """`rhs` for L states at once, stored variable-major (component i of lane k at
     Y[i * L + k]); W: workspace_size(L, nf) floats. Three bodies in the plane under one
     perimetric or areal term (every workflow, most of the paper) run loops over the lanes
-    that the compiler turns into SIMD instructions (from SIMD_LANES lanes on): the general
+    that the compiler turns into SIMD instructions (from SIMD_MIN lanes on): the general
     path's operations on the same values in the same order, without its loops, zero z
     components and accumulations, so every lane gets the bits `rhs` gives
     (tests/physics/test_system.py). Otherwise `rhs` runs lane by lane."""
     N = masses.size
-    if L >= SIMD_LANES and N == 3 and d == 2 and measure == PERIMETER and par.ndim == 1:
+    if L >= SIMD_MIN and N == 3 and d == 2 and measure == PERIMETER and par.ndim == 1:
         _lanes_velocities(Y, dY, L, masses, n_tan)
         _lanes_perimetric(Y, dY, L, prof, lead_params(par), n_tan, W)
-    elif L >= SIMD_LANES and N == 3 and d == 2 and measure == AREA and par.ndim == 1:
+    elif L >= SIMD_MIN and N == 3 and d == 2 and measure == AREA and par.ndim == 1:
         _lanes_velocities(Y, dY, L, masses, n_tan)
         _lanes_areal(Y, dY, L, prof, lead_params(par), n_tan, W)
     elif L == 1:
