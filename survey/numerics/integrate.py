@@ -11,8 +11,9 @@ budget, status, events, samples and accumulators; every decision is taken lane b
 with the arithmetic of one orbit, so a lane gives the bits one orbit alone gives (L = 1),
 whatever the lane count and whatever the other lanes hold (tests/numerics/test_lanes.py).
 A lane whose orbit ends takes the next start of the batch: no lane waits for the slowest.
-Once every start is taken and at most half the lanes still run, those orbits go on one
-after another in one lane (`_adopt`): idle lanes cost the SIMD loops as much as busy ones.
+Once every start is taken and at most half the lanes still run, those orbits move to half
+as many lanes, down to SIMD_MIN, then go on one after another in one lane (`_adopt`): idle
+lanes cost the SIMD loops as much as busy ones.
 
 The kernel is one compiled function for every system, potential and event set (all chosen
 by integer codes and parameter arrays), so it is cached on disk. Nothing raises inside it:
@@ -65,7 +66,7 @@ OK_, EVENT_, COLLISION_, STEP_LIMIT_, NONFINITE_, TIME_LIMIT_ = (
                      Status.NONFINITE, Status.TIME_LIMIT))
 RUNNING = -1
 # _run's returns besides the next job: every job has ended; the jobs are all started and at
-# most half the lanes still run one (the rest go on one lane each: `dop853`)
+# most half the lanes still run one (the rest go on in fewer lanes: `dop853`)
 DONE, HANDOFF = -1, -2
 # what an accepted step needs of the dense output (`_needs_dense`)
 DENSE_LATER, DENSE_ORBIT, DENSE_ALL = 1, 2, 3
