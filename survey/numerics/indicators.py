@@ -28,8 +28,7 @@ from ..catalog import defaults
 from ..catalog.indicators import IndicatorOptions
 from ..catalog.status import Status
 from ..catalog.variables import ENSEMBLE_QUANTILES, ENSEMBLE_STATISTICS, history_times
-from ..physics import portable
-from ..physics.portable import orthonormal
+from ..physics.portable import orthonormal, vdot, vnorm
 from ..physics.system import System, rhs
 from .events import Crossings
 from .integrate import EVAL, EVENTS, FINE, Outcome, integrate_batch
@@ -89,10 +88,10 @@ def deviation_vectors(system: System, y0, count: int, seed: int,
     rng = np.random.default_rng([seed, *state_key(y0), stream])
     w = rng.normal(size=(count, system.n))
     C = _constraints(system, y0, project_flow)
-    coefficients = portable.vdot(w[:, None, :], C[None])         # (count, constraints)
+    coefficients = vdot(w[:, None, :], C[None])         # (count, constraints)
     for k in range(len(C)):
         w -= coefficients[:, k:k + 1] * C[k]
-    return w / portable.vnorm(w)[:, None]
+    return w / vnorm(w)[:, None]
 
 
 def state_key(y0) -> list[int]:
@@ -106,9 +105,9 @@ def _sali(w1, w2):
     """SALI and GALI_2 of two deviation vectors. For unit a, b: |a + b|^2 |a - b|^2 =
     4 (1 - (a.b)^2), so GALI_2 = |a ^ b| = |a + b| |a - b| / 2 -- from the components,
     without the cancellation of sqrt(1 - c^2) that stops GALI_2 near 1e-8."""
-    a = w1 / portable.vnorm(w1)[..., None]
-    b = w2 / portable.vnorm(w2)[..., None]
-    plus, minus = portable.vnorm(a + b), portable.vnorm(a - b)
+    a = w1 / vnorm(w1)[..., None]
+    b = w2 / vnorm(w2)[..., None]
+    plus, minus = vnorm(a + b), vnorm(a - b)
     return np.minimum(plus, minus), 0.5 * plus * minus
 
 
@@ -137,9 +136,8 @@ def conservation_errors(system: System, y0, states):
     """max |E/E0 - 1| and max |J - J0| / max(|J0|, 1) over states (k, n)."""
     E0, J0 = system.energy(y0), system.angular_momentum(y0)
     dJ = np.reshape(system.angular_momentum(states) - J0, (len(states), -1))
-    norm = portable.vnorm
     return (float(np.max(np.abs(system.energy(states) / E0 - 1))),
-            float(np.max(norm(dJ)) / max(float(norm(np.reshape(J0, -1))), 1.0)))
+            float(np.max(vnorm(dJ)) / max(float(vnorm(np.reshape(J0, -1))), 1.0)))
 
 
 class Ensemble(NamedTuple):
@@ -170,7 +168,7 @@ def ensemble(system: System, y0, options: IndicatorOptions,
     record = [EVENTS | EVAL | FINE] + [EVAL] * (nominal - 1)
     for j in range(o.perturbations):
         xi = deviation_vectors(system, y0, 1, o.seed, stream=1 + j)[0]
-        yp = y0 + o.perturbation_size * float(portable.vnorm(y0)) * xi
+        yp = y0 + o.perturbation_size * float(vnorm(y0)) * xi
         starts.append(yp)
         tangents.append(deviation_vectors(system, yp, per_job, o.seed, o.project_flow,
                                           stream=1 + j))

@@ -279,19 +279,19 @@ EXP, LOG, SIN, COS, ATAN2 = range(5)
 
 
 @kernel
-def _elementwise(code, x, y, out):
-    """out[i] = f(x[i]) (atan2: f(x[i], y[i])) for the function of `code`."""
+def _elementwise(code, a, b, out):
+    """out[i] = f(a[i]) (atan2: f(a[i], b[i])) for the function of `code`."""
     for i in range(out.size):
         if code == EXP:
-            out[i] = exp(x[i])
+            out[i] = exp(a[i])
         elif code == LOG:
-            out[i] = log(x[i])
+            out[i] = log(a[i])
         elif code == SIN:
-            out[i] = sin(x[i])
+            out[i] = sin(a[i])
         elif code == COS:
-            out[i] = cos(x[i])
+            out[i] = cos(a[i])
         else:
-            out[i] = atan2(x[i], y[i])
+            out[i] = atan2(a[i], b[i])
 
 
 @kernel

@@ -26,8 +26,7 @@ from .forces import (
     vec,
 )
 from .geometry import cross
-from . import portable
-from .portable import power
+from .portable import power, vnorm
 from .jit import helper, kernel, lanes, leaf
 from .terms import (
     AREA,
@@ -170,7 +169,7 @@ class System:
         Powers by portable.power: the same bits on every machine."""
         k = self.homogeneity
         J = self.angular_momentum(y)
-        J = float(abs(J)) if self.dim == 2 else float(portable.vnorm(np.asarray(J, dtype=float)))
+        J = float(abs(J)) if self.dim == 2 else float(vnorm(np.asarray(J, dtype=float)))
         if k is None or k == -2.0 or not J > 0.0:
             return math.nan
         return float(self.energy(y)) * float(power(J, -2.0 * k / (k + 2.0)))
