@@ -937,8 +937,9 @@ def integrate_batch(system: System, starts, t_span, *, tangents=None, record=Non
                   renorm_dt=float(renorm_interval), L=int(lanes or lanes_for(M)))
     order = _costliest_first(starts, t1, float(time_limit), common) if M > common["L"] \
         else np.arange(M)
-    res = dop853(y0s=y0s[order], rows=rows[:, order], t1=t1, n_tan=n_tan, megno=megno,
-                 n_err=n_err, events=encode_events(events, system),
+    # (rows[:, order] alone would be Fortran-ordered: a second compilation of the kernel)
+    res = dop853(y0s=y0s[order], rows=np.ascontiguousarray(rows[:, order]), t1=t1,
+                 n_tan=n_tan, megno=megno, n_err=n_err, events=encode_events(events, system),
                  max_events=int(max_events), n_sub=int(event_substeps), t_eval=t_eval,
                  n_eval=n_eval, time_limit=float(time_limit), t_fine=t_fine, **common)
     at = np.empty(M, dtype=np.int64)

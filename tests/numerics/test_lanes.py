@@ -131,3 +131,22 @@ def test_a_batch_gives_its_lanes_the_costliest_orbits_first():
     assert sorted(order[:3]) == [1, 3, 5], order
     full = integrate_batch(system, starts, 2000.0, lanes=1)
     assert min(full[k].n_steps for k in (1, 3, 5)) > 2 * max(full[k].n_steps for k in (0, 2, 4))
+
+
+def test_the_driver_compiles_once_for_every_batch():
+    """One compiled driver for every batch of a system (a second specialisation, e.g. from
+    a Fortran-ordered argument, would double a new machine's first run): batches of more
+    orbits than lanes (ordered by a pilot run), fewer, one, with and without tangent
+    vectors, events and samples, backwards, all run the driver the first one compiled."""
+    from survey.numerics.integrate import _adopt, _run
+    system = System.create()
+    starts = np.array([initial_state(system, "equilateral", delta=x)
+                       for x in np.linspace(0.0, 6.0, 21)])
+    tangents = np.array([deviation_vectors(system, y, 1, 0) for y in starts])
+    integrate_batch(system, starts[:1], 1.0)
+    compiled = set(_run.signatures) | set(_adopt.signatures)
+    integrate_batch(system, starts, 3.0, tangents=tangents, megno=True)
+    integrate_batch(system, starts[:5], (0.0, -2.0), events=[section_event(system)],
+                    t_eval=np.linspace(0.0, -2.0, 5), t_fine=-np.arange(20) * 0.1)
+    integrate_batch(system, starts[:1], 2.0, tangents=tangents[:1], lanes=1)
+    assert set(_run.signatures) | set(_adopt.signatures) == compiled
