@@ -935,8 +935,9 @@ def integrate_batch(system: System, starts, t_span, *, tangents=None, record=Non
                   rtol=float(rtol), atol=float(atol), max_steps=int(max_steps),
                   h0=float(first_step), h_max=float(max_step), h_min=float(min_step),
                   renorm_dt=float(renorm_interval), L=int(lanes or lanes_for(M)))
-    order = _costliest_first(starts, t1, float(time_limit), common) if M > common["L"] \
-        else np.arange(M)
+    # (one lane runs its jobs one after another: their order changes nothing)
+    order = _costliest_first(starts, t1, float(time_limit), common) \
+        if M > common["L"] > 1 else np.arange(M)
     # (rows[:, order] alone would be Fortran-ordered: a second compilation of the kernel)
     res = dop853(y0s=y0s[order], rows=np.ascontiguousarray(rows[:, order]), t1=t1,
                  n_tan=n_tan, megno=megno, n_err=n_err, events=encode_events(events, system),
