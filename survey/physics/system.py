@@ -365,8 +365,8 @@ def rhs(t, y, dy, masses, d, measure, prof, par, n_tan):
     velocities_and_forces(y, dy, masses, d, measure, prof, par, n_tan)
 
 
-# A batch's lanes: 16 (32 cost 8% less per orbit, but a lane that finishes idles unless the
-# batch has a job left, and orbits differ 2x and more in length). The compiler's loops over
+# A batch's lanes: 16 (32 cost ~10% more per orbit-step, `bench --only step`, and a lane
+# that finishes idles unless the batch has a job left). The compiler's loops over
 # the lanes run as SIMD instructions from SIMD_MIN lanes on (4 doubles a vector, the 8 of
 # AVX-512 from 8); with fewer, rhs_lanes runs `rhs` lane by lane, which keeps one state's
 # values in registers.
