@@ -52,37 +52,47 @@ PI_HI, PI_LO = 3.141592653589793, 1.2246467991473532e-16
 
 
 @helper
+def _two_to(k):
+    """2^k, exactly, for an integer -1022 <= k <= 1023: its bits (libm's ldexp is a call,
+    which keeps a loop of exp or log from running as SIMD instructions)."""
+    return np.int64((k + 1023) << 52).view(np.float64)
+
+
+@helper
 def exp(x):
-    """e^x: x = k ln2 + r, |r| <= ln2/2, e^r by its Taylor series to r^13, times 2^k."""
-    if not x < EXP_MAX:
-        return x if x != x else math.inf
-    if not x > EXP_MIN:
-        return 0.0
-    k = math.floor(x * INV_LN2 + 0.5)
-    r_hi = x - k * LN2_HI
+    """e^x: x = k ln2 + r, |r| <= ln2/2, e^r by its Taylor series to r^13, times 2^k (in
+    two exact halves: the second product rounds once, as ldexp does into subnormals).
+    Without branches, so that a loop of it is vectorised."""
+    inside = x > EXP_MIN and x < EXP_MAX
+    xc = x if inside else 0.0
+    k = math.floor(xc * INV_LN2 + 0.5)
+    r_hi = xc - k * LN2_HI
     r = r_hi - k * LN2_LO
     p = 0.0
     for c in EXP_SERIES:
         p = p * r + c
     e = 1.0 + (r + r * r * p)
-    ki = int(k)
-    if ki < -1020:              # subnormal result: scale in two exact halves
-        return math.ldexp(math.ldexp(e, ki + 600), -600)
-    return math.ldexp(e, ki)
+    a = k >> 1
+    scaled = (e * _two_to(a)) * _two_to(k - a)
+    outside = 0.0 if x <= EXP_MIN else (x if x != x else math.inf)
+    return scaled if inside else outside
 
 
 @helper
 def log(x):
     """ln x: x = 2^k m with m in [sqrt(1/2), sqrt(2)), f = m - 1, s = f / (2 + f),
-    ln m = f - (f^2/2 - s (f^2/2 + R(s^2))) with R the atanh series (fdlibm's form)."""
-    if not x > 0.0:
-        return -math.inf if x == 0.0 else math.nan
-    if x == math.inf:
-        return x
-    m, k = math.frexp(x)
-    if m < SQRT_HALF:
-        m *= 2.0
-        k -= 1
+    ln m = f - (f^2/2 - s (f^2/2 + R(s^2))) with R the atanh series (fdlibm's form). m and
+    k from x's bits (a subnormal x scaled by 2^54 first), without branches, so that a loop
+    of it is vectorised."""
+    inside = x > 0.0 and x < math.inf
+    tiny = x < 2.2250738585072014e-308
+    xs = (x * 18014398509481984.0 if tiny else x) if inside else 1.0
+    bits = np.float64(xs).view(np.int64)
+    k = ((bits >> 52) & 0x7FF) - 1022 - (54 if tiny else 0)
+    m = np.int64((bits & 0x800FFFFFFFFFFFFF) | (1022 << 52)).view(np.float64)
+    low = m < SQRT_HALF
+    m = m * 2.0 if low else m
+    k = k - 1 if low else k
     f = m - 1.0
     s = f / (2.0 + f)
     z = s * s
@@ -92,7 +102,9 @@ def log(x):
     R = R * z
     hfsq = 0.5 * f * f
     dk = float(k)
-    return dk * LN2_HI - ((hfsq - (s * (hfsq + R) + dk * LN2_LO)) - f)
+    value = dk * LN2_HI - ((hfsq - (s * (hfsq + R) + dk * LN2_LO)) - f)
+    outside = x if x == math.inf else (-math.inf if x == 0.0 else math.nan)
+    return value if inside else outside
 
 
 @helper

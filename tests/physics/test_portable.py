@@ -58,6 +58,62 @@ def test_exp_and_log_within_one_ulp_over_their_ranges():
     assert P.vlog(1.0) == 0.0 and P.vexp(0.0) == 1.0
 
 
+def reference_exp(x: float) -> float:
+    """The reduction of portable.exp with libm's exact scaling (math.ldexp)."""
+    if not x < P.EXP_MAX:
+        return x if x != x else math.inf
+    if not x > P.EXP_MIN:
+        return 0.0
+    k = math.floor(x * P.INV_LN2 + 0.5)
+    r = (x - k * P.LN2_HI) - k * P.LN2_LO
+    p = 0.0
+    for c in P.EXP_SERIES:
+        p = p * r + c
+    e = 1.0 + (r + r * r * p)
+    return math.ldexp(math.ldexp(e, k + 600), -600) if k < -1020 else math.ldexp(e, k)
+
+
+def reference_log(x: float) -> float:
+    """The reduction of portable.log with libm's exact frexp."""
+    if not x > 0.0:
+        return -math.inf if x == 0.0 else math.nan
+    if x == math.inf:
+        return x
+    m, k = math.frexp(x)
+    if m < P.SQRT_HALF:
+        m, k = 2.0 * m, k - 1
+    f = m - 1.0
+    s = f / (2.0 + f)
+    z = s * s
+    R = 0.0
+    for c in P.LOG_SERIES:
+        R = R * z + c
+    R = R * z
+    hfsq = 0.5 * f * f
+    return k * P.LN2_HI - ((hfsq - (s * (hfsq + R) + k * P.LN2_LO)) - f)
+
+
+def test_exp_and_log_take_m_and_k_from_the_bits_as_frexp_and_ldexp_would():
+    """The kernels' exp and log build 2^k and split x with integer operations on the bits
+    (no libm calls, so that their loops run as SIMD instructions): the same bits as the
+    reduction written with frexp and ldexp, subnormal arguments and results included."""
+    rng = np.random.default_rng(5)
+    xs = np.concatenate([rng.uniform(-760, 720, 1500), rng.normal(0, 3, 500),
+                         np.linspace(-745.2, -744.4, 300), np.linspace(709.0, 709.79, 100),
+                         [-745.1332191019412, 709.782712893384, 0.0, -0.0, math.inf,
+                          -math.inf, math.nan]])
+    ys = np.concatenate([10.0 ** rng.uniform(-323.5, 308, 1500), rng.uniform(0.6, 1.5, 500),
+                         [5e-324, 2.225073858507201e-308, 2.2250738585072014e-308,
+                          P.SQRT_HALF, np.nextafter(P.SQRT_HALF, 0), 1.0, 0.0, -1.0,
+                          math.inf, math.nan, 1.7976931348623157e308]])
+    for f, ref, values in ((P.vexp, reference_exp, xs), (P.vlog, reference_log, ys)):
+        with np.errstate(all="ignore"):
+            got = f(values)
+        want = np.array([ref(float(v)) for v in values])
+        same = (got.view(np.int64) == want.view(np.int64)) | (np.isnan(got) & np.isnan(want))
+        assert same.all(), (f.__name__, values[~same][:5])
+
+
 def test_sin_and_cos_within_two_ulps():
     rng = np.random.default_rng(4)
     xs = np.concatenate([rng.uniform(-7, 7, 300), rng.uniform(-1e5, 1e5, 100),
