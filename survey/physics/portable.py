@@ -60,9 +60,9 @@ def _two_to(k):
 
 @helper
 def exp(x):
-    """e^x: x = k ln2 + r, |r| <= ln2/2, e^r by its Taylor series to r^13, times 2^k (in
-    two exact halves: the second product rounds once, as ldexp does into subnormals).
-    Without branches, so that a loop of it is vectorised."""
+    """e^x: x = k ln2 + r, |r| <= ln2/2, e^r by its Taylor series to r^13, times 2^k as
+    two powers of two (the first product exact, the second rounding once where the result
+    is subnormal, as ldexp does). Without branches, so that a loop of it is vectorised."""
     inside = x > EXP_MIN and x < EXP_MAX
     xc = x if inside else 0.0
     k = math.floor(xc * INV_LN2 + 0.5)
