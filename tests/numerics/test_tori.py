@@ -27,11 +27,13 @@ def sampled(system, y0, t_final, dt=DT):
 
 # ---------------------------------------------------------------- the tools themselves
 
-def test_naff_finds_exact_lines_and_agrees_with_nafflib():
+@pytest.mark.parametrize("samples", [10000, 10007])
+def test_naff_finds_exact_lines_and_agrees_with_nafflib(samples):
     """Four lines of known frequency and amplitude, two of them close: found to 1e-13 with
-    10^4 samples, like the reference implementation (nafflib)."""
+    10^4 samples, like the reference implementation (nafflib); also when the samples do not
+    fill the sums' last block."""
     nafflib = pytest.importorskip("nafflib")
-    n = np.arange(10000)
+    n = np.arange(samples)
     freqs = [0.0477, 0.0408, -0.0069, 0.0955]
     amps = [1.0, 0.5, 0.2 * np.exp(1j), 0.05]
     z = sum(a * np.exp(2j * np.pi * f * n) for a, f in zip(amps, freqs))
@@ -40,6 +42,29 @@ def test_naff_finds_exact_lines_and_agrees_with_nafflib():
     np.testing.assert_allclose(a, amps, atol=1e-7)
     ref_amp, ref_freq = nafflib.naff(z, num_harmonics=4)
     np.testing.assert_allclose(f, ref_freq, atol=1e-12)
+
+
+def test_naff_sums_are_the_transform_and_its_derivatives_over_every_sample():
+    """The blocked phase recurrences of NAFF's sums against the sums written with numpy's
+    exponentials, on a signal that is not small anywhere (the window would hide a missed
+    sample at either end) and does not fill the last block."""
+    rng = np.random.default_rng(1)
+    N, f = 1003, 0.0123456
+    v = rng.normal(size=N) + 1j * rng.normal(size=N)
+    n = np.arange(N)
+    terms = v * np.exp(-2j * np.pi * f * n)
+    want = [np.sum(terms * n ** p) for p in (0, 1, 2)]
+    got = torus._sums(v.view(np.float64), f, np.empty(2 * torus.BLOCK + 2),
+                      np.empty(6 * torus.BLOCK))
+    for p in range(3):
+        np.testing.assert_allclose(complex(got[2 * p], got[2 * p + 1]), want[p],
+                                   rtol=1e-11)
+    # and a line is taken out of every sample
+    w = np.linspace(0.5, 1.5, N)
+    left = v.copy()
+    f_line, a = torus._line(left.view(np.float64), w, float(np.sum(w)), f)
+    np.testing.assert_allclose(left, v - w * a * np.exp(2j * np.pi * f_line * n),
+                               rtol=0, atol=1e-12)
 
 
 def test_weighted_birkhoff_average_super_converges_on_quasi_periodic_signals():
