@@ -185,14 +185,14 @@ def naff(z: np.ndarray, count: int):
     analysis of a short survey), and its sums round by the CPU; the tests check this one
     against it."""
     N = np.size(z)
-    w = _window_of(N)
+    w, wsum = _window_of(N), _window_sum(N)
     zw = np.asarray(z, dtype=complex) * w       # the windowed signal, lines taken out of it
     v = zw.view(np.float64)                     # (re, im) pairs for the compiled loops
     freqs, amps = np.zeros(count), np.zeros(count, dtype=complex)
     for line in range(count):
         k = int(np.argmax(np.abs(np.fft.fft(zw))))
         f = k / N if k <= N // 2 else k / N - 1.0
-        freqs[line], amps[line] = _line(v, w, _window_sum(N), f)
+        freqs[line], amps[line] = _line(v, w, wsum, f)
     return freqs, amps
 
 
