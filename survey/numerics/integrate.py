@@ -641,6 +641,10 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
 @lanes
 def _spread(h, HH, L, nf):
     """Each lane's value h[k] at each of its components."""
+    if L == 1:
+        for i in range(nf):
+            HH[i] = h[0]
+        return
     for i in range(nf):
         for k in range(L):
             HH[i * L + k] = h[k]
@@ -650,6 +654,12 @@ def _spread(h, HH, L, nf):
 def _finite_lanes(Y, K, L, nf, out):
     """out[k]: finite iff every component of lane k in Y and K is (x * 0 is NaN for inf and
     NaN, and NaN survives the sum)."""
+    if L == 1:                 # one orbit: one loop (a loop per component cost 80 ns)
+        s = 0.0
+        for i in range(nf):
+            s += Y[i] * 0.0 + K[i] * 0.0
+        out[0] = s
+        return
     for k in range(L):
         out[k] = 0.0
     for i in range(nf):
@@ -682,6 +692,10 @@ def _take(Y, YN, K0, K12, take, mask, L, nf):
 def _tangent_norms(Y, L, n, n_tan, NW):
     """NW[t * L + k]: the norm of lane k's tangent vector t, summed in its components' order
     as numerics.dop853.norm_block does."""
+    if L == 1:
+        for t in range(n_tan):
+            NW[t] = norm_block(Y, n * (1 + t), n)
+        return
     for t in range(n_tan):
         nw = NW[t * L:(t + 1) * L]
         for k in range(L):
