@@ -82,17 +82,20 @@ def reduced(system: System, y) -> Reduced:
     y = np.asarray(y, dtype=np.float64)
     rows = np.ascontiguousarray(y.reshape(-1, y.shape[-1]))
     out = np.empty((len(Reduced._fields), rows.shape[0]))
-    _reduced_rows(rows, *jacobi_weights(system), m.mu1, m.mu2, out)
+    _reduced_rows(rows, *jacobi_weights(system), m.mu1, m.mu2, out,
+                  np.empty((4, rows.shape[0])))
     shape = y.shape[:-1]
     return Reduced(*(x.reshape(shape) if shape else x[0] for x in out))
 
 
 @kernel
-def _reduced_rows(y, S, H, Ps, Ph, mu1, mu2, out):
-    """`reduced` of states y (M, 12) into out (8, M), in one pass: the Jacobi vectors as
-    `jacobi` sums them (body by body), then NumPy's operations on them in NumPy's order
-    (a sum over a vector's components starts from 0.0), so the bits are those of the same
-    formulas on arrays -- 3x faster on the torus analysis' 10^4 samples of a half orbit."""
+def _reduced_rows(y, S, H, Ps, Ph, mu1, mu2, out, args):
+    """`reduced` of states y (M, 12) into out (8, M): the Jacobi vectors as `jacobi` sums
+    them (body by body), then NumPy's operations on them in NumPy's order (a sum over a
+    vector's components starts from 0.0), so the bits are those of the same formulas on
+    arrays; the angles' atan2 in SIMD loops of their own over the arguments gathered in
+    args (4, M). 3x faster than arrays on the torus analysis' 10^4 samples of a half orbit,
+    and the angles 4x faster again."""
     for r in range(y.shape[0]):
         q0x, q0y, q1x, q1y, q2x, q2y = y[r, 0], y[r, 1], y[r, 2], y[r, 3], y[r, 4], y[r, 5]
         p0x, p0y, p1x, p1y, p2x, p2y = y[r, 6], y[r, 7], y[r, 8], y[r, 9], y[r, 10], y[r, 11]
@@ -112,12 +115,14 @@ def _reduced_rows(y, S, H, Ps, Ph, mu1, mu2, out):
         b = mu2 * (eta * eta)
         out[0, r] = sigma
         out[1, r] = eta
-        out[2, r] = portable.atan2(sx * hy - sy * hx, 0.0 + sx * hx + sy * hy)
-        out[3, r] = portable.atan2(sy, sx)
+        args[0, r], args[1, r] = sx * hy - sy * hx, 0.0 + sx * hx + sy * hy
+        args[2, r], args[3, r] = sy, sx
         out[4, r] = (0.0 + psx * sx + psy * sy) / sigma
         out[5, r] = (0.0 + phx * hx + phy * hy) / eta
         out[6, r] = (a * Lh - b * Ls) / (a + b)
         out[7, r] = Ls + Lh
+    portable.atan2_into(args[0], args[1], out[2])
+    portable.atan2_into(args[2], args[3], out[3])
 
 
 def reduced_sides(system: System, sigma, eta, phi):

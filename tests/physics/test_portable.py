@@ -6,6 +6,7 @@ import math
 from decimal import Decimal, getcontext
 from fractions import Fraction
 
+import numba
 import numpy as np
 import pytest
 
@@ -184,6 +185,22 @@ def test_atan2_within_one_ulp_in_every_quadrant_and_exact_at_its_special_values(
         assert P.vatan2(y, x) == value and math.copysign(1, P.vatan2(y, x)) == \
             math.copysign(1, value)
     assert math.isnan(P.vatan2(math.nan, 1.0))
+
+
+def test_the_simd_atan2_gives_the_scalar_bits():
+    """atan2 over arrays (a branch-free SIMD loop, then the scalar atan2 where |y/x| is not
+    a positive finite number) against the scalar atan2 of the kernels, element by element:
+    every quadrant, each reduction interval, and the special values among them."""
+    scalar = numba.njit(lambda y, x: P.atan2(y, x))
+    rng = np.random.default_rng(6)
+    ys = rng.normal(size=997) * 10.0 ** rng.uniform(-5, 5, 997)
+    xs = rng.normal(size=997) * 10.0 ** rng.uniform(-5, 5, 997)
+    inf, nan = math.inf, math.nan
+    ys[:13] = [0.0, -0.0, 1.0, -1.0, inf, 1.0, nan, 1.0, 1e300, 1e-300, 0.0, -inf, 0.6875]
+    xs[:13] = [1.0, -1.0, 0.0, -0.0, 1.0, -inf, 1.0, nan, -1e-300, 1e300, -0.0, -inf, -1.0]
+    got = P.vatan2(ys, xs)
+    want = np.array([scalar(y, x) for y, x in zip(ys, xs)])
+    assert got.tobytes() == want.tobytes()
 
 
 @pytest.mark.parametrize("n", [1, 2, 3, 14, 30])
