@@ -8,10 +8,11 @@ root and exact scaling by powers of two -- each correctly rounded, so every CPU 
 compiler target returns the same bits -- in the classic argument reductions (Cody-Waite,
 as in fdlibm) with series long enough for about one ulp.
 
-Scalar versions inline into kernels; `vexp`, `vlog`, `vsin`, `vcos`, `vatan2` apply them
-elementwise to arrays for Python code, and `vnorm` and `vdot` are the Euclidean norm and the
-dot product along the last axis summed in order (numpy's and BLAS's sums change their order
-with the CPU). `symmetric_eigen` and `orthonormal` replace LAPACK's eigh and QR, whose blocked
+Scalar versions inline into kernels; `vexp`, `vlog`, `vsin`, `vcos`, `vsincos`, `vatan2`
+apply them elementwise to arrays for Python code (the trigonometric ones as branch-free SIMD
+loops with the same bits), and `vnorm` and `vdot` are the Euclidean norm and the dot product
+along the last axis summed in order (numpy's and BLAS's sums change their order with the
+CPU). `symmetric_eigen` and `orthonormal` replace LAPACK's eigh and QR, whose blocked
 kernels round by the CPU.
 """
 from __future__ import annotations
@@ -230,6 +231,24 @@ def _atan_positive(a):
 
 
 @kernel
+def sin_cos_into(x, sin_out, cos_out):
+    """sin and cos of every x[i], the bits of `sin` and `cos`: one branch-free loop (both
+    series, the quadrant's by selects) that runs as SIMD instructions, then libm's where
+    |x| > TRIG_MAX or x is not finite, as `sin` and `cos` do."""
+    for i in range(x.size):
+        xi = x[i]
+        q, r = _reduce(xi if abs(xi) <= TRIG_MAX else 0.0)
+        s, c = _sin_series(r), _cos_series(r)
+        odd = (q & 1) == 1
+        v, w = (c if odd else s), (s if odd else c)
+        sin_out[i] = -v if q >= 2 else v                  # q: 0 s, 1 c, 2 -s, 3 -c
+        cos_out[i] = -w if q == 1 or q == 2 else w        # q: 0 c, 1 -s, 2 -c, 3 s
+    for i in range(x.size):
+        if not abs(x[i]) <= TRIG_MAX:
+            sin_out[i], cos_out[i] = math.sin(x[i]), math.cos(x[i])
+
+
+@kernel
 def atan2_into(y, x, out):
     """out[i] = atan2(y[i], x[i]), the same bits: one branch-free loop that runs as SIMD
     instructions (4x the scalar loop), then `atan2` again where |y/x| is not a positive
@@ -332,16 +351,16 @@ def _elementwise(code, a, b, out):
     """out[i] = f(a[i]) (atan2: f(a[i], b[i])) for the function of `code`."""
     if code == ATAN2:
         atan2_into(a, b, out)
-        return
-    for i in range(out.size):
-        if code == EXP:
+    elif code == SIN:
+        sin_cos_into(a, out, np.empty(out.size))
+    elif code == COS:
+        sin_cos_into(a, np.empty(out.size), out)
+    elif code == EXP:
+        for i in range(out.size):
             out[i] = exp(a[i])
-        elif code == LOG:
+    else:
+        for i in range(out.size):
             out[i] = log(a[i])
-        elif code == SIN:
-            out[i] = sin(a[i])
-        else:
-            out[i] = cos(a[i])
 
 
 @kernel
@@ -379,6 +398,14 @@ def vsin(x):
 
 def vcos(x):
     return _apply(COS, x)
+
+
+def vsincos(x):
+    """(sin x, cos x) of an array, from one reduction of each x."""
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    s, c = np.empty_like(x), np.empty_like(x)
+    sin_cos_into(x.reshape(-1), s.reshape(-1), c.reshape(-1))
+    return s, c
 
 
 def vatan2(y, x):

@@ -86,6 +86,20 @@ def test_a_line_taken_out_of_the_spectrum_leaves_the_fft_of_the_rest(f):
     assert error.max() < 1e-10 * np.abs(np.fft.fft(line)).max()
 
 
+def test_unwrap_gives_numpys_bits():
+    """The one-pass unwrap against np.unwrap: wrapped random walks of every step size,
+    jumps of exactly +pi, -pi and 2 pi (the floored mod's edge cases), a NaN, one sample."""
+    rng = np.random.default_rng(3)
+    for scale in (0.1, 1.0, 3.0, 10.0, 1e3):
+        p = np.angle(np.exp(1j * np.cumsum(rng.normal(size=2001) * scale)))
+        p[5], p[7], p[9] = p[4] + np.pi, p[6] - np.pi, p[8] + 2 * np.pi
+        assert torus.unwrap(p).tobytes() == np.unwrap(p).tobytes(), scale
+    p[100] = np.nan
+    with np.errstate(invalid="ignore"):
+        assert torus.unwrap(p).tobytes() == np.unwrap(p).tobytes()
+    assert torus.unwrap(p[:1]).tobytes() == np.unwrap(p[:1]).tobytes()
+
+
 def test_weighted_birkhoff_average_super_converges_on_quasi_periodic_signals():
     """h = cos(2 pi t) + cos(2 pi sqrt2 t) averages to 0. Each doubling of T gains the
     weighted average more digits than the last (faster than any power of T) and reaches

@@ -203,6 +203,21 @@ def test_the_simd_atan2_gives_the_scalar_bits():
     assert got.tobytes() == want.tobytes()
 
 
+def test_the_simd_sine_and_cosine_give_the_scalar_bits():
+    """sin and cos over arrays (both series, the quadrant's by selects; libm beyond
+    TRIG_MAX) against the scalar sin and cos of the kernels: every quadrant, zeros, both
+    sides of TRIG_MAX, infinity and NaN."""
+    both = numba.njit(lambda x: (P.sin(x), P.cos(x)))
+    rng = np.random.default_rng(7)
+    xs = rng.normal(size=999) * 10.0 ** rng.uniform(-4, 6, 999)
+    xs[:9] = [0.0, -0.0, math.pi / 2, -math.pi, P.TRIG_MAX, -P.TRIG_MAX * (1 + 1e-15),
+              math.inf, -math.inf, math.nan]
+    s, c = P.vsincos(xs)
+    want = np.array([both(x) for x in xs])
+    assert s.tobytes() == want[:, 0].tobytes() and c.tobytes() == want[:, 1].tobytes()
+    assert P.vsin(xs).tobytes() == s.tobytes() and P.vcos(xs).tobytes() == c.tobytes()
+
+
 @pytest.mark.parametrize("n", [1, 2, 3, 14, 30])
 def test_symmetric_eigen_gives_the_closed_form_spectrum_and_an_orthonormal_basis(n):
     """The second-difference matrix (2 on the diagonal, -1 beside it) has eigenvalues
