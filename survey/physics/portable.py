@@ -176,46 +176,12 @@ def _atan_series(z):
 
 
 @helper
-def atan(x):
-    """atan x: |x| reduced to |z| <= 7/16 by atan x = atan c + atan((x - c)/(1 + c x)) with
-    c in (1/2, 1, 3/2, infinity), as in fdlibm; then the Taylor series."""
-    if x != x:
-        return x
-    a = abs(x)
-    if a < 0.4375:
-        r = a - _atan_series(a)
-    else:
-        if a < 0.6875:
-            i, z = 0, (2.0 * a - 1.0) / (2.0 + a)
-        elif a < 1.1875:
-            i, z = 1, (a - 1.0) / (a + 1.0)
-        elif a < 2.4375:
-            i, z = 2, (a - 1.5) / (1.0 + 1.5 * a)
-        else:
-            i, z = 3, -1.0 / a
-        r = ATAN_HI[i] - ((_atan_series(z) - ATAN_LO[i]) - z)
-    return -r if x < 0.0 else r
-
-
-@helper
-def atan2(y, x):
-    """The angle of (x, y) in [-pi, pi], from atan(|y| / |x|) by quadrant; zeros and
-    infinities as IEEE's atan2 (glibc's exact special values)."""
-    if y != y or x != x:
-        return x + y
-    if x == 0.0 or y == 0.0 or abs(x) == math.inf or abs(y) == math.inf:
-        return math.atan2(y, x)
-    z = atan(abs(y) / abs(x))
-    if x < 0.0:
-        z = PI_HI - (z - PI_LO)
-    return -z if y < 0.0 else z
-
-
-@helper
 def _atan_positive(a):
-    """atan a for 0 < a < inf as `atan` computes it, without branches: each interval's
-    reduction z = (p a - q) / (r + s a) (p a and s a exact, so the same z) and constants
-    chosen by comparisons, which the compiler turns into selects of SIMD lanes."""
+    """atan a for 0 <= a < inf: a reduced to |z| <= 7/16 by atan a = atan c + atan((a - c)/(1 +
+    c a)) with c in (0, 1/2, 1, 3/2, infinity), as in fdlibm, then the Taylor series. Each
+    interval's reduction is z = (p a - q) / (r + s a) (p a and s a exact, so fdlibm's z)
+    with constants chosen by comparisons, which the compiler turns into selects: a loop of
+    it runs as SIMD instructions."""
     if a < 0.4375:
         p, q, r, s, hi, lo = 1.0, 0.0, 1.0, 0.0, 0.0, 0.0
     elif a < 0.6875:
@@ -228,6 +194,34 @@ def _atan_positive(a):
         p, q, r, s, hi, lo = 0.0, 1.0, 0.0, 1.0, ATAN_HI[3], ATAN_LO[3]
     z = (p * a - q) / (r + s * a)
     return hi - ((_atan_series(z) - lo) - z)
+
+
+@helper
+def atan(x):
+    """atan x, odd, with atan(+-inf) = +-pi/2."""
+    if x != x:
+        return x
+    a = abs(x)
+    r = _atan_positive(a) if a < math.inf else ATAN_HI[3]
+    return -r if x < 0.0 else r
+
+
+@helper
+def _quadrant(y, x, z):
+    """The angle of (x, y) from z = atan(|y| / |x|)."""
+    z = PI_HI - (z - PI_LO) if x < 0.0 else z
+    return -z if y < 0.0 else z
+
+
+@helper
+def atan2(y, x):
+    """The angle of (x, y) in [-pi, pi], from atan(|y| / |x|) by quadrant; zeros and
+    infinities as IEEE's atan2 (glibc's exact special values)."""
+    if y != y or x != x:
+        return x + y
+    if x == 0.0 or y == 0.0 or abs(x) == math.inf or abs(y) == math.inf:
+        return math.atan2(y, x)
+    return _quadrant(y, x, atan(abs(y) / abs(x)))
 
 
 @kernel
@@ -252,12 +246,9 @@ def sin_cos_into(x, sin_out, cos_out):
 def atan2_into(y, x, out):
     """out[i] = atan2(y[i], x[i]), the same bits: one branch-free loop that runs as SIMD
     instructions (4x the scalar loop), then `atan2` again where |y/x| is not a positive
-    finite number (zeros, infinities, NaN; out may be y or x)."""
+    finite number (zeros, infinities, NaN). out must not be y or x."""
     for i in range(out.size):
-        yi, xi = y[i], x[i]
-        z = _atan_positive(abs(yi) / abs(xi))
-        z = PI_HI - (z - PI_LO) if xi < 0.0 else z
-        out[i] = -z if yi < 0.0 else z
+        out[i] = _quadrant(y[i], x[i], _atan_positive(abs(y[i]) / abs(x[i])))
     for i in range(out.size):
         a = abs(y[i]) / abs(x[i])
         if not (0.0 < a < math.inf):
