@@ -367,9 +367,9 @@ def rhs(t, y, dy, masses, d, measure, prof, par, n_tan):
 
 # A batch's lanes: 16 (32 cost ~10% more per orbit-step, `bench --only step`, and a lane
 # that finishes idles unless the batch has a job left). The compiler's loops over
-# the lanes run as SIMD instructions from SIMD_MIN lanes on (4 doubles a vector, the 8 of
-# AVX-512 from 8); with fewer, rhs_lanes runs `rhs` lane by lane, which keeps one state's
-# values in registers.
+# the lanes run as SIMD instructions from SIMD_MIN lanes on (4 doubles a vector, also on
+# AVX-512: jit.prefer_256_bit_vectors); with fewer, rhs_lanes runs `rhs` lane by lane, which
+# keeps one state's values in registers (the specialised loops at one lane: 5% slower).
 SIMD_LANES = 16
 SIMD_MIN = 4
 
@@ -509,7 +509,7 @@ def _planar_areal(y, dy, masses, prof, par, n_tan):
 # The loops over the lanes below are separate compiled functions, not inlined helpers:
 # numba vectorises each alone, but not all of them inlined into one function (measured:
 # the tangent loop 1.7 ns per orbit alone, 8 ns inside the whole right-hand side). Each is
-# given distinct arrays (`lanes`: compiled as such, so vectorised from 8 lanes on).
+# given distinct arrays (`lanes`: compiled as such, so vectorised from 4 lanes on).
 
 @lanes
 def _lanes_velocities(Y, dY, L, masses, n_tan):
