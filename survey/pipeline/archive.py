@@ -135,6 +135,8 @@ def machine() -> str:
     except OSError:
         pass
     target = numba_config.CPU_NAME or _host_cpu()
+    if (numba_config.CPU_FEATURES or "").endswith("+prefer-256-bit"):
+        target += " in 256-bit vectors"       # survey.physics.jit.prefer_256_bit_vectors
     dispatched = [k for k in umath.__cpu_dispatch__ if umath.__cpu_features__.get(k)]
     libc = " ".join(platform.libc_ver()).strip()
     overrides = [f"{k}={os.environ[k]}" for k in MACHINE_OVERRIDES if os.environ.get(k)]

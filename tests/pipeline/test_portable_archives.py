@@ -126,21 +126,25 @@ def test_verify_is_strict_on_any_machine(made_here, tmp_path, monkeypatch):
 TARGET = """
 import survey.physics.jit
 from numba.core.registry import cpu_target
-print(repr(cpu_target.target_context.codegen().magic_tuple()[1:]))
+from survey.pipeline.archive import machine
+print(repr((cpu_target.target_context.codegen().magic_tuple()[1:], machine())))
 """
 
 
 def test_kernels_vectorise_in_256_bits_on_avx512_unless_the_user_set_the_target():
     """On an AVX-512 host survey's kernels are compiled for 256-bit vectors (so the archives
-    here, verified under the generic target above, come from that code path); a target the
-    user sets is kept as set."""
+    here, verified under the generic target above, come from that code path), and the
+    archive's machine says so; a target the user sets is kept as set."""
     from llvmlite import binding
-    features = {}
+    got = {}
     for env in ({}, {"NUMBA_CPU_NAME": "generic"}):
         proc = subprocess.run([sys.executable, "-c", TARGET], capture_output=True, text=True,
                               env={**os.environ, **env}, timeout=300)
         assert proc.returncode == 0, proc.stderr
-        features[bool(env)] = eval(proc.stdout)
+        got[bool(env)] = eval(proc.stdout)
     avx512 = bool(binding.get_host_cpu_features().get("avx512f"))
-    assert features[False][1].endswith(",+prefer-256-bit") == avx512
-    assert features[True] == ("generic", "")
+    (_, features), made_on = got[False]
+    assert features.endswith(",+prefer-256-bit") == avx512
+    assert ("in 256-bit vectors" in made_on) == avx512, made_on
+    assert got[True][0] == ("generic", "")
+    assert "numba target generic;" in got[True][1], got[True][1]
