@@ -16,6 +16,7 @@ from pathlib import Path
 from llvmlite import binding as llvm
 from numba import njit
 from numba.core import compiler, config, cpu, options
+from numba.core.registry import cpu_target
 
 PACKAGE = Path(__file__).parents[1]
 # the modules whose source compiled code depends on, and the folders that hold kernels
@@ -74,15 +75,18 @@ def prefer_256_bit_vectors():
     256-bit halves, so nothing is lost at 16 lanes. Which instructions run changes, never the
     arithmetic (IEEE operations lane by lane): the same bits.
 
-    numba reads the target's features once, when the first function is decorated, so this
-    must run before that (importing this module does it). It sets numba's configuration for
-    the whole process, so other code numba compiles here after survey's import is
-    vectorised this way too; a NUMBA_CPU_NAME or NUMBA_CPU_FEATURES set by the user wins."""
+    numba reads the target's features once, when it makes its code generator (at the first
+    function decorated), so this must run before that and makes it at once (numba reloads
+    its configuration from the environment when that changes, which would drop the
+    setting). It holds for the whole process, so other code numba compiles here after
+    survey's import is vectorised this way too; a NUMBA_CPU_NAME or NUMBA_CPU_FEATURES set
+    by the user wins."""
     if config.CPU_NAME is not None or config.CPU_FEATURES is not None:
         return
     features = llvm.get_host_cpu_features()
     if features.get("avx512f"):
         config.CPU_FEATURES = features.flatten() + ",+prefer-256-bit"
+        cpu_target.target_context.codegen()
 
 
 prefer_256_bit_vectors()

@@ -125,7 +125,7 @@ def machine() -> str:
     which verify, run on another machine, shows."""
     import platform
 
-    from numba.core import config as numba_config
+    from numba.core.registry import cpu_target
     from numpy._core import _multiarray_umath as umath
     model = ""
     try:
@@ -134,9 +134,11 @@ def machine() -> str:
                           if line.startswith("model name")), "")
     except OSError:
         pass
-    target = numba_config.CPU_NAME or _host_cpu()
-    if (numba_config.CPU_FEATURES or "").endswith("+prefer-256-bit"):
-        target += " in 256-bit vectors"       # survey.physics.jit.prefer_256_bit_vectors
+    # what numba's code generator was made with (its configuration may since have been
+    # reloaded from an environment without survey.physics.jit's 256-bit setting)
+    _, target, features = cpu_target.target_context.codegen().magic_tuple()
+    if features.endswith("+prefer-256-bit"):
+        target += " in 256-bit vectors"
     dispatched = [k for k in umath.__cpu_dispatch__ if umath.__cpu_features__.get(k)]
     libc = " ".join(platform.libc_ver()).strip()
     overrides = [f"{k}={os.environ[k]}" for k in MACHINE_OVERRIDES if os.environ.get(k)]
@@ -144,11 +146,6 @@ def machine() -> str:
         f"{platform.machine()} {model or platform.processor() or 'unknown CPU'}",
         f"numba target {target}", f"numpy SIMD {'/'.join(dispatched) or 'baseline'}",
         libc, ", ".join(overrides)]))
-
-
-def _host_cpu() -> str:
-    from llvmlite import binding
-    return binding.get_host_cpu_name()
 
 
 def git_commit() -> str:
