@@ -15,6 +15,7 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
+from ..physics import linalg
 from ..physics.equilibria import (
     AXIS_TOLERANCE,
     Bifurcation,
@@ -24,7 +25,7 @@ from ..physics.equilibria import (
     rotations,
 )
 
-TURN = np.cos(np.radians(10.0))   # a step whose tangent or chord turns more is halved
+TURN = 0.984807753012208    # cos 10 degrees: a step whose tangent or chord turns more is halved
 
 
 class Located(NamedTuple):
@@ -38,8 +39,8 @@ class Located(NamedTuple):
 
 def tangent(A: np.ndarray, previous: np.ndarray) -> np.ndarray:
     """The unit null vector of A, oriented along `previous`."""
-    t = np.linalg.svd(A)[2][-1]
-    return -t if t @ previous < 0 else t
+    t = linalg.svd(A)[1][-1]
+    return -t if linalg.dot(t, previous) < 0 else t
 
 
 def follow(solve: Callable, x0: np.ndarray, to: float, steps: int,
@@ -54,7 +55,7 @@ def follow(solve: Callable, x0: np.ndarray, to: float, steps: int,
     family has turned back and run twice the span past its start."""
     direction = np.zeros(x0.size)
     direction[-1] = np.sign(to - x0[-1])
-    first = solve(x0, direction, direction @ x0)
+    first = solve(x0, direction, linalg.dot(direction, x0))
     if first is None:
         raise ValueError("the start does not converge as a member of the family")
     member, x, A = first
@@ -63,7 +64,7 @@ def follow(solve: Callable, x0: np.ndarray, to: float, steps: int,
     ds = nominal = 1.0 / steps
     while len(members) < max_members and abs(members[-1][1][-1] - start) <= 2.0:
         member, x, t = members[-1]
-        found = solve(x + ds * t, t, t @ x + ds)
+        found = solve(x + ds * t, t, linalg.dot(t, x) + ds)
         if found is None:
             ds /= 2
             if ds < 1e-4 * nominal:
@@ -71,12 +72,13 @@ def follow(solve: Callable, x0: np.ndarray, to: float, steps: int,
             continue
         member2, x2, A2 = found
         t2 = tangent(A2, t)
-        chord = (x2 - x) / max(np.linalg.norm(x2 - x), 1e-300)
+        chord = (x2 - x) / max(linalg.norm(x2 - x), 1e-300)
         moved = 0.0
         if signature is not None:
             a, b = signature(member), signature(member2)
             moved = np.max(np.abs(a - b), initial=0.0) if a.size == b.size else np.inf
-        if (min(t2 @ t, chord @ t) < TURN or moved > 0.1) and ds > 1e-3 * nominal:
+        turn = min(linalg.dot(t2, t), linalg.dot(chord, t))
+        if (turn < TURN or moved > 0.1) and ds > 1e-3 * nominal:
             ds /= 2
             continue
         if (x2[-1] - to) * (x[-1] - to) <= 0:        # passed the end: solve there
@@ -101,11 +103,11 @@ def locate(members, solve: Callable, tests: dict[str, Callable], bisect: float =
         for name, test in tests.items():
             if test(a, ta) == test(b, tb):
                 continue
-            lo, hi = 0.0, ta @ (xb - xa)
+            lo, hi = 0.0, linalg.dot(ta, xb - xa)
             ends = [xa, xb]
             while hi - lo > bisect:
                 mid = 0.5 * (lo + hi)
-                got = solve(xa + mid * ta, ta, ta @ xa + mid)
+                got = solve(xa + mid * ta, ta, linalg.dot(ta, xa) + mid)
                 if got is None:
                     break
                 side = int(test(got[0], tangent(got[2], ta)) != test(a, ta))
@@ -135,11 +137,11 @@ def equilibrium_family(systems: Callable, start, p0: float, to: float, steps: in
     first = relative_equilibrium(systems(p0), start, spin(p0), rotation_rate)
     d = first.positions.shape[1]
     T, w = frame(systems(p0).masses, d)
-    xi0 = T.T @ (first.positions.ravel() / w)
+    xi0 = linalg.dot(T.T, first.positions.ravel() / w)
     span = abs(to - p0)
     if span == 0:
         raise ValueError("the family's end value equals its start")
-    scale = np.concatenate([np.full(xi0.size, np.linalg.norm(xi0)), [span]])
+    scale = np.concatenate([np.full(xi0.size, linalg.norm(xi0)), [span]])
 
     def equations(p, xi):
         system = systems(p)
@@ -160,19 +162,19 @@ def equilibrium_family(systems: Callable, start, p0: float, to: float, steps: in
             A = np.vstack([np.hstack([H, col[:, None]]),
                            np.hstack([R, np.zeros((len(R), 1))])]) * scale
             F = np.concatenate([g, np.zeros(len(R))])
-            error = float(np.linalg.norm(g) / size)
+            error = linalg.norm(g) / size
             if not np.isfinite(error) or error > 10 * best:
                 return None
             if error <= 1e-12:
-                q = (w * (T @ xi)).reshape(first.positions.shape)
+                q = (w * linalg.dot(T, xi)).reshape(first.positions.shape)
                 try:
                     eq = relative_equilibrium(system, q, spin(p), rotation_rate)
                 except ValueError:
                     return None
                 return eq, x, A
             best = min(best, error)
-            x = x + np.linalg.lstsq(np.vstack([A, row]),
-                                    np.concatenate([-F, [target - row @ x]]), rcond=1e-14)[0]
+            x = x + linalg.lstsq(np.vstack([A, row]),
+                                 np.concatenate([-F, [target - linalg.dot(row, x)]]), 1e-14)
         return None
 
     members, complete = follow(solve, np.concatenate([xi0, [p0]]) / scale, to / scale[-1],

@@ -23,6 +23,7 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
+from ..physics import linalg, portable
 from ..physics.equilibria import (
     Bifurcation,
     RelativeEquilibrium,
@@ -51,22 +52,23 @@ class PeriodicOrbit(NamedTuple):
     @property
     def stable(self) -> bool:
         """Linearly stable: every non-trivial multiplier on the unit circle."""
-        return bool(np.all(np.abs(np.abs(self.multipliers) - 1.0) <= UNIT_CIRCLE))
+        return bool(np.all(np.abs(linalg.modulus(self.multipliers) - 1.0) <= UNIT_CIRCLE))
 
     @property
     def on_circle(self) -> int:
         """How many non-trivial multipliers lie on the unit circle."""
-        return int(np.sum(np.abs(np.abs(self.multipliers) - 1.0) <= UNIT_CIRCLE))
+        return int(np.sum(np.abs(linalg.modulus(self.multipliers) - 1.0) <= UNIT_CIRCLE))
 
     @property
     def kind(self) -> str:
         """elliptic (all on the unit circle), hyperbolic (a real pair off it, mu > 0),
         inverse hyperbolic (mu < 0) or complex unstable (a quartet off it)."""
         mu = self.multipliers
-        off = np.abs(np.abs(mu) - 1.0) > UNIT_CIRCLE
+        size = linalg.modulus(mu)
+        off = np.abs(size - 1.0) > UNIT_CIRCLE
         if not off.any():
             return "elliptic"
-        if np.any(off & (np.abs(mu.imag) > UNIT_CIRCLE * np.abs(mu))):
+        if np.any(off & (np.abs(mu.imag) > UNIT_CIRCLE * size)):
             return "complex unstable"
         return "inverse hyperbolic" if np.any(off & (mu.real < 0)) else "hyperbolic"
 
@@ -74,15 +76,17 @@ class PeriodicOrbit(NamedTuple):
     def rates(self) -> np.ndarray:
         """ln |mu| / T of the multipliers off the circle, largest first: how fast nearby
         orbits leave it."""
-        mu = self.multipliers
-        return np.sort(np.log(np.abs(mu[np.abs(mu) > 1.0 + UNIT_CIRCLE])))[::-1] / self.period
+        size = linalg.modulus(self.multipliers)
+        return np.sort(portable.vlog(size[size > 1.0 + UNIT_CIRCLE]))[::-1] / self.period
 
     @property
     def indices(self) -> np.ndarray:
         """Henon's stability index b = (mu + 1/mu) / 2, one per reciprocal pair (complex
         for a quartet), ascending: |b| <= 1 on the unit circle, b = 1 and b = -1 where a pair
         passes through +1 (tangent, fold or branch) or -1 (period doubling)."""
-        b = (self.multipliers + 1.0 / self.multipliers) / 2.0
+        mu = self.multipliers
+        m2 = mu.real * mu.real + mu.imag * mu.imag         # 1/mu = conj(mu) / |mu|^2
+        b = (mu.real + mu.real / m2) / 2.0 + 1j * ((mu.imag - mu.imag / m2) / 2.0)
         b = b[np.lexsort((np.round(b.imag, 9), np.round(b.real, 9)))]    # pairs adjacent
         return b[::2]
 
@@ -96,7 +100,7 @@ class PeriodicOrbit(NamedTuple):
 
 def _rotation(system: System, theta: float) -> np.ndarray:
     """The state-space matrix rotating every position and momentum by theta (the plane)."""
-    c, s = np.cos(theta), np.sin(theta)
+    c, s = portable.cos(theta), portable.sin(theta)
     return np.kron(np.eye(2 * system.n_bodies), np.array([[c, -s], [s, c]]))
 
 
@@ -120,7 +124,7 @@ def _gradients(system: System, y):
         return grad_h, None
     G = np.kron(np.eye(system.n_bodies), np.array([[0.0, -1.0], [1.0, 0.0]]))
     q, p = y[:nq], y[nq:]
-    return grad_h, np.concatenate([-G @ p, G @ q])
+    return grad_h, np.concatenate([-linalg.dot(G, p), linalg.dot(G, q)])
 
 
 def _centre(system: System) -> np.ndarray:
@@ -167,10 +171,10 @@ class _Shooting(NamedTuple):
             yT, phi = _return(system, y, T, self.tol)
         else:
             yT, phi = _return(system, y, T, self.tol, tangents=False), None
-        r = yT - R @ y
+        r = yT - linalg.dot(R, y)
         e = float(system.energy(y))
         F = [r, [0.0, e - energy]]
-        errors = [np.linalg.norm(r) / np.linalg.norm(y), abs(e - energy) / max(abs(energy), 1.0)]
+        errors = [linalg.norm(r) / linalg.norm(y), abs(e - energy) / max(abs(energy), 1.0)]
         if d == 2:
             F.append([0.0])
             if self.rotating:
@@ -178,7 +182,7 @@ class _Shooting(NamedTuple):
                 F.append([j - spin])
                 errors.append(abs(j - spin) / max(abs(spin), 1.0))
         C = _centre(system)
-        F.append(C @ y)
+        F.append(linalg.dot(C, y))
         F = np.concatenate(F)
         if not tangents:
             return F, None, max(errors), None
@@ -186,11 +190,11 @@ class _Shooting(NamedTuple):
         grad_h, grad_l = _gradients(system, y)
         cols = [phi - R, fT[:, None]]
         if self.rotating:
-            cols.append((-_generator(system) @ R @ y)[:, None])
+            cols.append(-linalg.chain(_generator(system), R, y)[:, None])
         top = np.hstack(cols)
         rows = [f0, grad_h]
         if d == 2:
-            rows.append(_generator(system) @ y)
+            rows.append(linalg.dot(_generator(system), y))
             if self.rotating:
                 rows.append(grad_l)
         rows += list(C)
@@ -205,16 +209,17 @@ class _Shooting(NamedTuple):
         n, d = system.n, system.dim
         nq = n // 2
         R = _rotation(system, theta) if self.rotating else np.eye(n)
-        M = R.T @ phi
-        internal = np.linalg.svd(_centre(system))[2][2 * d:].T
+        M = linalg.dot(R.T, phi)
+        internal = linalg.svd(_centre(system))[1][2 * d:].T
         J = np.block([[np.zeros((nq, nq)), np.eye(nq)], [-np.eye(nq), np.zeros((nq, nq))]])
-        known = [internal.T @ _flow(system, y)]
+        known = [linalg.dot(internal.T, _flow(system, y))]
         if d == 2:
-            known.append(internal.T @ _generator(system) @ y)
-        Mi = internal.T @ M @ internal
-        W = nontrivial_subspace(Mi - np.eye(Mi.shape[0]), known, internal.T @ J @ internal)
-        mu = np.linalg.eigvals(W.T @ Mi @ W)
-        mu = mu[np.lexsort((np.abs(mu), np.angle(mu)))]
+            known.append(linalg.chain(internal.T, _generator(system), y))
+        Mi = linalg.chain(internal.T, M, internal)
+        W = nontrivial_subspace(Mi - np.eye(Mi.shape[0]), known,
+                                linalg.chain(internal.T, J, internal))
+        mu = linalg.eigvals(linalg.chain(W.T, Mi, W))
+        mu = mu[np.lexsort((linalg.modulus(mu), linalg.argument(mu)))]
         return PeriodicOrbit(y, T, theta, float(system.energy(y)),
                              float(system.angular_momentum(y)) if d == 2 else 0.0,
                              residuals[-1], np.array(residuals), mu, M)
@@ -249,8 +254,10 @@ def periodic_orbit(system: System, guess, period: float, rotating: bool = False,
     T, theta = float(period), 0.0
     if rotating:    # the angle that best turns the guess's return onto its start
         yT = _return(system, y, T, tol, tangents=False)
-        z0, zT = y[0::2] + 1j * y[1::2], yT[0::2] + 1j * yT[1::2]
-        theta = float(np.angle(np.sum(np.conj(z0) * zT)))
+        # the angle of sum conj(z0) zT over positions and momenta as z = x + i y
+        a, b = y.reshape(-1, 2).T, yT.reshape(-1, 2).T
+        theta = float(portable.atan2(linalg.dot(a[0], b[1]) - linalg.dot(a[1], b[0]),
+                                     linalg.dot(a[0], b[0]) + linalg.dot(a[1], b[1])))
     residuals = []
     best = np.inf
     for _ in range(max_iter):
@@ -259,7 +266,7 @@ def periodic_orbit(system: System, guess, period: float, rotating: bool = False,
         if _converged(error, best, tol):
             break
         best = min(best, error)
-        step = np.linalg.lstsq(A, -F, rcond=1e-14)[0]
+        step = linalg.lstsq(A, -F, 1e-14)
         step *= min(1.0, 0.2 * T / max(abs(step[n]), 1e-300))   # T moves by 20% at most
         y = y + step[:n]
         T += step[n]
@@ -295,10 +302,11 @@ def lyapunov_start(system: System, eq: RelativeEquilibrium, mode: int,
     S = np.block([[hess, -eq.rotation_rate * B],
                   [-eq.rotation_rate * B.T, np.diag(1.0 / np.repeat(system.masses, d))]])
     J = np.block([[np.zeros((nq, nq)), np.eye(nq)], [-np.eye(nq), np.zeros((nq, nq))]])
-    lam, vec = np.linalg.eig(J @ S)
-    k = int(np.argmin(np.abs(lam - 2j * np.pi * f[mode - 1])))
-    v = vec[:, k] * np.exp(-1j * np.angle(vec[np.argmax(np.abs(vec[:nq, k])), k]))
-    v = v.real
+    lam, vec = linalg.eig(linalg.dot(J, S))
+    k = int(np.argmin(linalg.modulus(lam - 2j * np.pi * f[mode - 1])))
+    v = vec[:, k]
+    c = v[np.argmax(linalg.modulus(v[:nq]))]
+    v = v.real * c.real + v.imag * c.imag     # Re(v conj(c)): phased so that c is real
     size = np.max(np.linalg.norm(q - q.mean(axis=0), axis=1))
     v *= amplitude * size / np.max(np.abs(v[:nq]))
     return eq.state(system) + v, 1.0 / f[mode - 1]
@@ -334,7 +342,7 @@ def periodic_family(systems: Callable[[float], System], orbit: PeriodicOrbit, p0
     span = abs(to - p0)
     if span == 0:
         raise ValueError("the family's end value equals its start")
-    scale = np.concatenate([np.full(n, np.linalg.norm(orbit.state)), [orbit.period],
+    scale = np.concatenate([np.full(n, linalg.norm(orbit.state)), [orbit.period],
                             [1.0] * (extra - 1), [span]])
 
     def pack(o, p):
@@ -370,8 +378,8 @@ def periodic_family(systems: Callable[[float], System], orbit: PeriodicOrbit, p0
             best = min(best, error)
             As = np.hstack([A, col[:, None]]) * scale
             full = np.vstack([As, t_row])
-            rhs_ = np.concatenate([-F, [target - t_row @ x]])
-            x = x + np.linalg.lstsq(full, rhs_, rcond=1e-14)[0]
+            rhs_ = np.concatenate([-F, [target - linalg.dot(t_row, x)]])
+            x = x + linalg.lstsq(full, rhs_, 1e-14)
         return None
 
     members, complete = follow(solve, pack(orbit, p0), to / scale[-1], steps,

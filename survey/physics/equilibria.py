@@ -2,10 +2,10 @@
 tangent forces, the equilibrium reached by descending the potential, and relative
 equilibria (rigid rotations) with their linear stability.
 
-The descent's linear algebra is compiled here in a fixed order of IEEE operations
-(portable.symmetric_eigen instead of LAPACK): a chaotic orbit started at an equilibrium
-amplifies a difference in its last bit, so the start must be the same bits on every
-machine."""
+All the linear algebra is physics.linalg's, compiled in a fixed order of IEEE operations
+instead of LAPACK and BLAS: a chaotic orbit started at an equilibrium amplifies a
+difference in its last bit, and a family continued from one decides its steps by noise,
+so both must be the same bits on every machine."""
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -13,7 +13,8 @@ from typing import NamedTuple
 import numpy as np
 
 from .jit import kernel
-from .portable import orthonormal, symmetric_eigen
+from . import linalg
+from .linalg import orthonormal, symmetric_eigen
 from .system import System, centre_of_mass, rhs
 
 
@@ -189,7 +190,7 @@ def frame(masses: np.ndarray, d: int):
     """(T, w): T ((N d) x ((N - 1) d)) maps reduced mass-weighted coordinates xi to
     sqrt(m) q; w = 1 / sqrt(m) per coordinate of q."""
     s = np.sqrt(masses)
-    rows = np.vstack([s / np.linalg.norm(s), np.eye(s.size)])
+    rows = np.vstack([s / linalg.norm(s), np.eye(s.size)])
     B = orthonormal(rows)[1:s.size].T
     return np.kron(B, np.eye(d)), np.repeat(1.0 / s, d)
 
@@ -197,9 +198,9 @@ def frame(masses: np.ndarray, d: int):
 def _reduced_potential(system: System, T, w, xi):
     """U's gradient and Hessian in the reduced coordinates xi, from the exact tangent
     forces."""
-    q = (w * (T @ xi)).reshape(system.n_bodies, system.dim)
+    q = (w * linalg.dot(T, xi)).reshape(system.n_bodies, system.dim)
     force, hess = forces(system, q, hessian=True)
-    return -T.T @ (w * force), T.T @ (w[:, None] * hess * w[None, :]) @ T, q
+    return -linalg.dot(T.T, w * force), linalg.chain(T.T, w[:, None] * hess * w[None, :], T), q
 
 
 def amended(system: System, T, w, xi, angular_momentum: float | None,
@@ -209,7 +210,7 @@ def amended(system: System, T, w, xi, angular_momentum: float | None,
     scale: the Hessian times the smallest mutual distance (mass-weighted), a force that
     moves the closest bodies by their distance -- what the gradient is measured against."""
     g, H, q = _reduced_potential(system, T, w, xi)
-    r2 = float(xi @ xi)
+    r2 = linalg.dot(xi, xi)
     eye = np.eye(xi.size)
     if angular_momentum is not None:
         c = angular_momentum ** 2 / r2 ** 2
@@ -217,7 +218,7 @@ def amended(system: System, T, w, xi, angular_momentum: float | None,
     else:
         omega2 = (rotation_rate or 0.0) ** 2
         grad, hess = g - omega2 * xi, H - omega2 * eye
-    scale = np.linalg.norm(hess, 2) * np.min(_distances(q)) * np.sqrt(system.masses.min())
+    scale = linalg.norm2(hess) * np.min(_distances(q)) * np.sqrt(system.masses.min())
     return grad, hess, scale
 
 
@@ -239,7 +240,7 @@ def relative_equilibrium(system: System, start, angular_momentum: float | None =
     T, w = frame(system.masses, system.dim)
     q0 = np.asarray(start, dtype=float).reshape(system.n_bodies, system.dim)
     q0 = q0 - centre_of_mass(system.masses, q0)
-    xi = T.T @ (q0.ravel() / w)
+    xi = linalg.dot(T.T, q0.ravel() / w)
 
     def gradient(xi):
         return amended(system, T, w, xi, angular_momentum, rotation_rate)
@@ -251,30 +252,30 @@ def relative_equilibrium(system: System, start, angular_momentum: float | None =
             raise ValueError("the potential is not finite on the way to a relative "
                              "equilibrium (a collision?)")
         step = _newton(hess, grad, xi, system.dim)
-        if np.linalg.norm(grad) <= 1e-13 * scale:
+        if linalg.norm(grad) <= 1e-13 * scale:
             break
         for _ in range(40):
             trial = xi + step
             g_t, h_t, s_t = gradient(trial)
-            if np.all(np.isfinite(g_t)) and np.linalg.norm(g_t) < np.linalg.norm(grad):
+            if np.all(np.isfinite(g_t)) and linalg.norm(g_t) < linalg.norm(grad):
                 break
             step = 0.5 * step
         else:
             break
         xi, grad, hess, scale = trial, g_t, h_t, s_t
-    residual = float(np.linalg.norm(grad) / scale)
-    size = np.min(_distances((w * (T @ xi)).reshape(system.n_bodies, system.dim)))
-    if not (residual <= 1e-10 and np.linalg.norm(step) <= 1e-8 * size):
+    residual = float(linalg.norm(grad) / scale)
+    size = np.min(_distances((w * linalg.dot(T, xi)).reshape(system.n_bodies, system.dim)))
+    if not (residual <= 1e-10 and linalg.norm(step) <= 1e-8 * size):
         raise ValueError(f"no relative equilibrium from these positions within {max_iter} "
                          f"Newton steps (relative gradient {residual:.1e}, last step "
-                         f"{np.linalg.norm(step) / size:.1e} of the closest distance)")
-    r2 = float(xi @ xi)
+                         f"{linalg.norm(step) / size:.1e} of the closest distance)")
+    r2 = linalg.dot(xi, xi)
     omega = angular_momentum / r2 if angular_momentum is not None else (rotation_rate or 0.0)
-    q = (w * (T @ xi)).reshape(system.n_bodies, system.dim)
+    q = (w * linalg.dot(T, xi)).reshape(system.n_bodies, system.dim)
     # a body that drifted off feels no force and no curvature: a limit, not an equilibrium
     d = system.dim
     hq = forces(system, q, hessian=True)[1]
-    pull = np.array([np.linalg.norm(hq[i * d:(i + 1) * d, i * d:(i + 1) * d]) / m
+    pull = np.array([linalg.norm(hq[i * d:(i + 1) * d, i * d:(i + 1) * d].ravel()) / m
                      for i, m in enumerate(system.masses)])
     if not np.all(pull > 1e-8 * pull.max()):
         raise ValueError("bodies drifted apart: no bound relative equilibrium from these "
@@ -296,7 +297,7 @@ def _generators(d: int, k: int) -> list[np.ndarray]:
 
 def rotations(xi, d):
     """Orthonormal rows spanning the infinitesimal rotations of reduced positions xi."""
-    return orthonormal(np.array([g @ xi for g in _generators(d, xi.size // d)]))
+    return orthonormal(np.array([linalg.dot(g, xi) for g in _generators(d, xi.size // d)]))
 
 
 def _newton(hess, grad, xi, d):
@@ -304,9 +305,10 @@ def _newton(hess, grad, xi, d):
     on the Hessian with the rotations' directions given its own scale, so only a further
     degeneracy (the size of an isochronous family at a given rate) is cut."""
     R = rotations(xi, d)
-    P = np.eye(xi.size) - R.T @ R
-    M = P @ hess @ P + np.linalg.norm(hess, 2) * R.T @ R
-    return -np.linalg.lstsq(M, P @ grad, rcond=1e-14)[0]
+    RR = linalg.dot(R.T, R)
+    P = np.eye(xi.size) - RR
+    M = linalg.chain(P, hess, P) + linalg.norm2(hess) * RR
+    return -linalg.lstsq(M, linalg.dot(P, grad), 1e-14)
 
 
 def linear_stability(system: System, positions, rotation_rate: float):
@@ -321,28 +323,28 @@ def linear_stability(system: System, positions, rotation_rate: float):
     T, w = frame(system.masses, d)
     q = np.asarray(positions, dtype=float).reshape(system.n_bodies, d)
     q = q - centre_of_mass(system.masses, q)
-    xi = T.T @ (q.ravel() / w)
+    xi = linalg.dot(T.T, q.ravel() / w)
     _, H, _ = _reduced_potential(system, T, w, xi)
     n = xi.size
     gens = _generators(d, n // d)
     rot = gens[0].T if d == 2 else np.zeros((n, n))     # xi x eta = xi . rot eta
     S = np.block([[H, -rotation_rate * rot], [-rotation_rate * rot.T, np.eye(n)]])
     J = np.block([[np.zeros((n, n)), np.eye(n)], [-np.eye(n), np.zeros((n, n))]])
-    A = J @ S
-    eta = rotation_rate * rot.T @ xi            # the rotating frame's momenta at rest
-    zrot = [np.concatenate([g @ xi, g @ eta]) for g in gens]
-    zrot = [z for z in zrot if np.linalg.norm(z) > 1e-12 * np.linalg.norm(xi)]
+    A = linalg.dot(J, S)
+    eta = rotation_rate * linalg.dot(rot.T, xi)     # the rotating frame's momenta at rest
+    zrot = [np.concatenate([linalg.dot(g, xi), linalg.dot(g, eta)]) for g in gens]
+    zrot = [z for z in zrot if linalg.norm(z) > 1e-12 * linalg.norm(xi)]
     W = nontrivial_subspace(A, zrot)
-    AW = W.T @ A @ W
-    lam, vec = np.linalg.eig(AW)
+    lam, vec = linalg.eig(linalg.chain(W.T, A, W))
     order = np.lexsort((lam.real, lam.imag))
     lam, vec = lam[order], vec[:, order]
     krein = np.zeros(lam.size, dtype=np.int8)
     size = _size(lam)
     for i, (l, v) in enumerate(zip(lam, vec.T)):
         if l.imag > 0 and abs(l.real) <= AXIS_TOLERANCE * size:
-            full = W @ v
-            krein[i] = 1 if np.real(np.conj(full) @ S @ full) > 0 else -1
+            re, im = linalg.dot(W, v.real), linalg.dot(W, v.imag)   # v* S v, S symmetric
+            krein[i] = 1 if linalg.dot(re, linalg.dot(S, re)) + \
+                linalg.dot(im, linalg.dot(S, im)) > 0 else -1
     return lam, krein
 
 
@@ -359,16 +361,16 @@ def nontrivial_subspace(N: np.ndarray, known, form: np.ndarray | None = None) ->
     n = dim // 2
     J = np.block([[np.zeros((n, n)), np.eye(n)], [-np.eye(n), np.zeros((n, n))]]) \
         if form is None else form
-    _, sv, vt = np.linalg.svd(N @ N)
+    sv, vt = linalg.svd(linalg.dot(N, N))
     kernel = vt[sv <= 1e-9 * max(sv[0], 1e-300)].T
     trivial = []
     for z in known:
-        pairing = kernel.T @ (J.T @ z)                 # omega(z, K c) = z^T J K c
-        if np.linalg.norm(pairing) > 1e-12 * np.linalg.norm(z):
-            trivial += [z, kernel @ pairing]
+        pairing = linalg.chain(kernel.T, J.T, z)       # omega(z, K c) = z^T J K c
+        if linalg.norm(pairing) > 1e-12 * linalg.norm(z):
+            trivial += [z, linalg.dot(kernel, pairing)]
     if not trivial:
         return np.eye(dim)
-    _, s2, v2 = np.linalg.svd(np.array(trivial) @ J)
+    s2, v2 = linalg.svd(linalg.dot(np.array(trivial), J))
     return v2[np.sum(s2 > 1e-10 * s2[0]):].T
 
 

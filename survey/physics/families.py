@@ -18,7 +18,7 @@ from typing import Callable
 import numpy as np
 
 from ..catalog.errors import Inaccessible
-from . import portable
+from . import linalg, portable
 from .equilibria import equilibrium_positions, forces
 from .forces import profile
 from .jacobi import (
@@ -308,7 +308,7 @@ def _random_motion(system: System, q: np.ndarray, rng, angular_momentum: float):
     """Seeded Gaussian velocities with zero total momentum and zero angular momentum about
     the centre of mass, and the rigid rotation that carries `angular_momentum` (about z):
     (internal, rotation) velocities. Sums body by body and the inertia tensor inverted
-    through portable.symmetric_eigen: the same bits on every machine."""
+    through linalg.symmetric_eigen: the same bits on every machine."""
     m = system.masses[:, None]
     r = q - centre_of_mass(system.masses, q)
     v = rng.normal(size=q.shape)
@@ -320,7 +320,7 @@ def _random_motion(system: System, q: np.ndarray, rng, angular_momentum: float):
     inertia = (inertia[0, 0] + inertia[1, 1] + inertia[2, 2]) * np.eye(3) - inertia
     L = np.sum(m * np.cross(r3, v3), axis=0)
     axes = [2] if system.dim == 2 else [0, 1, 2]
-    w, V = portable.symmetric_eigen(np.ascontiguousarray(inertia[np.ix_(axes, axes)]))
+    w, V = linalg.symmetric_eigen(np.ascontiguousarray(inertia[np.ix_(axes, axes)]))
     # the least-squares omega: eigenvalues below 1e-12 of the largest (a line's own axis)
     # carry none of it
     rank = w > 1e-12 * w.max()

@@ -12,8 +12,7 @@ Scalar versions inline into kernels; `vexp`, `vlog`, `vsin`, `vcos`, `vsincos`, 
 apply them elementwise to arrays for Python code (the trigonometric ones as branch-free SIMD
 loops with the same bits), and `vnorm` and `vdot` are the Euclidean norm and the dot product
 along the last axis summed in order (numpy's and BLAS's sums change their order with the
-CPU). `symmetric_eigen` and `orthonormal` replace LAPACK's eigh and QR, whose blocked
-kernels round by the CPU.
+CPU); `linalg` builds the portable matrix algorithms on them.
 """
 from __future__ import annotations
 
@@ -255,53 +254,6 @@ def atan2_into(y, x, out):
             out[i] = atan2(y[i], x[i])
 
 
-@kernel
-def symmetric_eigen(A):
-    """Eigenvalues (ascending) and orthonormal eigenvectors (columns) of a symmetric
-    matrix by cyclic Jacobi rotations (Golub & Van Loan, Alg. 8.5.3): a fixed sequence of
-    IEEE operations, so every machine gets the same bits -- LAPACK's eigh does not."""
-    n = A.shape[0]
-    a = A.copy()
-    V = np.eye(n)
-    for _ in range(100):
-        off, total = 0.0, 0.0
-        for p in range(n):
-            for q in range(n):
-                total += a[p, q] * a[p, q]
-                if p != q:
-                    off += a[p, q] * a[p, q]
-        if not off > 1e-32 * total:
-            break
-        for p in range(n - 1):
-            for q in range(p + 1, n):
-                apq = a[p, q]
-                if apq == 0.0:
-                    continue
-                theta = (a[q, q] - a[p, p]) / (2.0 * apq)
-                if abs(theta) > 1e150:
-                    t = 0.5 / theta
-                else:
-                    t = 1.0 / (abs(theta) + math.sqrt(theta * theta + 1.0))
-                    t = -t if theta < 0.0 else t
-                c = 1.0 / math.sqrt(t * t + 1.0)
-                s = t * c
-                for k in range(n):
-                    akp, akq = a[k, p], a[k, q]
-                    a[k, p], a[k, q] = c * akp - s * akq, s * akp + c * akq
-                for k in range(n):
-                    apk, aqk = a[p, k], a[q, k]
-                    a[p, k], a[q, k] = c * apk - s * aqk, s * apk + c * aqk
-                a[p, q] = a[q, p] = 0.0
-                for k in range(n):
-                    vkp, vkq = V[k, p], V[k, q]
-                    V[k, p], V[k, q] = c * vkp - s * vkq, s * vkp + c * vkq
-    w = np.empty(n)
-    for i in range(n):
-        w[i] = a[i, i]
-    order = np.argsort(w, kind="mergesort")
-    return w[order], V[:, order]
-
-
 @helper
 def root8(x):
     """(x^(1/8), x^(1/128)) by chained square roots: the step-size control's powers."""
@@ -417,18 +369,3 @@ def vdot(a, b):
 def vnorm(a):
     """The Euclidean norms along the last axis, summed in order."""
     return np.sqrt(vdot(a, a))
-
-
-def orthonormal(rows: np.ndarray) -> np.ndarray:
-    """An orthonormal basis of the rows' span by modified Gram-Schmidt (sums in order, so
-    the same bits on every CPU, unlike LAPACK's QR); a row whose remainder is below 1e-12
-    of the largest row adds nothing."""
-    basis, floor = [], 1e-12 * float(np.max(vnorm(rows)))
-    for v in rows:
-        v = v.copy()
-        for q in basis:
-            v -= float(vdot(v, q)) * q
-        size = float(vnorm(v))
-        if size > floor:
-            basis.append(v / size)
-    return np.array(basis)

@@ -24,6 +24,7 @@ from ..numerics.periodic import (
     periodic_family,
     periodic_orbit,
 )
+from ..physics import linalg
 from ..physics.equilibria import (
     RelativeEquilibrium,
     forces,
@@ -412,7 +413,8 @@ def periodic_text(system: System, orbit: PeriodicOrbit) -> str:
              "after the last: " + ", ".join(f"{r:.1e}" if r >= 1e-12 else "< 1e-12"
                                             for r in orbit.residuals) + ".",
              "Non-trivial Floquet multipliers (|mu|, angle/pi): " + ", ".join(
-                 f"{abs(z):.9f} {np.angle(z) / np.pi:+.6f}" for z in orbit.multipliers)
+                 f"{m:.9f} {a / np.pi:+.6f}" for m, a in zip(linalg.modulus(orbit.multipliers),
+                                                          linalg.argument(orbit.multipliers)))
              + f": {orbit.kind}" + (", linearly stable." if orbit.stable else
                                     ", unstable; nearby orbits leave at " + ", ".join(
                                         f"{r:.6g}" for r in sorted({float(f"{r:.6g}") for r in

@@ -216,20 +216,3 @@ def test_the_simd_sine_and_cosine_give_the_scalar_bits():
     want = np.array([both(x) for x in xs])
     assert s.tobytes() == want[:, 0].tobytes() and c.tobytes() == want[:, 1].tobytes()
     assert P.vsin(xs).tobytes() == s.tobytes() and P.vcos(xs).tobytes() == c.tobytes()
-
-
-@pytest.mark.parametrize("n", [1, 2, 3, 14, 30])
-def test_symmetric_eigen_gives_the_closed_form_spectrum_and_an_orthonormal_basis(n):
-    """The second-difference matrix (2 on the diagonal, -1 beside it) has eigenvalues
-    2 - 2 cos(k pi / (n + 1)); conjugated by a random orthogonal matrix it is a full
-    symmetric matrix with the same spectrum. Its eigenvectors are orthonormal and rebuild
-    it."""
-    T = 2 * np.eye(n) - np.eye(n, k=1) - np.eye(n, k=-1)
-    Q = np.linalg.qr(np.random.default_rng(n).normal(size=(n, n)))[0]
-    A = Q @ T @ Q.T
-    A = 0.5 * (A + A.T)
-    w, V = P.symmetric_eigen(A)
-    exact = 2 - 2 * np.cos(np.arange(1, n + 1) * np.pi / (n + 1))
-    np.testing.assert_allclose(w, exact, rtol=0, atol=1e-13 * n)
-    np.testing.assert_allclose(V.T @ V, np.eye(n), atol=1e-14 * n)
-    np.testing.assert_allclose(V @ np.diag(w) @ V.T, A, atol=1e-14 * n)

@@ -86,7 +86,8 @@ def test_lagranges_triangle_follows_routhss_criterion(masses, stable):
     system = System(m, 2, make_potential("gravity", {"G": 1.0}, "pair"))
     eq = relative_equilibrium(system, TRIANGLE, rotation_rate=1.0)
     r = distances(eq.positions)
-    np.testing.assert_allclose(r, r[0], rtol=1e-12)
+    # the light bodies' distance is pinned by forces ~1e-4 of the rest: to ~1e-12, not eps
+    np.testing.assert_allclose(r, r[0], rtol=5e-12)
     assert eq.rotation_rate ** 2 * r[0] ** 3 == pytest.approx(m.sum(), rel=1e-12)
     routh = 27 * (m[0] * m[1] + m[1] * m[2] + m[2] * m[0]) < m.sum() ** 2
     assert routh == stable and eq.stable == stable

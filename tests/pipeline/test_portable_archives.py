@@ -2,13 +2,14 @@
 made here by switching the code paths a CPU selects: numba compiling for the generic x86-64
 target, numpy without its AVX2/AVX-512 loops, glibc without its FMA/AVX2 libm, OpenBLAS's
 oldest kernels. The orbit, the variational indicators, the sections and the torus analysis
-must come out the same bits. So must every start a family
-builds -- the N-body families descend to an equilibrium and remove rigid motions with
-linear algebra that LAPACK and BLAS would round by the CPU -- and the reduced coordinates
-of section crossings (an arctan2)."""
+must come out the same bits. So must the starts the families build (the N-body ones
+descend to an equilibrium and remove rigid motions with linear algebra that LAPACK and
+BLAS would round by the CPU), the reduced coordinates of section crossings (an arctan2),
+and the families of periodic orbits and of relative equilibria."""
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,6 +18,8 @@ import xarray as xr
 from survey.catalog.variables import V
 from survey.pipeline import archive
 from survey.pipeline.sweep import run_survey, verify
+
+WORKFLOWS = Path(__file__).parents[2] / "workflows"
 
 FOREIGN = {"NUMBA_CPU_NAME": "generic",
            "NPY_DISABLE_CPU_FEATURES": "X86_V3,X86_V4,AVX512_ICL,AVX512_SPR",
@@ -39,6 +42,12 @@ max_crossings = 20
 [dask]
 workers = 1
 """
+
+
+@pytest.fixture(scope="module")
+def foreign_cache(tmp_path_factory):
+    """numba's cache for the other machine's kernels, compiled once for this module."""
+    return str(tmp_path_factory.mktemp("foreign-numba"))
 
 
 # starts whose every bit a chaotic orbit amplifies: the LJAT trimer and 2-D LJ7 from their
@@ -68,20 +77,40 @@ out = dict(
     sides=initial_state(System(np.array([1.0, 0.3, 0.07]), 2, (ATM,)), "sides"),
     reduced=np.array(reduced(System(np.array([1.0, 0.3, 0.07])),
                              np.random.default_rng(5).normal(size=(200, 12)))))
+# families: a Lyapunov family from a relative equilibrium's normal mode (rotating, in the
+# energy), the figure-eight in a mass with its bifurcations bisected, and a family of
+# relative equilibria with its Routh bifurcation
+from survey.pipeline.special import solve_equilibria, solve_periodic
+for name in ("rotating_triangle_breathing", "figure_eight_mass_family"):
+    family = solve_periodic(f"{sys.argv[2]}/{name}.toml")[2]
+    out[name] = np.concatenate([family.parameters, [b.parameter for b in family.bifurcations]]
+                               + [np.concatenate([o.state, [o.period, o.rotation],
+                                                  o.multipliers.real, o.multipliers.imag])
+                                  for o in family.members])
+members, found, _ = solve_equilibria(f"{sys.argv[2]}/lagrange_routh_family.toml")[2]
+out["routh"] = np.concatenate([[b.parameter for b in found]] + [
+    np.concatenate([[p], e.positions.ravel(), e.eigenvalues.real, e.eigenvalues.imag])
+    for p, e in members])
 np.savez(sys.argv[1], **out)
 """
 
 
-def test_family_starts_and_reduced_coordinates_are_the_same_bits_on_another_cpu(tmp_path):
+def test_starts_reduced_coordinates_and_periodic_families_are_the_same_bits_elsewhere(
+        tmp_path, foreign_cache):
+    """Also the periodic families and a family of relative equilibria: their Newton
+    corrections stop at the integrator's noise and their continuation steps by it, so a
+    last bit of LAPACK's would change the members and where they bifurcate."""
     here, there = tmp_path / "here.npz", tmp_path / "there.npz"
-    for path, env in ((here, {}), (there, {**FOREIGN, "NUMBA_CACHE_DIR": str(tmp_path)})):
-        proc = subprocess.run([sys.executable, "-c", STARTS, str(path)], capture_output=True,
-                              text=True, timeout=1200, env={**os.environ, **env})
+    for path, env in ((here, {}), (there, {**FOREIGN, "NUMBA_CACHE_DIR": foreign_cache})):
+        proc = subprocess.run([sys.executable, "-c", STARTS, str(path), str(WORKFLOWS)],
+                              capture_output=True, text=True, timeout=1200,
+                              env={**os.environ, **env})
         assert proc.returncode == 0, proc.stderr
     with np.load(here) as a, np.load(there) as b:
         for name in a.files:
-            assert np.isfinite(a[name]).all() and a[name].tobytes() == b[name].tobytes(), \
-                (name, np.max(np.abs(a[name] - b[name])))
+            x, y = a[name], b[name]
+            assert np.isfinite(x).all() and x.tobytes() == y.tobytes(), \
+                (name, np.max(np.abs(x - y)) if x.shape == y.shape else (x.shape, y.shape))
 
 
 @pytest.fixture(scope="module")
@@ -92,8 +121,8 @@ def made_here(tmp_path_factory):
     return run_survey(cfg, progress=False)
 
 
-def test_an_archive_verifies_under_another_cpu_target_and_libraries(made_here, tmp_path):
-    env = {**os.environ, **FOREIGN, "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
+def test_an_archive_verifies_under_another_cpu_target_and_libraries(made_here, foreign_cache):
+    env = {**os.environ, **FOREIGN, "NUMBA_CACHE_DIR": foreign_cache}
     proc = subprocess.run([sys.executable, "-m", "survey", "verify", str(made_here)],
                           env=env, capture_output=True, text=True, timeout=1200)
     out = proc.stdout + proc.stderr
