@@ -710,9 +710,6 @@ def special_cells(ds) -> list[dict]:
     return equilibrium_cells(ds) + homographic_cells(ds)
 
 
-FAMILY_TOLERANCE = 1e-8    # relative: how closely a family computed again must agree
-
-
 def is_family(path) -> bool:
     """Whether an archive is a family (of `equilibria` or `periodic --output`)."""
     from .archive import open_archive
@@ -723,10 +720,8 @@ def is_family(path) -> bool:
 def verify_family(path) -> tuple[bool, list[str]]:
     """A family archive against its stored config: the family computed again and compared
     member by member -- the parameter and every per-member number (period, rotation, E, J,
-    states, multipliers; or E, J, Omega, positions, eigenvalues) -- to FAMILY_TOLERANCE
-    relative to each variable's scale. Not bit for bit: Newton's linear algebra is
-    LAPACK's, whose last bits differ between machines, so a family is reproducible to the
-    solver's accuracy."""
+    states, multipliers; or E, J, Omega, positions, eigenvalues) -- bit for bit, on any
+    machine: the integrator and the linear algebra (physics.linalg) are portable."""
     import hashlib
     import tempfile
 
@@ -756,9 +751,9 @@ def verify_family(path) -> tuple[bool, list[str]]:
         if var.dtype.kind != "f" or name not in stored or stored[name].shape != var.shape:
             continue
         a, b = stored[name].values, var.values
-        scale = np.nanmax(np.abs(a), initial=0.0) or 1.0
-        worst = float(np.nanmax(np.abs(a - b), initial=0.0)) / scale
-        if worst > FAMILY_TOLERANCE or not np.array_equal(np.isnan(a), np.isnan(b)):
+        if not np.array_equal(a, b, equal_nan=True):
+            scale = np.nanmax(np.abs(a), initial=0.0) or 1.0
+            worst = float(np.nanmax(np.abs(a - b), initial=0.0)) / scale
             lines.append(f"{name}: differs by {worst:.1e} of its scale")
     for name in ("bifurcation_kind", "kind"):
         if name in fresh and list(fresh[name].values) != list(stored[name].values):
@@ -769,7 +764,7 @@ def verify_family(path) -> tuple[bool, list[str]]:
             [f"  {line}" for line in lines]
     return True, [f"{path}: {stored.sizes['member']} members and "
                   f"{stored.sizes.get('bifurcation', 0)} bifurcations computed again agree "
-                  f"to {FAMILY_TOLERANCE:g} {made}"]
+                  f"bit for bit {made}"]
 
 
 def section_slice(ds) -> dict:

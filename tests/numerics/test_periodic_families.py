@@ -144,13 +144,14 @@ def test_periodic_family_command(tmp_path, capsys):
         np.testing.assert_allclose(ds["period"], math.pi / 3, rtol=1e-11)
         assert ds["index_real"].dims == ("member", "pair") and ds["stable"].all()
     assert main(["verify", str(out)]) == 0
-    assert "members and 0 bifurcations computed again agree to 1e-08" in capsys.readouterr().out
+    assert "members and 0 bifurcations computed again agree bit for bit" in \
+        capsys.readouterr().out
     with xr.open_dataset(out) as ds:        # a tampered member is found
         tampered = ds.load()
-    tampered["period"][1] = tampered["period"][1] * (1 + 1e-6)
+    tampered["period"][1] = np.nextafter(tampered["period"][1], 0.0)    # one ulp
     tampered.to_netcdf(tmp_path / "tampered.nc")
     assert main(["verify", str(tmp_path / "tampered.nc")]) == 1
-    assert "period: differs by 1.0e-06 of its scale" in capsys.readouterr().out
+    assert "period: differs by 2.1e-16 of its scale" in capsys.readouterr().out
     assert main(["periodic", str(cfg), "--json"]) == 0
     found = json.loads(capsys.readouterr().out)
     assert found["complete"] and found["bifurcations"] == [] and len(found["energy"]) >= 4
