@@ -21,7 +21,7 @@ import math
 
 import numpy as np
 
-from .jit import kernel
+from .jit import helper, kernel
 from .portable import vatan2, vdot, vnorm
 
 EPS = 2.220446049250313e-16
@@ -64,6 +64,26 @@ def norm(x) -> float:
     return float(vnorm(np.asarray(x, dtype=np.float64)))
 
 
+@helper
+def _rotation(zeta):
+    """(c, s) of the Jacobi rotation that zeroes an off-diagonal pair with
+    zeta = (a_qq - a_pp) / (2 a_pq): t = tan of the smaller angle."""
+    if abs(zeta) > 1e150:
+        t = 0.5 / zeta
+    else:
+        t = 1.0 / (abs(zeta) + math.sqrt(zeta * zeta + 1.0))
+        t = -t if zeta < 0.0 else t
+    c = 1.0 / math.sqrt(t * t + 1.0)
+    return c, c * t
+
+
+@helper
+def _rotate_columns(a, p, q, c, s):
+    for i in range(a.shape[0]):
+        x, y = a[i, p], a[i, q]
+        a[i, p], a[i, q] = c * x - s * y, s * x + c * y
+
+
 @kernel
 def _jacobi(a):
     """One-sided Jacobi rotations of a's columns until they are mutually orthogonal:
@@ -86,20 +106,9 @@ def _jacobi(a):
                 if abs(gamma) <= tol * math.sqrt(alpha) * math.sqrt(beta):
                     continue
                 rotated = True
-                zeta = (beta - alpha) / (2.0 * gamma)
-                if abs(zeta) > 1e150:
-                    t = 0.5 / zeta
-                else:
-                    t = 1.0 / (abs(zeta) + math.sqrt(zeta * zeta + 1.0))
-                    t = -t if zeta < 0.0 else t
-                c = 1.0 / math.sqrt(t * t + 1.0)
-                s = c * t
-                for i in range(m):
-                    x, y = u[i, p], u[i, q]
-                    u[i, p], u[i, q] = c * x - s * y, s * x + c * y
-                for i in range(n):
-                    x, y = v[i, p], v[i, q]
-                    v[i, p], v[i, q] = c * x - s * y, s * x + c * y
+                c, s = _rotation((beta - alpha) / (2.0 * gamma))
+                _rotate_columns(u, p, q, c, s)
+                _rotate_columns(v, p, q, c, s)
         if not rotated:
             break
     return u, v
@@ -534,24 +543,13 @@ def symmetric_eigen(A):
                 apq = a[p, q]
                 if apq == 0.0:
                     continue
-                theta = (a[q, q] - a[p, p]) / (2.0 * apq)
-                if abs(theta) > 1e150:
-                    t = 0.5 / theta
-                else:
-                    t = 1.0 / (abs(theta) + math.sqrt(theta * theta + 1.0))
-                    t = -t if theta < 0.0 else t
-                c = 1.0 / math.sqrt(t * t + 1.0)
-                s = t * c
-                for k in range(n):
-                    akp, akq = a[k, p], a[k, q]
-                    a[k, p], a[k, q] = c * akp - s * akq, s * akp + c * akq
+                c, s = _rotation((a[q, q] - a[p, p]) / (2.0 * apq))
+                _rotate_columns(a, p, q, c, s)
                 for k in range(n):
                     apk, aqk = a[p, k], a[q, k]
                     a[p, k], a[q, k] = c * apk - s * aqk, s * apk + c * aqk
                 a[p, q] = a[q, p] = 0.0
-                for k in range(n):
-                    vkp, vkq = V[k, p], V[k, q]
-                    V[k, p], V[k, q] = c * vkp - s * vkq, s * vkp + c * vkq
+                _rotate_columns(V, p, q, c, s)
     w = np.empty(n)
     for i in range(n):
         w[i] = a[i, i]
