@@ -194,6 +194,20 @@ def _balance(a):
     return d
 
 
+@helper
+def _reflect(a, ort, m, h, start):
+    """Columns j >= start of a times the Householder reflection 1 - u u^T / h from the
+    left, u = ort[m:] in rows m and on."""
+    n = a.shape[0]
+    for j in range(start, a.shape[1]):
+        f = 0.0
+        for i in range(n - 1, m - 1, -1):
+            f += ort[i] * a[i, j]
+        f /= h
+        for i in range(m, n):
+            a[i, j] -= f * ort[i]
+
+
 @kernel
 def _hessenberg(a):
     """Reduce a to upper Hessenberg form in place by Householder reflections (EISPACK's
@@ -214,20 +228,8 @@ def _hessenberg(a):
         g = -g if ort[m] > 0.0 else g
         h -= ort[m] * g
         ort[m] -= g
-        for j in range(m, n):
-            f = 0.0
-            for i in range(n - 1, m - 1, -1):
-                f += ort[i] * a[i, j]
-            f /= h
-            for i in range(m, n):
-                a[i, j] -= f * ort[i]
-        for i in range(n):
-            f = 0.0
-            for j in range(n - 1, m - 1, -1):
-                f += ort[j] * a[i, j]
-            f /= h
-            for j in range(m, n):
-                a[i, j] -= f * ort[j]
+        _reflect(a, ort, m, h, m)           # from the left
+        _reflect(a.T, ort, m, h, 0)         # and from the right
         a[m, m - 1] = scale * g
         for i in range(m + 1, n):
             a[i, m - 1] = 0.0
