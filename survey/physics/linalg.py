@@ -403,6 +403,17 @@ def _unbalance(x, d):
     return out
 
 
+@helper
+def _orthogonalise(x, known, count):
+    """x less its projections on the first `count` (orthonormal) columns of known."""
+    for c in range(count):
+        proj = 0j
+        for i in range(x.size):
+            proj += known[i, c].conjugate() * x[i]
+        for i in range(x.size):
+            x[i] -= proj * known[i, c]
+
+
 @kernel
 def _inverse_iteration(a, lam, known, count):
     """The unit eigenvector of a for the eigenvalue lam by inverse iteration from a fixed
@@ -443,12 +454,7 @@ def _inverse_iteration(a, lam, known, count):
         x[i] = ((i * 7919) % 101 + 1) / 102.0
     y = np.empty(n, dtype=np.complex128)
     for _ in range(3):
-        for c in range(count):
-            proj = 0j
-            for i in range(n):
-                proj += known[i, c].conjugate() * x[i]
-            for i in range(n):
-                x[i] -= proj * known[i, c]
+        _orthogonalise(x, known, count)
         for i in range(n):
             y[i] = x[piv[i]]
         for i in range(n):
@@ -463,12 +469,7 @@ def _inverse_iteration(a, lam, known, count):
             big = max(big, abs(y[i].real) + abs(y[i].imag))
         for i in range(n):
             x[i] = y[i] / big
-    for c in range(count):
-        proj = 0j
-        for i in range(n):
-            proj += known[i, c].conjugate() * x[i]
-        for i in range(n):
-            x[i] -= proj * known[i, c]
+    _orthogonalise(x, known, count)
     _normalise(x)
     return x
 
