@@ -489,10 +489,10 @@ def eigvals(a) -> np.ndarray:
 
 def eig(a):
     """(eigenvalues, eigenvectors): np.linalg.eig of a real square matrix, in another
-    order (a conjugate pair adjacent, the lower first, with conjugate vectors). Each vector has unit length,
-    its largest component real and positive; a multiple eigenvalue (equal to 1e-10 of the
-    balanced matrix's largest entry) gets independent vectors. By inverse iteration on the
-    balanced matrix: accurate in every component of a badly scaled one."""
+    order (a conjugate pair adjacent, the lower first, with conjugate vectors). Each vector
+    has unit length, its largest component real and positive; a multiple eigenvalue (equal
+    to 1e-10 of the balanced matrix's largest entry) gets independent vectors. By inverse
+    iteration on the balanced matrix: accurate in every component of a badly scaled one."""
     lam, b, d = _spectrum(a)
     n = lam.size
     bal = np.zeros((n, n), dtype=np.complex128)        # the vectors of D^-1 a D
