@@ -673,8 +673,9 @@ def _step_roots(err, L, roots):
     """roots[k], roots[L + k]: max(err[k], 1e-10) to the powers 1/8 and 1/128 (the step
     control's: seven chained square roots, ~150 cycles of latency for one lane, the same
     in SIMD for 8). Meaningful for finite errors only."""
+    r8, r128 = roots[:L], roots[L:2 * L]        # views: see dop853.error_norms
     for k in range(L):
-        roots[k], roots[L + k] = portable.root8(max(err[k], 1e-10))
+        r8[k], r128[k] = portable.root8(max(err[k], 1e-10))
 
 
 @lanes
@@ -715,13 +716,13 @@ def _growth_terms(NW, t, h, flags, t0, t1, L, n_tan):
     Birkhoff average (NW[2 n_tan L:]): a log and an exp series per lane and step, in loops
     over the lanes that run as SIMD instructions (inside each lane's bookkeeping, one lane
     after another, their latency chains took ~8% of a 16-lane step)."""
-    for i in range(n_tan * L):
-        NW[n_tan * L + i] = portable.log(NW[i])
+    norms, logs, weights = NW[:n_tan * L], NW[n_tan * L:2 * n_tan * L], NW[2 * n_tan * L:]
+    for i in range(n_tan * L):          # views: see dop853.error_norms
+        logs[i] = portable.log(norms[i])
     for k in range(L):
         t_new = t1 if flags[k, 2] == 1 else t[k] + h[k]
         x = (0.5 * (t[k] + t_new) - t0) / (t1 - t0)
-        NW[2 * n_tan * L + k] = portable.exp(-1.0 / (x * (1.0 - x))) \
-            if 0.0 < x < 1.0 else 0.0
+        weights[k] = portable.exp(-1.0 / (x * (1.0 - x))) if 0.0 < x < 1.0 else 0.0
 
 
 @leaf

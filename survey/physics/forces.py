@@ -59,12 +59,24 @@ def norm(a):
 
 
 @helper
+def power_2(c, x):
+    """U, U', U'' of the power profile c x^2 / 2 (the paper's U = P^2 / 2)."""
+    return 0.5 * c * x * x, c * x, c
+
+
+@helper
+def barrier(a, b, x):
+    """U, U', U'' of the barrier profile a / x + b x^2."""
+    return a / x + b * x * x, -a / (x * x) + 2.0 * b * x, 2.0 * a / (x * x * x) + 2.0 * b
+
+
+@helper
 def profile(code, par, x):
     """U(x), U'(x), U''(x) of a profile."""
     if code == POWER:
         c, k = par[0], par[1]
         if k == 2.0:
-            return 0.5 * c * x * x, c * x, c
+            return power_2(c, x)
         if k == 0.0:
             return c * portable.log(x), c / x, -c / (x * x)
         xk2 = portable.power(x, k - 2.0)
@@ -75,8 +87,7 @@ def profile(code, par, x):
         return (-c * e / x, c * e * (g * x + 1.0) / (x * x),
                 -c * e * (g * g * x * x + 2.0 * g * x + 2.0) / (x * x * x))
     if code == BARRIER:
-        a, b = par[0], par[1]
-        return a / x + b * x * x, -a / (x * x) + 2.0 * b * x, 2.0 * a / (x * x * x) + 2.0 * b
+        return barrier(par[0], par[1], x)
     r2 = par[1] / x                          # LENNARD_JONES
     r2 = r2 * r2
     eps, r6 = par[0], r2 * r2 * r2

@@ -17,9 +17,11 @@ from .forces import (
     areal_forces,
     atm_energy,
     atm_forces,
+    barrier,
     norm,
     pair_forces,
     perimetric_forces,
+    power_2,
     profile,
     sub,
     triplet_measure,
@@ -390,12 +392,19 @@ def rhs_lanes(t, Y, dY, L, masses, d, measure, prof, par, n_tan, W):
     components and accumulations, so every lane gets the bits `rhs` gives
     (tests/physics/test_system.py). Otherwise `rhs` runs lane by lane."""
     N = masses.size
-    if L >= SIMD_MIN and N == 3 and d == 2 and measure == PERIMETER and par.ndim == 1:
-        _lanes_velocities(Y, dY, L, masses, n_tan)
-        _lanes_perimetric(Y, dY, L, prof, lead_params(par), n_tan, W)
-    elif L >= SIMD_MIN and N == 3 and d == 2 and measure == AREA and par.ndim == 1:
-        _lanes_velocities(Y, dY, L, masses, n_tan)
-        _lanes_areal(Y, dY, L, prof, lead_params(par), n_tan, W)
+    if L >= SIMD_MIN and N == 3 and d == 2 and par.ndim == 1 and (measure == PERIMETER
+                                                                  or measure == AREA):
+        inv = (1.0 / masses[0], 1.0 / masses[1], 1.0 / masses[2])
+        if measure == PERIMETER:
+            _perimetric_orbits(Y, dY, L, W, prof, lead_params(par), inv)
+        else:
+            _areal_orbits(Y, dY, L, W, prof, lead_params(par), inv)
+        for t in range(n_tan):
+            y, dy = Y[12 * L * (1 + t):], dY[12 * L * (1 + t):]
+            if measure == PERIMETER:
+                _perimetric_tangent(y, dy, L, W, inv)
+            else:
+                _areal_tangent(Y, y, dy, L, W, inv)
     elif L == 1:
         rhs(t, Y, dY, masses, d, measure, prof, par, n_tan)
     else:
@@ -509,97 +518,92 @@ def _planar_areal(y, dy, masses, prof, par, n_tan):
 # The loops over the lanes below are separate compiled functions, not inlined helpers:
 # numba vectorises each alone, but not all of them inlined into one function (measured:
 # the tangent loop 1.7 ns per orbit alone, 8 ns inside the whole right-hand side). Each is
-# given distinct arrays (`lanes`: compiled as such, so vectorised from 4 lanes on).
+# given distinct arrays (`lanes`: compiled as such, so vectorised from 4 lanes on). The
+# orbits' forces take one loop (geometry, profile, forces, velocities: 7.8 ns per lane and
+# evaluation with a tangent vector's loop, 16 lanes; 11.2 as five loops, whose calls cost
+# more than their arithmetic), but for a profile other than the paper's two: a branch on
+# the profile inside a loop keeps it scalar (19 ns), so each has a loop of its own.
+
+@helper
+def _lane_velocities(y, dy, L, k, inv):
+    """dq/dt = p/m of lane k's block (the orbit's or a tangent vector's; inv: 1/m)."""
+    dy[k] = y[6 * L + k] * inv[0]
+    dy[L + k] = y[7 * L + k] * inv[0]
+    dy[2 * L + k] = y[8 * L + k] * inv[1]
+    dy[3 * L + k] = y[9 * L + k] * inv[1]
+    dy[4 * L + k] = y[10 * L + k] * inv[2]
+    dy[5 * L + k] = y[11 * L + k] * inv[2]
+
 
 @lanes
-def _lanes_velocities(Y, dY, L, masses, n_tan):
-    """dq/dt = p/m of the orbits and d dq/dt = dp/m of their tangent vectors, three bodies
-    in the plane."""
-    for t in range(1 + n_tan):
-        # views at each block: an offset from the outer loop in the index keeps the
-        # compiler from vectorising the inner one (measured 14x)
-        y, dy = Y[12 * L * t:], dY[12 * L * t:]
-        for c in range(6):
-            inv = 1.0 / masses[c // 2]
-            for k in range(L):
-                dy[c * L + k] = y[(6 + c) * L + k] * inv
-
-
-@lanes
-def _lanes_profile(prof, par, W, x, L):
-    """U'(v) into W[x + L + k] and U''(v) into W[x + 2 L + k] from v = W[x + k], lane by
-    lane: the paper's P^2/2 and barrier in loops the compiler vectorises (a branch on the
-    profile inside the lanes' loop costs 4x), any other profile through `profile`. (x is
-    an offset computed at run time: a literal row number would compile it once per
-    caller.)"""
-    u1, u2 = x + L, x + 2 * L
+def _perimetric_orbits(Y, dY, L, W, prof, par, inv):
+    """forces.perimetric_forces of bodies (0, 1, 2) in the plane and the velocities, lane by
+    lane, the leading `0.0 +` of each force keeping the general path's zero signs (it adds
+    into zeros). W rows: e1x e1y e2x e2y e3x e3y L1 L2 L3 P U' U'' U'/L1 U'/L2 U'/L3 (the
+    tangent vectors' loops read them)."""
     if prof == POWER and par[1] == 2.0:
         for k in range(L):
-            W[u1 + k], W[u2 + k] = par[0] * W[x + k], par[0]
+            e, s = _triangle_sides(Y, L, W, k)
+            _, U1, U2 = power_2(par[0], s[0] + s[1] + s[2])
+            _perimetric_lane(Y, dY, L, W, k, inv, e, s, U1, U2)
     elif prof == BARRIER:
-        a, b = par[0], par[1]
         for k in range(L):
-            v = W[x + k]
-            W[u1 + k] = -a / (v * v) + 2.0 * b * v
-            W[u2 + k] = 2.0 * a / (v * v * v) + 2.0 * b
+            e, s = _triangle_sides(Y, L, W, k)
+            _, U1, U2 = barrier(par[0], par[1], s[0] + s[1] + s[2])
+            _perimetric_lane(Y, dY, L, W, k, inv, e, s, U1, U2)
     else:
         for k in range(L):
-            _, W[u1 + k], W[u2 + k] = profile(prof, par, W[x + k])
+            _, s = _triangle_sides(Y, L, W, k)
+            W[6 * L + k], W[7 * L + k], W[8 * L + k] = s
+            W[9 * L + k] = s[0] + s[1] + s[2]
+        for k in range(L):
+            _, W[10 * L + k], W[11 * L + k] = profile(prof, par, W[9 * L + k])
+        for k in range(L):
+            e = (W[k], W[L + k], W[2 * L + k], W[3 * L + k], W[4 * L + k], W[5 * L + k])
+            s = (W[6 * L + k], W[7 * L + k], W[8 * L + k])
+            _perimetric_lane(Y, dY, L, W, k, inv, e, s, W[10 * L + k], W[11 * L + k])
 
 
 @helper
-def _lanes_perimetric(Y, dY, L, prof, par, n_tan, W):
-    """forces.perimetric_forces of bodies (0, 1, 2) in the plane, lane by lane: the side
-    unit vectors, lengths and perimeter into W, the profile, the forces, each tangent
-    vector; loops that each store to one array (one storing to both W and dY is one the
-    compiler does not vectorise). The leading `0.0 +` keeps the general path's zero signs
-    (it adds into zeros). W rows: e1x e1y e2x e2y e3x e3y L1 L2 L3 P U' U'' U'/L1 U'/L2
-    U'/L3."""
-    _perimetric_sides(Y, L, W)
-    _lanes_profile(prof, par, W, 9 * L, L)
-    _perimetric_forces(dY, L, W)
-    for t in range(n_tan):
-        _perimetric_tangent(Y[12 * L * (1 + t):], dY[12 * L * (1 + t):], L, W)
+def _triangle_sides(Y, L, W, k):
+    """Lane k's side unit vectors into W (rows 0-5), and returned with its side lengths.
+    (A loop that reads back what it wrote to other rows of W runs scalar -- the compiler
+    cannot tell the rows apart, L being a run-time value --, and so does the loop of the
+    paper's profile with the lengths stored too: the general profile's loops store them.)"""
+    ax, ay = Y[2 * L + k] - Y[k], Y[3 * L + k] - Y[L + k]       # v - u
+    bx, by = Y[4 * L + k] - Y[2 * L + k], Y[5 * L + k] - Y[3 * L + k]   # w - v
+    cx, cy = Y[k] - Y[4 * L + k], Y[L + k] - Y[5 * L + k]       # u - w
+    L1 = math.sqrt(ax * ax + ay * ay)
+    L2 = math.sqrt(bx * bx + by * by)
+    L3 = math.sqrt(cx * cx + cy * cy)
+    r1, r2, r3 = 1.0 / L1, 1.0 / L2, 1.0 / L3
+    W[k], W[L + k] = ax * r1, ay * r1
+    W[2 * L + k], W[3 * L + k] = bx * r2, by * r2
+    W[4 * L + k], W[5 * L + k] = cx * r3, cy * r3
+    return (ax * r1, ay * r1, bx * r2, by * r2, cx * r3, cy * r3), (L1, L2, L3)
+
+
+@helper
+def _perimetric_lane(Y, dY, L, W, k, inv, e, s, U1, U2):
+    """Lane k's velocities and forces from its side unit vectors e and lengths s (U1, U2:
+    U', U'' at its perimeter), and U'', U'/L_i into W for its tangent vectors."""
+    W[11 * L + k] = U2
+    W[12 * L + k], W[13 * L + k], W[14 * L + k] = U1 / s[0], U1 / s[1], U1 / s[2]
+    _lane_velocities(Y, dY, L, k, inv)
+    e1x, e1y, e2x, e2y, e3x, e3y = e
+    dY[6 * L + k] = 0.0 + U1 * (e1x - e3x)
+    dY[7 * L + k] = 0.0 + U1 * (e1y - e3y)
+    dY[8 * L + k] = 0.0 + U1 * (e2x - e1x)
+    dY[9 * L + k] = 0.0 + U1 * (e2y - e1y)
+    dY[10 * L + k] = 0.0 + U1 * (e3x - e2x)
+    dY[11 * L + k] = 0.0 + U1 * (e3y - e2y)
 
 
 @lanes
-def _perimetric_sides(Y, L, W):
+def _perimetric_tangent(y, dy, L, W, inv):
+    """One tangent vector's block (y, dy start at it): velocities and tangent forces."""
     for k in range(L):
-        ax, ay = Y[2 * L + k] - Y[k], Y[3 * L + k] - Y[L + k]       # v - u
-        bx, by = Y[4 * L + k] - Y[2 * L + k], Y[5 * L + k] - Y[3 * L + k]   # w - v
-        cx, cy = Y[k] - Y[4 * L + k], Y[L + k] - Y[5 * L + k]       # u - w
-        L1 = math.sqrt(ax * ax + ay * ay)
-        L2 = math.sqrt(bx * bx + by * by)
-        L3 = math.sqrt(cx * cx + cy * cy)
-        r1, r2, r3 = 1.0 / L1, 1.0 / L2, 1.0 / L3
-        W[k], W[L + k] = ax * r1, ay * r1
-        W[2 * L + k], W[3 * L + k] = bx * r2, by * r2
-        W[4 * L + k], W[5 * L + k] = cx * r3, cy * r3
-        W[6 * L + k], W[7 * L + k], W[8 * L + k] = L1, L2, L3
-        W[9 * L + k] = L1 + L2 + L3
-
-
-@lanes
-def _perimetric_forces(dY, L, W):
-    for k in range(L):
-        U1 = W[10 * L + k]
-        W[12 * L + k], W[13 * L + k] = U1 / W[6 * L + k], U1 / W[7 * L + k]
-        W[14 * L + k] = U1 / W[8 * L + k]
-    for k in range(L):
-        e1x, e1y, e2x, e2y = W[k], W[L + k], W[2 * L + k], W[3 * L + k]
-        e3x, e3y, U1 = W[4 * L + k], W[5 * L + k], W[10 * L + k]
-        dY[6 * L + k] = 0.0 + U1 * (e1x - e3x)
-        dY[7 * L + k] = 0.0 + U1 * (e1y - e3y)
-        dY[8 * L + k] = 0.0 + U1 * (e2x - e1x)
-        dY[9 * L + k] = 0.0 + U1 * (e2y - e1y)
-        dY[10 * L + k] = 0.0 + U1 * (e3x - e2x)
-        dY[11 * L + k] = 0.0 + U1 * (e3y - e2y)
-
-
-@lanes
-def _perimetric_tangent(y, dy, L, W):
-    """One tangent vector's block (y, dy start at it)."""
-    for k in range(L):
+        _lane_velocities(y, dy, L, k, inv)
         e1x, e1y, e2x, e2y = W[k], W[L + k], W[2 * L + k], W[3 * L + k]
         e3x, e3y, U2 = W[4 * L + k], W[5 * L + k], W[11 * L + k]
         s1, s2, s3 = W[12 * L + k], W[13 * L + k], W[14 * L + k]
@@ -622,50 +626,68 @@ def _perimetric_tangent(y, dy, L, W):
         dy[11 * L + k] = 0.0 + (g3y - g2y)
 
 
+@lanes
+def _areal_orbits(Y, dY, L, W, prof, par, inv):
+    """forces.areal_forces of bodies (0, 1, 2) in the plane and the velocities, lane by
+    lane (see _perimetric_orbits): there the area vector and its unit vector have z
+    components only. W rows: Ahat_z, 1/|A|, |A|, U', U''."""
+    if prof == POWER and par[1] == 2.0:
+        for k in range(L):
+            hz, absA = _triangle_area(Y, L, W, k)
+            _, U1, U2 = power_2(par[0], absA)
+            _areal_lane(Y, dY, L, W, k, inv, hz, U1, U2)
+    elif prof == BARRIER:
+        for k in range(L):
+            hz, absA = _triangle_area(Y, L, W, k)
+            _, U1, U2 = barrier(par[0], par[1], absA)
+            _areal_lane(Y, dY, L, W, k, inv, hz, U1, U2)
+    else:
+        for k in range(L):
+            _triangle_area(Y, L, W, k)
+        for k in range(L):
+            _, W[3 * L + k], W[4 * L + k] = profile(prof, par, W[2 * L + k])
+        for k in range(L):
+            _areal_lane(Y, dY, L, W, k, inv, W[k], W[3 * L + k], W[4 * L + k])
+
+
 @helper
-def _lanes_areal(Y, dY, L, prof, par, n_tan, W):
-    """forces.areal_forces of bodies (0, 1, 2) in the plane, lane by lane (see
-    _lanes_perimetric): there the area vector and its unit vector have z components only.
-    W rows: Ahat_z, 1/|A|, |A|, U', U''."""
-    _areal_area(Y, L, W)
-    _lanes_profile(prof, par, W, 2 * L, L)
-    _areal_forces(Y, dY, L, W)
-    for t in range(n_tan):
-        _areal_tangent(Y, Y[12 * L * (1 + t):], dY[12 * L * (1 + t):], L, W)
+def _triangle_area(Y, L, W, k):
+    """Lane k's Ahat_z, 1/|A| and |A| into W (rows 0-2); returns Ahat_z and |A|."""
+    ax, ay = Y[2 * L + k] - Y[k], Y[3 * L + k] - Y[L + k]        # v - u
+    bx, by = Y[4 * L + k] - Y[k], Y[5 * L + k] - Y[L + k]        # w - u
+    Az = 0.5 * (ax * by - ay * bx)
+    absA = math.sqrt(Az * Az)
+    inv = 1.0 / absA if absA > 0.0 else 0.0
+    W[k], W[L + k], W[2 * L + k] = Az * inv, inv, absA
+    return Az * inv, absA
+
+
+@helper
+def _areal_lane(Y, dY, L, W, k, inv, hz, U1, U2):
+    """Lane k's velocities and forces from its area's unit vector hz (U1, U2: U', U'' at
+    |A|), and U', U'' into W for its tangent vectors."""
+    W[3 * L + k], W[4 * L + k] = U1, U2
+    _lane_velocities(Y, dY, L, k, inv)
+    f = -0.5 * U1
+    svx, svy = Y[2 * L + k] - Y[4 * L + k], Y[3 * L + k] - Y[5 * L + k]   # v - w
+    swx, swy = Y[4 * L + k] - Y[k], Y[5 * L + k] - Y[L + k]               # w - u
+    sux, suy = Y[k] - Y[2 * L + k], Y[L + k] - Y[3 * L + k]               # u - v
+    # (v - w) x Ahat: twice grad_u |A|, and cyclic
+    dY[6 * L + k] = 0.0 + f * (svy * hz)
+    dY[7 * L + k] = 0.0 + f * -(svx * hz)
+    dY[8 * L + k] = 0.0 + f * (swy * hz)
+    dY[9 * L + k] = 0.0 + f * -(swx * hz)
+    dY[10 * L + k] = 0.0 + f * (suy * hz)
+    dY[11 * L + k] = 0.0 + f * -(sux * hz)
 
 
 @lanes
-def _areal_area(Y, L, W):
+def _areal_tangent(Y, y, dy, L, W, inv):
+    """One tangent vector's block (y, dy start at it; Y is the orbit): velocities and
+    tangent forces."""
     for k in range(L):
-        ax, ay = Y[2 * L + k] - Y[k], Y[3 * L + k] - Y[L + k]        # v - u
-        bx, by = Y[4 * L + k] - Y[k], Y[5 * L + k] - Y[L + k]        # w - u
-        Az = 0.5 * (ax * by - ay * bx)
-        absA = math.sqrt(Az * Az)
-        inv = 1.0 / absA if absA > 0.0 else 0.0
-        W[k], W[L + k], W[2 * L + k] = Az * inv, inv, absA
-
-
-@lanes
-def _areal_forces(Y, dY, L, W):
-    for k in range(L):
-        hz, f = W[k], -0.5 * W[3 * L + k]
-        svx, svy = Y[2 * L + k] - Y[4 * L + k], Y[3 * L + k] - Y[5 * L + k]   # v - w
-        swx, swy = Y[4 * L + k] - Y[k], Y[5 * L + k] - Y[L + k]               # w - u
-        sux, suy = Y[k] - Y[2 * L + k], Y[L + k] - Y[3 * L + k]               # u - v
-        # (v - w) x Ahat: twice grad_u |A|, and cyclic
-        dY[6 * L + k] = 0.0 + f * (svy * hz)
-        dY[7 * L + k] = 0.0 + f * -(svx * hz)
-        dY[8 * L + k] = 0.0 + f * (swy * hz)
-        dY[9 * L + k] = 0.0 + f * -(swx * hz)
-        dY[10 * L + k] = 0.0 + f * (suy * hz)
-        dY[11 * L + k] = 0.0 + f * -(sux * hz)
-
-
-@lanes
-def _areal_tangent(Y, y, dy, L, W):
-    """One tangent vector's block (y, dy start at it; Y is the orbit)."""
-    for k in range(L):
-        hz, inv = W[k], W[L + k]
+        _lane_velocities(y, dy, L, k, inv)
+        hz, inv_a = W[k], W[L + k]
         f, g = -0.5 * W[3 * L + k], -0.5 * W[4 * L + k]
         svx, svy = Y[2 * L + k] - Y[4 * L + k], Y[3 * L + k] - Y[5 * L + k]
         swx, swy = Y[4 * L + k] - Y[k], Y[5 * L + k] - Y[L + k]
@@ -676,7 +698,7 @@ def _areal_tangent(Y, y, dy, L, W):
         dAz = 0.5 * ((dux * svy - duy * svx) + (dvx * swy - dvy * swx)
                      + (dwx * suy - dwy * sux))
         dabs = hz * dAz
-        dhz = (-dabs * inv) * hz + dAz * inv
+        dhz = (-dabs * inv_a) * hz + dAz * inv_a
         a = g * dabs
         dy[6 * L + k] = (0.0 + a * (svy * hz)) + f * ((dvy - dwy) * hz + svy * dhz)
         dy[7 * L + k] = (0.0 + a * -(svx * hz)) + f * (-((dvx - dwx) * hz) + -(svx * dhz))
