@@ -23,7 +23,9 @@ def test_bench_parts_run_and_print_their_ratios(tmp_path):
     assert "compute phase" in text and "cluster" in text and "archive" in text
     assert "python -m survey run" in text and "the same with [tori]" in text
     assert "heyoka is not installed" in text or ("survey / heyoka: compute" in text and
-                                                 "largest energy error" in text)
+                                                 "largest energy error" in text and
+                                                 "survey's default:" in text)
+    assert "same work as heyoka" in text and "by phase (default)" in text
     assert text.count("x\n") >= 1 and "Default survey cell" in text and "per orbit" in text
     assert "Where a step goes" in text and "stages+norm" in text
     assert "Newton shooting: one step" in text and "largest idle share" in text
