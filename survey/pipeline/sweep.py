@@ -410,9 +410,11 @@ def _compute(client, task, starts, todo, folder, key, config, bar, round_):
     size = config.tables["dask"]["chunk_size"] or chunk_size(todo.size, len(slots),
                                                             jobs_per_cell(task))
     retries = config.tables["dask"]["retries"]
-    # the archive's imports, in this process, once a worker has nothing left to do (fewer
-    # tasks than threads): on a core the survey no longer uses
-    prefetch = threading.Thread(target=archive.prefetch, name="prefetch", daemon=True)
+    # the archive's imports, in a thread of this process while the workers compute: after
+    # them they added ~0.5 s to a scan whose tasks all end together (the 101-orbit bench
+    # scan's command line: 3.42-3.68 -> 3.22-3.30 s; with its default re-runs, which leave
+    # a core idle before the end, the same within noise)
+    threading.Thread(target=archive.prefetch, name="prefetch", daemon=True).start()
     # a chunk by its first cell: its ids, result rows, extensions pending
     chunks = {int(ids[0]): [ids, None, 0] for ids in _chunks(todo, size)}
     futures = {client.submit(first_runs, task, ids, starts[ids], pure=False,
@@ -460,9 +462,6 @@ def _compute(client, task, starts, todo, folder, key, config, bar, round_):
                     for _ in range(slots[w] - len(busy.get(w, ()))):
                         if held:
                             extend(*held.pop(0), worker=[w])
-        if prefetch is not None and len(futures) < sum(slots.values()):
-            prefetch.start()
-            prefetch = None
     return saved
 
 
