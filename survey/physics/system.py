@@ -521,8 +521,9 @@ def _planar_areal(y, dy, masses, prof, par, n_tan):
 # given distinct arrays (`lanes`: compiled as such, so vectorised from 4 lanes on). The
 # orbits' forces take one loop (geometry, profile, forces, velocities: 7.8 ns per lane and
 # evaluation with a tangent vector's loop, 16 lanes; 11.2 as five loops, whose calls cost
-# more than their arithmetic), but for a profile other than the paper's two: a branch on
-# the profile inside a loop keeps it scalar (19 ns), so each has a loop of its own.
+# more than their arithmetic), but for profiles other than x^2/2 (the paper's P^2/2 and
+# |A|^2/2) and the barrier: a branch on the profile inside a loop keeps it scalar (19 ns),
+# so each of those has a loop of its own, and any other takes three.
 
 @helper
 def _lane_velocities(y, dy, L, k, inv):
@@ -540,7 +541,8 @@ def _perimetric_orbits(Y, dY, L, W, prof, par, inv):
     """forces.perimetric_forces of bodies (0, 1, 2) in the plane and the velocities, lane by
     lane, the leading `0.0 +` of each force keeping the general path's zero signs (it adds
     into zeros). W rows: e1x e1y e2x e2y e3x e3y L1 L2 L3 P U' U'' U'/L1 U'/L2 U'/L3 (the
-    tangent vectors' loops read them)."""
+    tangent vectors' loops read the unit vectors, U'' and U'/L_i; L_i, P and U' are stored
+    by the general profile's loops only)."""
     if prof == POWER and par[1] == 2.0:
         for k in range(L):
             e, s = _triangle_sides(Y, L, W, k)
