@@ -397,14 +397,12 @@ def rhs_lanes(t, Y, dY, L, masses, d, measure, prof, par, n_tan, W):
         inv = (1.0 / masses[0], 1.0 / masses[1], 1.0 / masses[2])
         if measure == PERIMETER:
             _perimetric_orbits(Y, dY, L, W, prof, lead_params(par), inv)
+            for t in range(1, 1 + n_tan):
+                _perimetric_tangent(Y[12 * L * t:], dY[12 * L * t:], L, W, inv)
         else:
             _areal_orbits(Y, dY, L, W, prof, lead_params(par), inv)
-        for t in range(n_tan):
-            y, dy = Y[12 * L * (1 + t):], dY[12 * L * (1 + t):]
-            if measure == PERIMETER:
-                _perimetric_tangent(y, dy, L, W, inv)
-            else:
-                _areal_tangent(Y, y, dy, L, W, inv)
+            for t in range(1, 1 + n_tan):
+                _areal_tangent(Y, Y[12 * L * t:], dY[12 * L * t:], L, W, inv)
     elif L == 1:
         rhs(t, Y, dY, masses, d, measure, prof, par, n_tan)
     else:
@@ -579,10 +577,9 @@ def _triangle_sides(Y, L, W, k):
     L2 = math.sqrt(bx * bx + by * by)
     L3 = math.sqrt(cx * cx + cy * cy)
     r1, r2, r3 = 1.0 / L1, 1.0 / L2, 1.0 / L3
-    W[k], W[L + k] = ax * r1, ay * r1
-    W[2 * L + k], W[3 * L + k] = bx * r2, by * r2
-    W[4 * L + k], W[5 * L + k] = cx * r3, cy * r3
-    return (ax * r1, ay * r1, bx * r2, by * r2, cx * r3, cy * r3), (L1, L2, L3)
+    e = (ax * r1, ay * r1, bx * r2, by * r2, cx * r3, cy * r3)
+    W[k], W[L + k], W[2 * L + k], W[3 * L + k], W[4 * L + k], W[5 * L + k] = e
+    return e, (L1, L2, L3)
 
 
 @helper
@@ -660,8 +657,9 @@ def _triangle_area(Y, L, W, k):
     Az = 0.5 * (ax * by - ay * bx)
     absA = math.sqrt(Az * Az)
     inv = 1.0 / absA if absA > 0.0 else 0.0
-    W[k], W[L + k], W[2 * L + k] = Az * inv, inv, absA
-    return Az * inv, absA
+    hz = Az * inv
+    W[k], W[L + k], W[2 * L + k] = hz, inv, absA
+    return hz, absA
 
 
 @helper
