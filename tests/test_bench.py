@@ -26,6 +26,9 @@ def test_bench_parts_run_and_print_their_ratios(tmp_path):
                                                  "largest energy error" in text and
                                                  "survey's default:" in text)
     assert "same work as heyoka" in text and "by phase (default)" in text
+    # the command line's fixed costs and the torus analysis's share, each on its own
+    assert all(f"{phase} " in text for phase in ("interpreter", "imports", "prepare", "rest"))
+    assert "the torus analysis (same work, in process): compute" in text
     assert text.count("x\n") >= 1 and "Default survey cell" in text and "per orbit" in text
     assert "Where a step goes" in text and "stages+norm" in text
     assert "Newton shooting: one step" in text and "largest idle share" in text
