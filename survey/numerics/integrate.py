@@ -152,9 +152,9 @@ class Lanes(NamedTuple):
     acc: np.ndarray           # (L, 4) MEGNO: L at the last step end, int L, Y; clock start
     g_old: np.ndarray         # (L, m) watched events at the last step end, and slopes
     s_old: np.ndarray
-    g_new: np.ndarray         # (m,) scratch of one lane
+    g_new: np.ndarray         # (L, m) the same at the accepted step's end (`_screen`)
     s_new: np.ndarray
-    todo: np.ndarray
+    todo: np.ndarray          # (L, m) may_cross of each: the events the step scans
     found_x: np.ndarray
     found_e: np.ndarray
     yd: np.ndarray            # (nf,) scratch of one lane
@@ -313,32 +313,25 @@ def _record(k, ln, out, rows, t0, t1, masses, d, megno, events, max_events, n_su
     terminal_hit = False
     re = rows[0, j]
     if m > 0 and re >= 0:
-        # screen every watched event on a cubic model of g(t); scan only steps whose model
-        # may cross zero, on the 7th-order dense output
+        # the events `_screen` found may cross zero are scanned on the 7th-order dense output
         scan = False
         for e in range(m):
-            if watch[e]:
-                ln.g_new[e] = event_value(ep, eoff[e], ynew, masses, d)
-                ln.s_new[e] = event_slope(ep, eoff[e], ynew, ln.K[12, k::L], n, yd, masses,
-                                          d, h)
-                ln.todo[e] = may_cross(ln.g_old[k, e], ln.s_old[k, e], ln.g_new[e],
-                                       ln.s_new[e], h)
-                scan = scan or ln.todo[e] > 0
+            scan = scan or ln.todo[k, e] > 0
         n_found = np.int64(0)       # not the literal 0: numba would compile scan_events twice
         if scan:
             counts[2] += 3
             nd_ready = n
             xtol = 4.0 * EPS * max(abs(t), abs(t_new)) / abs(h)
             for e in range(m):
-                if ln.todo[e]:
+                if ln.todo[k, e]:
                     g0 = eoff[guard[e]] if guard[e] >= 0 else -1
-                    n_found = scan_events(ep, eoff[e], ln.g_old[k, e], ln.g_new[e], direc[e],
-                                          g0, n_sub if ln.todo[e] == 2 else 1, h, xtol, F, y,
-                                          n, yd, masses, d, ln.found_x, ln.found_e, e,
-                                          n_found)
+                    n_found = scan_events(ep, eoff[e], ln.g_old[k, e], ln.g_new[k, e],
+                                          direc[e], g0, n_sub if ln.todo[k, e] == 2 else 1,
+                                          h, xtol, F, y, n, yd, masses, d, ln.found_x,
+                                          ln.found_e, e, n_found)
         for e in range(m):
-            ln.g_old[k, e] = ln.g_new[e]
-            ln.s_old[k, e] = ln.s_new[e]
+            ln.g_old[k, e] = ln.g_new[k, e]
+            ln.s_old[k, e] = ln.s_new[k, e]
         for p in range(n_found):
             xr = ln.found_x[p]
             if counts[3] < max_events:
@@ -589,7 +582,7 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
                 continue
             ln.flags[k, 3] = 1          # accepted
             dense = max(dense, _needs_dense(k, ln, rows, t1, direction, events, t_eval,
-                                            t_fine, n_eval > n))
+                                            t_fine, n_eval > n, masses, d, n))
         if dense >= DENSE_ORBIT:    # the orbits' interpolant where no lane needs more
             dense_prepare(masses, d, measure, prof, par, n_tan, L,
                           nf if dense == DENSE_ALL else n, dense == DENSE_ALL, ln.Y, ln.YN,
@@ -747,22 +740,52 @@ def _adopt(to, slot, ln, k):
 
 
 @helper
-def _needs_dense(k, ln, rows, t1, direction, events, t_eval, t_fine, tangent_samples):
-    """What of the dense output lane k's accepted step needs: DENSE_ALL now (it watches
-    events -- every step is screened, may be scanned, and a terminal event takes the whole
-    state there -- or holds a sample time and samples carry tangents), DENSE_ORBIT now (it
-    holds an orbit-only sample time of t_eval, recorded with the accumulators of the
-    moment), DENSE_LATER (only orbit samples of t_fine), 0 none."""
+def _screen(k, ln, rows, events, masses, d, n):
+    """Lane k's accepted step against the events it watches, on a cubic model of each g(t)
+    from its values and slopes at the step's ends (no dense output): ln.todo[k, e] > 0 where
+    g_e may cross zero, for `_record` to scan on the dense output. Returns what of the dense
+    output those scans need: DENSE_ALL if a terminal event may cross (its crossing ends the
+    lane with the whole state there), DENSE_ORBIT if another may, 0 if none -- most steps:
+    the lane watching a section no longer costs every lane three stages with tangents."""
+    eoff, ep, direc, terminal, guard, watch = events
+    m = eoff.size - 1
+    if m == 0 or rows[0, ln.job[k]] < 0:
+        return 0
+    L = ln.job.size
+    h = ln.h[k]
+    ynew, f = ln.YN[k::L], ln.K[12, k::L]
+    need = 0
+    for e in range(m):
+        ln.todo[k, e] = 0
+        if watch[e]:
+            ln.g_new[k, e] = event_value(ep, eoff[e], ynew, masses, d)
+            ln.s_new[k, e] = event_slope(ep, eoff[e], ynew, f, n, ln.yd, masses, d, h)
+            ln.todo[k, e] = may_cross(ln.g_old[k, e], ln.s_old[k, e], ln.g_new[k, e],
+                                      ln.s_new[k, e], h)
+            if ln.todo[k, e] > 0:
+                need = max(need, DENSE_ALL if terminal[e] else DENSE_ORBIT)
+    return need
+
+
+@helper
+def _needs_dense(k, ln, rows, t1, direction, events, t_eval, t_fine, tangent_samples,
+                 masses, d, n):
+    """What of the dense output lane k's accepted step needs: DENSE_ALL now (a terminal
+    event may cross in it, or it holds a sample time and samples carry tangents),
+    DENSE_ORBIT now (another event may cross, or it holds an orbit-only sample time of
+    t_eval, recorded with the accumulators of the moment), DENSE_LATER (only orbit samples
+    of t_fine), 0 none."""
     j = ln.job[k]
-    if rows[0, j] >= 0 and events[0].size > 1:
-        return DENSE_ALL
+    need = _screen(k, ln, rows, events, masses, d, n)
     t_new = t1 if ln.flags[k, 2] else ln.t[k] + ln.h[k]
     i = ln.i_eval[k]
     if rows[1, j] >= 0 and i < t_eval.size and direction * (t_eval[i] - t_new) <= 0.0:
-        return DENSE_ALL if tangent_samples else DENSE_ORBIT
+        return max(need, DENSE_ALL if tangent_samples else DENSE_ORBIT)
     i = ln.i_fine[k]
-    return DENSE_LATER if rows[2, j] >= 0 and i < t_fine.size and \
-        direction * (t_fine[i] - t_new) <= 0.0 else 0
+    if need == 0 and rows[2, j] >= 0 and i < t_fine.size and \
+            direction * (t_fine[i] - t_new) <= 0.0:
+        return DENSE_LATER
+    return need
 
 
 def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol,
@@ -821,7 +844,8 @@ def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol,
             np.zeros(L), np.zeros(L), np.zeros((L, 4), dtype=np.int64),
             np.zeros(L, dtype=np.int64), np.zeros(L, dtype=np.int64), np.zeros(L),
             np.zeros((L, 4)), np.zeros((L, max(m, 1))), np.zeros((L, max(m, 1))),
-            np.zeros(max(m, 1)), np.zeros(max(m, 1)), np.zeros(max(m, 1), dtype=np.int64),
+            np.zeros((L, max(m, 1))), np.zeros((L, max(m, 1))),
+            np.zeros((L, max(m, 1)), dtype=np.int64),
             np.zeros(max(1, m * n_sub)), np.zeros(max(1, m * n_sub), dtype=np.int64),
             np.zeros(nf), np.zeros(nf), np.zeros((2, nf)), deferred(2 * max(L, SIMD_LANES)))
 
