@@ -19,8 +19,9 @@ The kernel is one compiled function for every system, potential and event set (a
 by integer codes and parameter arrays), so it is cached on disk. Nothing raises inside it:
 failures come back as a `Status`. Error control covers the first `n_err` components of
 each orbit (the orbit by default; the tangent vectors optionally). Dense output is built
-only for steps that need it -- a step holding requested output times, and every step while
-events are watched -- for all lanes at once when any lane needs it now. A step that holds
+only for steps that need it -- a step holding requested output times, and a step in which
+a watched event may cross zero (screened first on a cubic model of it from the step's ends,
+`_screen`) -- for all lanes at once when any lane needs it now. A step that holds
 only orbit samples at t_fine (the torus analysis': every few steps of every lane) needs it
 later: its stages wait in `Deferred` until a batch of such steps fills, whose dense output
 is then built in SIMD loops over the batch, not over every lane at every round.
