@@ -746,8 +746,9 @@ def _screen(k, ln, rows, events, masses, d, n):
     from its values and slopes at the step's ends (no dense output): ln.todo[k, e] > 0 where
     g_e may cross zero, for `_record` to scan on the dense output. Returns what of the dense
     output those scans need: DENSE_ALL if a terminal event may cross (its crossing ends the
-    lane with the whole state there), DENSE_ORBIT if another may, 0 if none -- most steps:
-    the lane watching a section no longer costs every lane three stages with tangents."""
+    lane with the whole state there), DENSE_ORBIT if another may, 0 if none -- as on most
+    steps, so that one lane watching a section does not cost every lane of its batch three
+    more stages with tangents at every step."""
     eoff, ep, direc, terminal, guard, watch = events
     m = eoff.size - 1
     if m == 0 or rows[0, ln.job[k]] < 0:
