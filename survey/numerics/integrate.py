@@ -776,7 +776,8 @@ def _needs_dense(k, ln, rows, t1, direction, events, t_eval, t_fine, tangent_sam
     event may cross in it, or it holds a sample time and samples carry tangents),
     DENSE_ORBIT now (another event may cross, or it holds an orbit-only sample time of
     t_eval, recorded with the accumulators of the moment), DENSE_LATER (only orbit samples
-    of t_fine), 0 none."""
+    of t_fine), 0 none. It screens the lane's events on the way (`_screen`): `_record`
+    reads what that stored."""
     j = ln.job[k]
     need = _screen(k, ln, rows, events, masses, d, n)
     t_new = t1 if ln.flags[k, 2] else ln.t[k] + ln.h[k]
