@@ -1,7 +1,10 @@
 """Dormand-Prince 8(5,3) (Hairer's DOP853): its tableau, the stages of one step, the blended
 error estimate and the 7th-order dense output, compiled, for L orbits at once stored
 variable-major (component i of lane k at y[i * L + k]; L = 1 is one orbit). The driver that
-steps the orbits is `integrate.dop853`."""
+steps the orbits is `integrate.dop853`. Sums of products are fused multiply-adds
+(`portable.fma`, correctly rounded, the same bits on every CPU), in the tableau's order: on
+Intel's CPUs, where multiplications and additions share two pipes, the stage combinations
+are bound by them, and fused they run ~1.3x faster (a scan task 7-10%)."""
 from __future__ import annotations
 
 import math
@@ -9,6 +12,7 @@ import math
 import numpy as np
 
 from ..physics.jit import helper, lanes, leaf
+from ..physics.portable import fma
 from ..physics.system import rhs, rhs_lanes
 
 EPS = np.finfo(np.float64).eps
@@ -502,6 +506,48 @@ D7_15 = -39.17726167561544
 D7_16 = -149.72683625798564
 
 
+# Each combination of stages: (the rows of K it reads, their coefficients) in the tableau's
+# order -- stages 2-12 and 14-16, the 8th-order solution B, the 5th-order error ER and the
+# dense output's D4-D7 -- summed by `_dot`.
+A2 = ((0,), (A2_1,))
+A3 = ((0, 1), (A3_1, A3_2))
+A4 = ((0, 2), (A4_1, A4_3))
+A5 = ((0, 2, 3), (A5_1, A5_3, A5_4))
+A6 = ((0, 3, 4), (A6_1, A6_4, A6_5))
+A7 = ((0, 3, 4, 5), (A7_1, A7_4, A7_5, A7_6))
+A8 = ((0, 3, 4, 5, 6), (A8_1, A8_4, A8_5, A8_6, A8_7))
+A9 = ((0, 3, 4, 5, 6, 7), (A9_1, A9_4, A9_5, A9_6, A9_7, A9_8))
+A10 = ((0, 3, 4, 5, 6, 7, 8), (A10_1, A10_4, A10_5, A10_6, A10_7, A10_8, A10_9))
+A11 = ((0, 3, 4, 5, 6, 7, 8, 9), (A11_1, A11_4, A11_5, A11_6, A11_7, A11_8, A11_9, A11_10))
+A12 = ((0, 3, 4, 5, 6, 7, 8, 9, 10),
+       (A12_1, A12_4, A12_5, A12_6, A12_7, A12_8, A12_9, A12_10, A12_11))
+B = ((0, 5, 6, 7, 8, 9, 10, 11), (B1, B6, B7, B8, B9, B10, B11, B12))
+ER = ((0, 5, 6, 7, 8, 9, 10, 11), (ER1, ER6, ER7, ER8, ER9, ER10, ER11, ER12))
+A14 = ((0, 6, 7, 8, 9, 10, 11, 12), (A14_1, A14_7, A14_8, A14_9, A14_10, A14_11, A14_12, A14_13))
+A15 = ((0, 5, 6, 7, 10, 11, 12, 13), (A15_1, A15_6, A15_7, A15_8, A15_11, A15_12, A15_13, A15_14))
+A16 = ((0, 5, 6, 7, 8, 12, 13, 14), (A16_1, A16_6, A16_7, A16_8, A16_9, A16_13, A16_14, A16_15))
+D4 = ((0, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15),
+      (D4_1, D4_6, D4_7, D4_8, D4_9, D4_10, D4_11, D4_12, D4_13, D4_14, D4_15, D4_16))
+D5 = ((0, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15),
+      (D5_1, D5_6, D5_7, D5_8, D5_9, D5_10, D5_11, D5_12, D5_13, D5_14, D5_15, D5_16))
+D6 = ((0, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15),
+      (D6_1, D6_6, D6_7, D6_8, D6_9, D6_10, D6_11, D6_12, D6_13, D6_14, D6_15, D6_16))
+D7 = ((0, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15),
+      (D7_1, D7_6, D7_7, D7_8, D7_9, D7_10, D7_11, D7_12, D7_13, D7_14, D7_15, D7_16))
+
+
+@helper
+def _dot(K, i, comb):
+    """sum_j c_j K[r_j, i] over comb = (rows r, coefficients c), as fused multiply-adds in
+    order (the loop has a constant length: the compiler unrolls it, and the loops over i that
+    call it run as SIMD instructions)."""
+    rows, coefs = comb
+    s = coefs[0] * K[rows[0], i]
+    for j in range(1, len(rows)):
+        s = fma(coefs[j], K[rows[j], i], s)
+    return s
+
+
 @helper
 def _rhs(y, dy, L, masses, d, measure, prof, par, n_tan, W):
     """The right-hand side of L lanes; one orbit straight through `rhs` (a call less: 16 ns
@@ -520,40 +566,40 @@ def stages(masses, d, measure, prof, par, n_tan, L, y, hh, K, yt, ynew, W):
     right-hand side is given no time."""
     M = y.size
     for i in range(M):
-        yt[i] = y[i] + hh[i] * (A2_1 * K[0, i])
+        yt[i] = fma(hh[i], _dot(K, i, A2), y[i])
     _rhs(yt, K[1], L, masses, d, measure, prof, par, n_tan, W)
     for i in range(M):
-        yt[i] = y[i] + hh[i] * (A3_1 * K[0, i] + A3_2 * K[1, i])
+        yt[i] = fma(hh[i], _dot(K, i, A3), y[i])
     _rhs(yt, K[2], L, masses, d, measure, prof, par, n_tan, W)
     for i in range(M):
-        yt[i] = y[i] + hh[i] * (A4_1 * K[0, i] + A4_3 * K[2, i])
+        yt[i] = fma(hh[i], _dot(K, i, A4), y[i])
     _rhs(yt, K[3], L, masses, d, measure, prof, par, n_tan, W)
     for i in range(M):
-        yt[i] = y[i] + hh[i] * (A5_1 * K[0, i] + A5_3 * K[2, i] + A5_4 * K[3, i])
+        yt[i] = fma(hh[i], _dot(K, i, A5), y[i])
     _rhs(yt, K[4], L, masses, d, measure, prof, par, n_tan, W)
     for i in range(M):
-        yt[i] = y[i] + hh[i] * (A6_1 * K[0, i] + A6_4 * K[3, i] + A6_5 * K[4, i])
+        yt[i] = fma(hh[i], _dot(K, i, A6), y[i])
     _rhs(yt, K[5], L, masses, d, measure, prof, par, n_tan, W)
     for i in range(M):
-        yt[i] = y[i] + hh[i] * (A7_1 * K[0, i] + A7_4 * K[3, i] + A7_5 * K[4, i] + A7_6 * K[5, i])
+        yt[i] = fma(hh[i], _dot(K, i, A7), y[i])
     _rhs(yt, K[6], L, masses, d, measure, prof, par, n_tan, W)
     for i in range(M):
-        yt[i] = y[i] + hh[i] * (A8_1 * K[0, i] + A8_4 * K[3, i] + A8_5 * K[4, i] + A8_6 * K[5, i] + A8_7 * K[6, i])
+        yt[i] = fma(hh[i], _dot(K, i, A8), y[i])
     _rhs(yt, K[7], L, masses, d, measure, prof, par, n_tan, W)
     for i in range(M):
-        yt[i] = y[i] + hh[i] * (A9_1 * K[0, i] + A9_4 * K[3, i] + A9_5 * K[4, i] + A9_6 * K[5, i] + A9_7 * K[6, i] + A9_8 * K[7, i])
+        yt[i] = fma(hh[i], _dot(K, i, A9), y[i])
     _rhs(yt, K[8], L, masses, d, measure, prof, par, n_tan, W)
     for i in range(M):
-        yt[i] = y[i] + hh[i] * (A10_1 * K[0, i] + A10_4 * K[3, i] + A10_5 * K[4, i] + A10_6 * K[5, i] + A10_7 * K[6, i] + A10_8 * K[7, i] + A10_9 * K[8, i])
+        yt[i] = fma(hh[i], _dot(K, i, A10), y[i])
     _rhs(yt, K[9], L, masses, d, measure, prof, par, n_tan, W)
     for i in range(M):
-        yt[i] = y[i] + hh[i] * (A11_1 * K[0, i] + A11_4 * K[3, i] + A11_5 * K[4, i] + A11_6 * K[5, i] + A11_7 * K[6, i] + A11_8 * K[7, i] + A11_9 * K[8, i] + A11_10 * K[9, i])
+        yt[i] = fma(hh[i], _dot(K, i, A11), y[i])
     _rhs(yt, K[10], L, masses, d, measure, prof, par, n_tan, W)
     for i in range(M):
-        yt[i] = y[i] + hh[i] * (A12_1 * K[0, i] + A12_4 * K[3, i] + A12_5 * K[4, i] + A12_6 * K[5, i] + A12_7 * K[6, i] + A12_8 * K[7, i] + A12_9 * K[8, i] + A12_10 * K[9, i] + A12_11 * K[10, i])
+        yt[i] = fma(hh[i], _dot(K, i, A12), y[i])
     _rhs(yt, K[11], L, masses, d, measure, prof, par, n_tan, W)
     for i in range(M):
-        ynew[i] = y[i] + hh[i] * (B1 * K[0, i] + B6 * K[5, i] + B7 * K[6, i] + B8 * K[7, i] + B9 * K[8, i] + B10 * K[9, i] + B11 * K[10, i] + B12 * K[11, i])
+        ynew[i] = fma(hh[i], _dot(K, i, B), y[i])
 
 
 @lanes
@@ -567,10 +613,10 @@ def error_norms(y, ynew, K, L, n_err, rtol, atol, h, err, scratch):
     # array runs 4x slower (the compiler's overlap checks), 1.03 us for 16 lanes against 0.27
     sq3, sq5 = scratch[:M], scratch[M:2 * M]
     for i in range(M):
-        isk = 1.0 / (atol + rtol * max(abs(y[i]), abs(ynew[i])))
-        b = B1 * K[0, i] + B6 * K[5, i] + B7 * K[6, i] + B8 * K[7, i] + B9 * K[8, i] + B10 * K[9, i] + B11 * K[10, i] + B12 * K[11, i]
-        er3 = (b - BHH1 * K[0, i] - BHH2 * K[8, i] - BHH3 * K[11, i]) * isk
-        er5 = (ER1 * K[0, i] + ER6 * K[5, i] + ER7 * K[6, i] + ER8 * K[7, i] + ER9 * K[8, i] + ER10 * K[9, i] + ER11 * K[10, i] + ER12 * K[11, i]) * isk
+        isk = 1.0 / fma(rtol, max(abs(y[i]), abs(ynew[i])), atol)
+        b = _dot(K, i, B)
+        er3 = fma(-BHH3, K[11, i], fma(-BHH2, K[8, i], fma(-BHH1, K[0, i], b))) * isk
+        er5 = _dot(K, i, ER) * isk
         sq3[i] = er3 * er3
         sq5[i] = er5 * er5
     e3, e5 = scratch[2 * M:2 * M + L], scratch[2 * M + L:2 * M + 2 * L]
@@ -607,25 +653,25 @@ def dense_prepare(masses, d, measure, prof, par, n_tan, L, nd, full, y, ynew, hh
     nt = n_tan if full else 0
     M = nd * L
     for i in range(M):
-        yt[i] = y[i] + hh[i] * (A14_1 * K[0, i] + A14_7 * K[6, i] + A14_8 * K[7, i] + A14_9 * K[8, i] + A14_10 * K[9, i] + A14_11 * K[10, i] + A14_12 * K[11, i] + A14_13 * K[12, i])
+        yt[i] = fma(hh[i], _dot(K, i, A14), y[i])
     _rhs(yt, K[13], L, masses, d, measure, prof, par, nt, W)
     for i in range(M):
-        yt[i] = y[i] + hh[i] * (A15_1 * K[0, i] + A15_6 * K[5, i] + A15_7 * K[6, i] + A15_8 * K[7, i] + A15_11 * K[10, i] + A15_12 * K[11, i] + A15_13 * K[12, i] + A15_14 * K[13, i])
+        yt[i] = fma(hh[i], _dot(K, i, A15), y[i])
     _rhs(yt, K[14], L, masses, d, measure, prof, par, nt, W)
     for i in range(M):
-        yt[i] = y[i] + hh[i] * (A16_1 * K[0, i] + A16_6 * K[5, i] + A16_7 * K[6, i] + A16_8 * K[7, i] + A16_9 * K[8, i] + A16_13 * K[12, i] + A16_14 * K[13, i] + A16_15 * K[14, i])
+        yt[i] = fma(hh[i], _dot(K, i, A16), y[i])
     _rhs(yt, K[15], L, masses, d, measure, prof, par, nt, W)
     # one view per row stored to: see error_norms
     F0, F1, F2, F3, F4, F5, F6 = F[0], F[1], F[2], F[3], F[4], F[5], F[6]
     for i in range(M):
         dy = ynew[i] - y[i]
         F0[i] = dy
-        F1[i] = hh[i] * K[0, i] - dy
-        F2[i] = 2.0 * dy - hh[i] * (K[12, i] + K[0, i])
-        F3[i] = hh[i] * (D4_1 * K[0, i] + D4_6 * K[5, i] + D4_7 * K[6, i] + D4_8 * K[7, i] + D4_9 * K[8, i] + D4_10 * K[9, i] + D4_11 * K[10, i] + D4_12 * K[11, i] + D4_13 * K[12, i] + D4_14 * K[13, i] + D4_15 * K[14, i] + D4_16 * K[15, i])
-        F4[i] = hh[i] * (D5_1 * K[0, i] + D5_6 * K[5, i] + D5_7 * K[6, i] + D5_8 * K[7, i] + D5_9 * K[8, i] + D5_10 * K[9, i] + D5_11 * K[10, i] + D5_12 * K[11, i] + D5_13 * K[12, i] + D5_14 * K[13, i] + D5_15 * K[14, i] + D5_16 * K[15, i])
-        F5[i] = hh[i] * (D6_1 * K[0, i] + D6_6 * K[5, i] + D6_7 * K[6, i] + D6_8 * K[7, i] + D6_9 * K[8, i] + D6_10 * K[9, i] + D6_11 * K[10, i] + D6_12 * K[11, i] + D6_13 * K[12, i] + D6_14 * K[13, i] + D6_15 * K[14, i] + D6_16 * K[15, i])
-        F6[i] = hh[i] * (D7_1 * K[0, i] + D7_6 * K[5, i] + D7_7 * K[6, i] + D7_8 * K[7, i] + D7_9 * K[8, i] + D7_10 * K[9, i] + D7_11 * K[10, i] + D7_12 * K[11, i] + D7_13 * K[12, i] + D7_14 * K[13, i] + D7_15 * K[14, i] + D7_16 * K[15, i])
+        F1[i] = fma(hh[i], K[0, i], -dy)
+        F2[i] = fma(-hh[i], K[12, i] + K[0, i], 2.0 * dy)
+        F3[i] = hh[i] * _dot(K, i, D4)
+        F4[i] = hh[i] * _dot(K, i, D5)
+        F5[i] = hh[i] * _dot(K, i, D6)
+        F6[i] = hh[i] * _dot(K, i, D7)
 
 
 @leaf
@@ -633,8 +679,9 @@ def dense_eval(F, y, x, nd, out):
     """Interpolated state at t + x h, x in [0, 1]."""
     x1 = 1.0 - x
     for i in range(nd):
-        out[i] = y[i] + x * (F[0, i] + x1 * (F[1, i] + x * (F[2, i] + x1 * (
-            F[3, i] + x * (F[4, i] + x1 * (F[5, i] + x * F[6, i]))))))
+        inner = fma(x1, fma(x, F[6, i], F[5, i]), F[4, i])
+        inner = fma(x1, fma(x, inner, F[3, i]), F[2, i])
+        out[i] = fma(x, fma(x1, fma(x, inner, F[1, i]), F[0, i]), y[i])
 
 
 @leaf

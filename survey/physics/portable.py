@@ -4,8 +4,8 @@ glibc's exp, log, pow, sin and cos pick an implementation by the CPU's features 
 and numpy's pick SIMD versions (AVX-512 on some machines, none on others): the same orbit
 then rounds differently on another machine, and a chaotic orbit amplifies that into any
 digit. The functions here use only IEEE-754 addition, multiplication, division, square
-root and exact scaling by powers of two -- each correctly rounded, so every CPU and every
-compiler target returns the same bits -- in the classic argument reductions (Cody-Waite,
+root, fused multiply-add (`fma`) and exact scaling by powers of two -- each correctly
+rounded, so every CPU and every compiler target returns the same bits -- in the classic argument reductions (Cody-Waite,
 as in fdlibm) with series long enough for about one ulp.
 
 Scalar versions inline into kernels; `vexp`, `vlog`, `vsin`, `vcos`, `vsincos`, `vatan2`
@@ -19,8 +19,29 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from llvmlite import ir
+from numba import types
+from numba.extending import intrinsic
 
 from .jit import helper, kernel
+
+
+
+@intrinsic
+def fma(typingctx, a, b, c):
+    """a * b + c rounded once: IEEE-754's fusedMultiplyAdd, correctly rounded like + and *,
+    so the same bits on every CPU (one instruction wherever the CPU has FMA, as every x86-64
+    since 2013 does; libm's exact emulation elsewhere). numba never fuses a * b + c by
+    itself; on CPUs whose multiplications and additions share two pipes (Intel's) a sum of
+    products then runs at half the machine's rate."""
+    sig = types.float64(types.float64, types.float64, types.float64)
+
+    def codegen(context, builder, signature, args):
+        d = ir.DoubleType()
+        fn = builder.module.declare_intrinsic("llvm.fma", [d], ir.FunctionType(d, [d, d, d]))
+        return builder.call(fn, args)
+    return sig, codegen
+
 
 # ln 2 split so that k * LN2_HI is exact for |k| < 2^20 (fdlibm's constants; the test
 # checks them against ln 2 to 50 digits)
