@@ -4,7 +4,7 @@ variable-major (component i of lane k at y[i * L + k]; L = 1 is one orbit). The 
 steps the orbits is `integrate.dop853`. Sums of products are fused multiply-adds
 (`portable.fma`, correctly rounded, the same bits on every CPU), in the tableau's order: on
 Intel's CPUs, where multiplications and additions share two pipes, the stage combinations
-are bound by them, and fused they run ~1.3x faster (a scan task 7-10%)."""
+are bound by them, and fused they run ~1.2-1.3x faster (a scan task 9-12%)."""
 from __future__ import annotations
 
 import math
