@@ -698,14 +698,28 @@ def dense_prepare(masses, d, measure, prof, par, n_tan, L, nd, full, y, ynew, hh
         F6[i] = hh[i] * _dot_long(K, i, D7)
 
 
+@helper
+def _interpolant(F, y, i, x, x1):
+    """Component i of the interpolant at x (x1 = 1 - x)."""
+    inner = fma(x1, fma(x, F[6, i], F[5, i]), F[4, i])
+    inner = fma(x1, fma(x, inner, F[3, i]), F[2, i])
+    return fma(x, fma(x1, fma(x, inner, F[1, i]), F[0, i]), y[i])
+
+
 @leaf
 def dense_eval(F, y, x, nd, out):
     """Interpolated state at t + x h, x in [0, 1]."""
     x1 = 1.0 - x
     for i in range(nd):
-        inner = fma(x1, fma(x, F[6, i], F[5, i]), F[4, i])
-        inner = fma(x1, fma(x, inner, F[3, i]), F[2, i])
-        out[i] = fma(x, fma(x1, fma(x, inner, F[1, i]), F[0, i]), y[i])
+        out[i] = _interpolant(F, y, i, x, x1)
+
+
+@lanes
+def dense_eval_lanes(F, y, xx, M, out):
+    """`dense_eval` of lanes (variable-major, the first M entries), each at its own x (xx:
+    each lane's x at each of its components): the same bits, in SIMD instructions."""
+    for i in range(M):
+        out[i] = _interpolant(F, y, i, xx[i], 1.0 - xx[i])
 
 
 @leaf

@@ -46,6 +46,7 @@ from .dop853 import (
     ERR_FLOOR_ROOT,
     RTOL_MIN,
     dense_eval,
+    dense_eval_lanes,
     dense_prepare,
     error_norms,
     norm_block,
@@ -115,6 +116,9 @@ class Deferred(NamedTuple):
     HH: np.ndarray            # (n P,) each slot's step at each of its components
     YT: np.ndarray            # (n P,) stage states
     W: np.ndarray             # rhs_lanes workspace
+    x: np.ndarray             # (P,) each slot's first sample time in units of its step
+    XX: np.ndarray            # (n P,) the same at each of its components
+    S: np.ndarray             # (n P,) the states there
     t: np.ndarray             # (P,) the step's start, size, end
     h: np.ndarray
     t_new: np.ndarray
@@ -435,7 +439,8 @@ def _defer(ln, k, row, first, end, t, h, t_new):
 @leaf
 def _flush(ln, out, masses, d, measure, prof, par, t_fine):
     """The waiting steps' dense output, all P slots in SIMD loops (slots past the count
-    hold stale values, computed and ignored), and their samples at t_fine."""
+    hold stale values, computed and ignored), and their samples at t_fine: each slot's
+    first (most steps hold one) in a SIMD loop too, any others one by one."""
     w = ln.wait
     P = w.t.size
     c = w.count[0]
@@ -445,10 +450,22 @@ def _flush(ln, out, masses, d, measure, prof, par, t_fine):
     _spread(w.h, w.HH, P, n)
     dense_prepare(masses, d, measure, prof, par, 0, P, n, False, w.Y, w.YN, w.HH, w.K,
                   w.YT, w.F, w.W)
+    for p in range(P):
+        w.x[p] = (t_fine[w.first[p]] - w.t[p]) / w.h[p] if p < c else 0.0
+    _spread(w.x, w.XX, P, n)
+    dense_eval_lanes(w.F, w.Y, w.XX, n * P, w.S)
     for p in range(c):
         F, y, ynew = w.F[:, p::P], w.Y[p::P], w.YN[p::P]
         fine = out.fine[w.row[p]]
-        for i in range(w.first[p], w.end[p]):
+        first = w.first[p]
+        sample, at = fine[first], t_fine[first]
+        if at == w.t_new[p]:
+            for i in range(n):
+                sample[i] = ynew[i]
+        else:
+            for i in range(n):
+                sample[i] = w.S[i * P + p]
+        for i in range(first + 1, w.end[p]):
             _fine_sample(fine[i], t_fine[i], F, y, ynew, w.t[p], w.h[p], w.t_new[p], n,
                          ln.yd)
     w.count[0] = 0
@@ -555,7 +572,7 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
         _step_roots(ln.err, L, ln.roots)
         rhs_lanes(0.0, ln.YN, ln.K[12], L, masses, d, measure, prof, par, n_tan, ln.W)
         _finite_lanes(ln.YN, ln.K[12], L, nf, ln.NW)
-        dense = 0
+        dense = later = 0
         n = 2 * masses.size * d
         for k in range(L):
             j = ln.job[k]
@@ -582,12 +599,16 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
                 ln.flags[k, 0] = 1
                 continue
             ln.flags[k, 3] = 1          # accepted
-            dense = max(dense, _needs_dense(k, ln, rows, t1, direction, events, t_eval,
-                                            t_fine, n_eval > n, masses, d, n))
+            need = _needs_dense(k, ln, rows, t1, direction, events, t_eval, t_fine,
+                                n_eval > n, masses, d, n)
+            later += need == DENSE_LATER
+            dense = max(dense, need)
         if dense >= DENSE_ORBIT:    # the orbits' interpolant where no lane needs more
             dense_prepare(masses, d, measure, prof, par, n_tan, L,
                           nf if dense == DENSE_ALL else n, dense == DENSE_ALL, ln.Y, ln.YN,
                           ln.HH, ln.K, ln.YT, ln.F, ln.W)
+        elif dense == DENSE_LATER and ln.wait.count[0] + later > ln.wait.t.size:
+            _flush(ln, out, masses, d, measure, prof, par, t_fine)   # room for the steps
         for k in range(L):
             if ln.flags[k, 3] and _record(k, ln, out, rows, t0, t1, masses, d, megno,
                                           events, max_events, n_sub, t_eval, n_eval,
@@ -595,8 +616,6 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
                 _finish(k, ln, out, EVENT_, rows)
                 ln.flags[k, 3] = 0
             ln.taken[k] = ln.flags[k, 3]
-        if ln.wait.count[0] > ln.wait.t.size - L:      # room for every lane's next step
-            _flush(ln, out, masses, d, measure, prof, par, t_fine)
         # ---- accepted lanes take their new states, then their tangent vectors' norms
         _take(ln.Y, ln.YN, ln.K[0], ln.K[12], ln.taken, ln.HH, L, nf)
         _tangent_norms(ln.Y, L, 2 * masses.size * d, n_tan, ln.NW)
@@ -855,7 +874,8 @@ def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol,
     def deferred(P):
         return Deferred(
             np.zeros(n * P), np.zeros(n * P), np.zeros((16, n * P)), np.zeros((7, n * P)),
-            np.zeros(n * P), np.zeros(n * P), np.zeros(workspace_size(P, n)), np.zeros(P),
+            np.zeros(n * P), np.zeros(n * P), np.zeros(workspace_size(P, n)),
+            np.zeros(P), np.zeros(n * P), np.zeros(n * P), np.zeros(P),
             np.zeros(P), np.zeros(P), np.zeros(P, dtype=np.int64),
             np.zeros(P, dtype=np.int64), np.zeros(P, dtype=np.int64),
             np.zeros(1, dtype=np.int64))
