@@ -624,6 +624,11 @@ def scan_vs_heyoka(cells=101, t_final=2000.0, tol=1e-12, repeats=2, folder="resu
     out(f"  the torus analysis (same work, in process): compute {best['same', 'compute']:.2f}"
         f" -> {best['tori']:.2f} s, {100 * share:+.0f}% (the orbits sampled every "
         f"{defaults.SAMPLE_INTERVAL:g} and analysed; target <= +15%)")
+    parts = _torus_parts(cfgs["same"], repeats)
+    out(f"  of it, on one worker's task ({parts['cells']} cells; best of {repeats}): "
+        f"{parts['off']:.2f} s without the analysis, {parts['on']:.2f} s with it: the "
+        f"analysis of the samples {parts['analysis']:.2f} s, the sampling (dense output at "
+        f"the sample times, the samples' memory) {parts['on'] - parts['off'] - parts['analysis']:.2f} s")
     if not hy:
         out("heyoka is not installed (pip install 'survey[bench]'): no baseline.")
         return dict(compute=best["same", "compute"], phases=phases, command=command,
@@ -647,6 +652,37 @@ def scan_vs_heyoka(cells=101, t_final=2000.0, tol=1e-12, repeats=2, folder="resu
         f"{default[True]:.2f}x")
     return dict(compute=best["same", "compute"], heyoka=best["heyoka"], ratios=ratios,
                 default=default, phases=phases, command=command, tori=best["tori"])
+
+
+def _torus_parts(cfg, repeats) -> dict:
+    """Where the torus analysis's share of a scan goes, on the task of one worker (every
+    second cell), in this process: the task with the analysis off and on (`first_runs`, a
+    worker's code path), and the analysis alone on the same orbits' samples -- the rest is
+    the sampling. Best of `repeats` interleaved runs each."""
+    from .pipeline.cells import CellTask, build_starts, first_runs, torus_evidence
+    from .pipeline.config import load_config
+    runs = {}
+    for analyse in (False, True):
+        config = load_config({**cfg, "tori": {"extend": 0, "analyse": analyse}})
+        ids = np.arange(0, config.n_cells, 2)
+        task, starts = CellTask.of(config), build_starts(config, ids)
+        first_runs(task.short(), ids[:1], starts[:1])
+        runs[analyse] = (task, ids, starts)
+    task, _, starts = runs[True]
+    system = config.system()
+    T, dt = config.tables["integration"]["t_final"], task.tori["sample_interval"]
+    outs = integrate_batch(system, starts, T, t_fine=(np.arange(int(T / dt)) + 0.5) * dt)
+    errors = [abs(system.energy(o.y) / system.energy(y0) - 1.0) for o, y0 in zip(outs, starts)]
+
+    def analysis():
+        for o, e in zip(outs, errors):
+            torus_evidence(task, system, o.fine, e)
+    best = {"off": math.inf, "on": math.inf, "analysis": math.inf}
+    for _ in range(repeats):
+        for key, analyse in (("off", False), ("on", True)):
+            best[key] = min(best[key], _best_time(lambda: first_runs(*runs[analyse]), 1)[0])
+        best["analysis"] = min(best["analysis"], _best_time(analysis, 1)[0])
+    return {**best, "cells": len(starts)}
 
 
 def _heyoka_scan(cells, t_final, tols, dE_max):

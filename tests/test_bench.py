@@ -29,6 +29,7 @@ def test_bench_parts_run_and_print_their_ratios(tmp_path):
     # the command line's fixed costs and the torus analysis's share, each on its own
     assert all(f"{phase} " in text for phase in ("interpreter", "imports", "prepare", "rest"))
     assert "the torus analysis (same work, in process): compute" in text
+    assert "the analysis of the samples" in text and "the sampling" in text
     assert text.count("x\n") >= 1 and "Default survey cell" in text and "per orbit" in text
     assert "Where a step goes" in text and "stages+norm" in text
     assert "Newton shooting: one step" in text and "largest idle share" in text

@@ -287,8 +287,7 @@ def _run(task: CellTask, system, events, starts, factor: int) -> list[CellResult
     for y0, ind_k, (out, status, errors) in zip(starts, indicators, ends):
         evidence = None
         if tor["analyse"] and status.finished:
-            evidence = torus.analyse(system, out.fine, dt, errors[0], tor["observables"],
-                                    tor["lines"], tor["resonance_order"])
+            evidence = torus_evidence(task, system, out.fine, errors[0])
         results.append(CellResult(
             status=status, wall_time=0.0, n_steps=out.n_steps,
             n_rhs=out.n_rhs, start=y0, t_end=out.t, energy=system.energy(y0),
@@ -300,6 +299,13 @@ def _run(task: CellTask, system, events, starts, factor: int) -> list[CellResult
             reduced=reduced(system, out.crossings.y) if planar3 else None,
             horizon=t_final))
     return results
+
+
+def torus_evidence(task: CellTask, system, fine, energy_error) -> torus.TorusEvidence:
+    """The torus analysis of one orbit's samples, as the task's [tori] table asks."""
+    tor = task.tori
+    return torus.analyse(system, fine, tor["sample_interval"], energy_error,
+                         tor["observables"], tor["lines"], tor["resonance_order"])
 
 
 def warm_up(task: CellTask, first, starts):
