@@ -417,6 +417,13 @@ def _fine_sample(sample, at, F, y, ynew, t, h, t_new, n, yd):
 
 
 @helper
+def _copy_lane(to, p, P, src, k, L, n):
+    """Components 0..n-1 of lane k of src (L lanes) into slot p of `to` (P slots)."""
+    for i in range(n):
+        to[i * P + p] = src[i * L + k]
+
+
+@helper
 def _defer(ln, k, row, first, end, t, h, t_new):
     """Lane k's accepted step into a slot of ln.wait: its samples first .. end - 1 at t_fine
     (row `row` of the fine output) are taken when the batch is built (`_flush`)."""
@@ -424,13 +431,14 @@ def _defer(ln, k, row, first, end, t, h, t_new):
     P = w.t.size
     L = ln.job.size
     p = w.count[0]
-    for i in range(w.Y.size // P):
-        a, b = i * P + p, i * L + k
-        w.Y[a] = ln.Y[b]
-        w.YN[a] = ln.YN[b]
-        w.K[0, a] = ln.K[0, b]
-        for s in range(5, 13):
-            w.K[s, a] = ln.K[s, b]
+    n = w.Y.size // P
+    # array by array (all of them in one loop over the components spilled their addresses
+    # to the stack: 11 streams)
+    _copy_lane(w.Y, p, P, ln.Y, k, L, n)
+    _copy_lane(w.YN, p, P, ln.YN, k, L, n)
+    _copy_lane(w.K[0], p, P, ln.K[0], k, L, n)
+    for s in range(5, 13):
+        _copy_lane(w.K[s], p, P, ln.K[s], k, L, n)
     w.t[p], w.h[p], w.t_new[p] = t, h, t_new
     w.row[p], w.first[p], w.end[p] = row, first, end
     w.count[0] = p + 1
