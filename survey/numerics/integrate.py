@@ -818,6 +818,23 @@ def _needs_dense(k, ln, rows, t1, direction, events, t_eval, t_fine, tangent_sam
     return need
 
 
+CACHE_LINE = 64
+
+
+def _zeros(shape, dtype=np.float64) -> np.ndarray:
+    """np.zeros starting on a cache line (numpy's own start on 16 bytes): a lane row of
+    the SIMD loops -- a multiple of 64 bytes -- is then never split across two lines, nor a
+    vector load or store within it. numpy's start varies with the process's heap, and so
+    did the speed: a 51-orbit scan task to t = 1000 ran 1.02-1.05 s (best of 3, in each of
+    5 processes) against 1.05-1.21 s with numpy's arrays, and to t = 500, interleaved with
+    them in 10 processes each, 0.06 s (10%) faster on average; once, in a profile, a load
+    in the tangent forces made a whole run a third slower."""
+    size = int(np.prod(shape)) * np.dtype(dtype).itemsize
+    raw = np.zeros(size + CACHE_LINE, dtype=np.uint8)
+    start = -raw.ctypes.data % CACHE_LINE
+    return raw[start:start + size].view(dtype).reshape(shape)
+
+
 def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol,
            n_err, max_steps, h0, h_max, h_min, events, max_events, n_sub, t_eval, n_eval,
            renorm_dt, time_limit, t_fine, L):
@@ -957,23 +974,6 @@ class Outcome(NamedTuple):
         with np.errstate(over="ignore"):
             scale = self.tangent_norms0 * portable.vexp(self.log_growth)
             return self.tangents / norms * scale[:, None]
-
-
-CACHE_LINE = 64
-
-
-def _zeros(shape, dtype=np.float64) -> np.ndarray:
-    """np.zeros starting on a cache line (numpy's own start on 16 bytes): a lane row of
-    the SIMD loops -- a multiple of 64 bytes -- is then never split across two lines, nor a
-    vector load or store within it. numpy's start varies with the process's heap, and so
-    did the speed: a 51-orbit scan task to t = 1000 ran 1.02-1.05 s (best of 3, in each of
-    5 processes) against 1.05-1.21 s with numpy's arrays, and to t = 500, interleaved with
-    them in 10 processes each, 0.06 s (10%) faster on average; once, in a profile, a load
-    in the tangent forces made a whole run a third slower."""
-    size = int(np.prod(shape)) * np.dtype(dtype).itemsize
-    raw = np.zeros(size + CACHE_LINE, dtype=np.uint8)
-    start = -raw.ctypes.data % CACHE_LINE
-    return raw[start:start + size].view(dtype).reshape(shape)
 
 
 def lanes_for(jobs: int) -> int:

@@ -222,9 +222,10 @@ def naff(z: np.ndarray, count: int):
     N = np.size(z)
     w, wsum = _window_of(N), _window_sum(N)
     z = np.ascontiguousarray(z, dtype=complex)
-    zw = _pack(z.real, z.imag, w, np.empty(N, dtype=complex))  # the windowed signal, lines
-    v = zw.view(np.float64)                     # taken out of it; (re, im) pairs for the
-    freqs, amps = np.zeros(count), np.zeros(count, dtype=complex)     # compiled loops
+    # the windowed signal, lines taken out of it; (re, im) pairs for the compiled loops
+    zw = _pack(z.real, z.imag, w, np.empty(N, dtype=complex))
+    v = zw.view(np.float64)
+    freqs, amps = np.zeros(count), np.zeros(count, dtype=complex)
     spectrum = np.fft.fft(zw)
     for line in range(count):
         k = _peak(spectrum)
