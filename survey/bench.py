@@ -268,7 +268,7 @@ def interaction_terms(t_final=2000.0, repeats=5, out=print):
 
 def torus_overhead(t_final=2000.0, repeats=6, out=print):
     """The torus analysis (Birkhoff digits, frequencies, resonance) per default survey cell
-    -- 2 deviation vectors, 2 perturbed orbits, the phi section, histories -- against the
+    -- 2 deviation vectors, 16 perturbed orbits, the phi section, histories -- against the
     same cell without it, through the worker's own code path (run_cells), best of
     `repeats` interleaved runs; and the classification of a 10^4-cell grid (target: the
     analysis adds < 15% per cell)."""

@@ -144,7 +144,8 @@ class Lanes(NamedTuple):
     roots: np.ndarray         # (2 L,) their 8th and 128th roots (the step control's)
     NW: np.ndarray            # ((2 n_tan + 1) L,) tangent vectors' norms, their logs,
                               # the steps' Birkhoff weights; (L,) finiteness
-    taken: np.ndarray         # (L,) 1.0 where the lane takes its new state
+    taken: np.ndarray         # (L,) int64 -1 (every bit set) where the lane takes its new
+                              # state, 0 where it keeps its old one
     job: np.ndarray           # (L,) the job a lane runs, -1: idle
     t: np.ndarray
     h: np.ndarray
@@ -623,9 +624,9 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
                                           t_fine, dense == DENSE_LATER) == EVENT_:
                 _finish(k, ln, out, EVENT_, rows)
                 ln.flags[k, 3] = 0
-            ln.taken[k] = ln.flags[k, 3]
+            ln.taken[k] = -ln.flags[k, 3]
         # ---- accepted lanes take their new states, then their tangent vectors' norms
-        _take(ln.Y, ln.YN, ln.K[0], ln.K[12], ln.taken, ln.HH, L, nf)
+        _take(ln.Y, ln.YN, ln.K[0], ln.K[12], ln.taken, L, nf)
         _tangent_norms(ln.Y, L, 2 * masses.size * d, n_tan, ln.NW)
         if n_tan > 0:
             _growth_terms(ln.NW, ln.t, ln.h, ln.flags, t0, t1, L, n_tan)
@@ -700,14 +701,23 @@ def _step_roots(err, L, roots):
 
 
 @lanes
-def _take(Y, YN, K0, K12, take, mask, L, nf):
-    """Lanes with take[k] != 0 adopt their new state YN and its derivative K12 (mask:
-    scratch)."""
-    _spread(take, mask, L, nf)
-    for j in range(nf * L):
-        if mask[j] != 0.0:
-            Y[j] = YN[j]
-            K0[j] = K12[j]
+def _take(Y, YN, K0, K12, take, L, nf):
+    """Lanes with take[k] = -1 adopt their new state YN and its derivative K12, those with 0
+    keep theirs: a select of the bits under the lane's mask, which runs as SIMD
+    instructions (a store under `if` ran lane by lane: 360 ns for 16 lanes, 190 now)."""
+    if L == 1:
+        if take[0] != 0:
+            for i in range(nf):
+                Y[i] = YN[i]
+                K0[i] = K12[i]
+        return
+    y, yn, k0, k12 = Y.view(np.int64), YN.view(np.int64), K0.view(np.int64), K12.view(np.int64)
+    for i in range(nf):
+        # views at each component: see dop853.error_norms
+        a, b, c, e = y[i * L:], yn[i * L:], k0[i * L:], k12[i * L:]
+        for k in range(L):
+            a[k] = (b[k] & take[k]) | (a[k] & ~take[k])
+            c[k] = (e[k] & take[k]) | (c[k] & ~take[k])
 
 
 @lanes
@@ -885,7 +895,7 @@ def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol,
             _zeros(nf * L), _zeros((16, nf * L)), _zeros(nf * L), _zeros(nf * L),
             _zeros((7, nf * L)), _zeros(nf * L), _zeros(workspace_size(L, nf)),
             _zeros(2 * (nf + 1) * L),
-            _zeros(L), _zeros(2 * L), _zeros((2 * n_tan + 1) * L), _zeros(L),
+            _zeros(L), _zeros(2 * L), _zeros((2 * n_tan + 1) * L), _zeros(L, dtype=np.int64),
             np.full(L, -1, dtype=np.int64),
             _zeros(L), _zeros(L),
             _zeros(L), _zeros(L), _zeros((L, 4), dtype=np.int64),

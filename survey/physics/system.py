@@ -717,14 +717,23 @@ def _leading_forces(y, dy, masses, N, d, measure, prof, lead, n_tan):
     took 26 s to compile instead of 11."""
     nq = N * d
     n = 2 * nq
+    # flat loops over views, whose indices the compiler knows are not negative (an index
+    # computed from run-time sizes gets a wrap-around fix-up at every access, and loops of
+    # d trips): 1/m of each coordinate first, parked in the orbit's force slots (zeroed
+    # below), then every block's velocities (the same bits; this part 35 -> 20 ns)
+    inv = dy[nq:n]
+    for b in range(N):
+        x = 1.0 / masses[b]
+        for c in range(d):
+            inv[b * d + c] = x
     for t_ in range(1 + n_tan):
-        base = n * t_
-        for b in range(N):
-            inv = 1.0 / masses[b]
-            for c in range(base + b * d, base + b * d + d):
-                dy[c] = y[nq + c] * inv
-        for c in range(base + nq, base + n):
-            dy[c] = 0.0
+        rate, p = dy[n * t_:n * t_ + nq], y[n * t_ + nq:n * t_ + n]
+        for c in range(nq):
+            rate[c] = p[c] * inv[c]
+    for t_ in range(1 + n_tan):
+        force = dy[n * t_ + nq:n * t_ + n]
+        for c in range(nq):
+            force[c] = 0.0
     if measure == PERIMETER:
         for i in range(N - 2):
             for j in range(i + 1, N - 1):
