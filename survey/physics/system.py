@@ -321,7 +321,7 @@ def _planar_forces(y, dy, masses, d, measure, prof, par, n_tan):
         _planar_areal(y, dy, masses, prof, (par[0], par[1]), n_tan)
 
 
-@leaf
+@helper
 def _general_forces(y, dy, masses, d, measure, prof, par, n_tan):
     """Any other system: the leading perimetric or areal term, then the further terms."""
     N = masses.size
