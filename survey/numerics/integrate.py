@@ -291,6 +291,15 @@ def _start(k, j, ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_ta
 
 
 @helper
+def _lane(ln, k):
+    """Lane k's state, new state and dense output as strided views: made where a branch
+    uses them (each view's length costs an integer division, on every lane's every step
+    when made up front)."""
+    L = ln.job.size
+    return ln.Y[k::L], ln.YN[k::L], ln.F[:, k::L]
+
+
+@helper
 def _record(k, ln, out, rows, t0, t1, masses, d, megno, events, max_events, n_sub, t_eval,
             n_eval, t_fine, later):
     """What lane k's accepted step [t, t + h] records, before the lane takes its new state
@@ -301,8 +310,6 @@ def _record(k, ln, out, rows, t0, t1, masses, d, megno, events, max_events, n_su
     nf = ln.Y.size // L
     n = 2 * masses.size * d
     j = ln.job[k]
-    y, ynew = ln.Y[k::L], ln.YN[k::L]
-    F = ln.F[:, k::L]
     yd = ln.yd
     t, h = ln.t[k], ln.h[k]
     last = ln.flags[k, 2] == 1
@@ -324,6 +331,7 @@ def _record(k, ln, out, rows, t0, t1, masses, d, megno, events, max_events, n_su
         for e in range(m):
             scan = scan or ln.todo[k, e] > 0
         n_found = np.int64(0)       # not the literal 0: numba would compile scan_events twice
+        y, ynew, F = _lane(ln, k)
         if scan:
             counts[2] += 3
             nd_ready = n
@@ -365,6 +373,7 @@ def _record(k, ln, out, rows, t0, t1, masses, d, megno, events, max_events, n_su
     L_prev, int_L, Y_prev = ln.acc[k, 0], ln.acc[k, 1], ln.acc[k, 2]
     megno_sums = out.megno_sums[j]
     while rs >= 0 and i_eval < t_eval.size and direction * (t_eval[i_eval] - t_stop) <= 0.0:
+        y, ynew, F = _lane(ln, k)
         sample = out.samples[rs, i_eval]
         if t_eval[i_eval] == t_new:
             for i in range(n_eval):
@@ -392,10 +401,12 @@ def _record(k, ln, out, rows, t0, t1, masses, d, megno, events, max_events, n_su
         if i_fine > first:
             _defer(ln, k, rf, first, i_fine, t, h, t_new)
     while rf >= 0 and i_fine < t_fine.size and direction * (t_fine[i_fine] - t_stop) <= 0.0:
+        y, ynew, F = _lane(ln, k)
         _fine_sample(out.fine[rf, i_fine], t_fine[i_fine], F, y, ynew, t, h, t_new, n, yd)
         i_fine += 1
     ln.i_eval[k], ln.i_fine[k] = i_eval, i_fine
     if terminal_hit:
+        y, ynew, F = _lane(ln, k)
         dense_eval(F, y, x_stop, nf, yd)
         for a in range(nf):
             y[a] = yd[a]
