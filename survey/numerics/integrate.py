@@ -306,8 +306,6 @@ def _record(k, ln, out, rows, t0, t1, masses, d, megno, events, max_events, n_su
     (its dense output prepared if it needs one now): counters, event crossings, samples;
     with `later`, its samples at t_fine wait in ln.wait. Returns EVENT_ at a terminal event
     (the state and time then the event's), else RUNNING."""
-    L = ln.job.size
-    nf = ln.Y.size // L
     n = 2 * masses.size * d
     j = ln.job[k]
     yd = ln.yd
@@ -360,7 +358,7 @@ def _record(k, ln, out, rows, t0, t1, masses, d, megno, events, max_events, n_su
                 x_stop = xr
                 break
     t_stop = t + x_stop * h if terminal_hit else t_new
-    need = nf if terminal_hit else 0
+    need = ln.Y.size // ln.job.size if terminal_hit else 0     # the whole state
     rs, rf = rows[1, j], rows[2, j]
     i_eval, i_fine = ln.i_eval[k], ln.i_fine[k]
     if rs >= 0 and i_eval < t_eval.size and direction * (t_eval[i_eval] - t_stop) <= 0.0:
@@ -399,7 +397,7 @@ def _record(k, ln, out, rows, t0, t1, masses, d, megno, events, max_events, n_su
                 direction * (t_fine[i_fine] - t_stop) <= 0.0:
             i_fine += 1
         if i_fine > first:
-            _defer(ln, k, rf, first, i_fine, t, h, t_new)
+            _defer(ln, k, rf, first, i_fine, t, h, t_new, n)
     while rf >= 0 and i_fine < t_fine.size and direction * (t_fine[i_fine] - t_stop) <= 0.0:
         y, ynew, F = _lane(ln, k)
         _fine_sample(out.fine[rf, i_fine], t_fine[i_fine], F, y, ynew, t, h, t_new, n, yd)
@@ -407,6 +405,7 @@ def _record(k, ln, out, rows, t0, t1, masses, d, megno, events, max_events, n_su
     ln.i_eval[k], ln.i_fine[k] = i_eval, i_fine
     if terminal_hit:
         y, ynew, F = _lane(ln, k)
+        nf = y.size
         dense_eval(F, y, x_stop, nf, yd)
         for a in range(nf):
             y[a] = yd[a]
@@ -439,14 +438,14 @@ def _copy_lane(to, p, P, src, k, L, n):
 
 
 @helper
-def _defer(ln, k, row, first, end, t, h, t_new):
-    """Lane k's accepted step into a slot of ln.wait: its samples first .. end - 1 at t_fine
-    (row `row` of the fine output) are taken when the batch is built (`_flush`)."""
+def _defer(ln, k, row, first, end, t, h, t_new, n):
+    """Lane k's accepted step (its orbit's n components) into a slot of ln.wait: its
+    samples first .. end - 1 at t_fine (row `row` of the fine output) are taken when the
+    batch is built (`_flush`)."""
     w = ln.wait
     P = w.t.size
     L = ln.job.size
     p = w.count[0]
-    n = w.Y.size // P
     # array by array (all of them in one loop over the components spilled their addresses
     # to the stack: 11 streams)
     _copy_lane(w.Y, p, P, ln.Y, k, L, n)
