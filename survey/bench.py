@@ -895,11 +895,11 @@ def _timed_command(args, env=None):
     return first, total
 
 
-def fixed_costs(folder="results/bench", repeats=3, out=print):
+def fixed_costs(folder="results/bench", repeats=3, out=print, cold=True):
     """What a survey costs beside its cells: a 1-cell survey ('sides', default settings
     otherwise, t = 10) end to end with numba's disk cache warm, by phase, best of
-    `repeats`; and the command line cold, compiling every kernel into an empty cache (what
-    a new machine's first run costs), with the time to its first word."""
+    `repeats`; and (`cold`) the command line compiling every kernel into an empty cache
+    (what a new machine's first run costs), with the time to its first word."""
     from .pipeline.sweep import run_survey
     cfg = {"survey": {"name": "bench-1cell", "output": f"{folder}/bench-1cell.nc"},
            "initial": {"family": "sides"}, "integration": {"t_final": 10.0}}
@@ -921,18 +921,21 @@ def fixed_costs(folder="results/bench", repeats=3, out=print):
         t = time.perf_counter()
         subprocess.run(run, check=True, capture_output=True)
         command = min(command, time.perf_counter() - t)
-    import os
-    import tempfile
-    with tempfile.TemporaryDirectory() as cache:
-        first, cold = _timed_command(run, {**os.environ, "NUMBA_CACHE_DIR": cache})
+    first = compiling = math.nan
+    if cold:
+        import os
+        import tempfile
+        with tempfile.TemporaryDirectory() as cache:
+            first, compiling = _timed_command(run, {**os.environ, "NUMBA_CACHE_DIR": cache})
     out("")
     out(f"Fixed costs: a 1-cell survey ('sides', t = 10, warm cache, best of {repeats}), "
         "seconds")
     out("in process: " + "  ".join(f"{k} {v:.2f}" for k, v in best.items() if k != "tasks"))
     out(f"python -m survey run (interpreter, imports and regime summary included): "
-        f"warm {command:.2f}; cold (every kernel compiled into an empty cache) {cold:.1f}, "
-        f"its first word on the terminal after {first:.2f}")
-    best.update(command=command, cold=cold, first_word=first)
+        f"warm {command:.2f}" + (f"; cold (every kernel compiled into an empty cache) "
+                                 f"{compiling:.1f}, its first word on the terminal after "
+                                 f"{first:.2f}" if cold else ""))
+    best.update(command=command, cold=compiling, first_word=first)
     return best
 
 

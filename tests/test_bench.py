@@ -1,5 +1,10 @@
 """The benchmark's parts in miniature: they run, and print the rows the performance issue
 asks for (the speed numbers themselves are never asserted: they live in the bench)."""
+import math
+import sys
+
+import pytest
+
 from survey import bench
 
 
@@ -8,7 +13,9 @@ def test_bench_parts_run_and_print_their_ratios(tmp_path):
     bench.scan_vs_heyoka(cells=3, t_final=2.0, repeats=1, folder=str(tmp_path),
                          out=lines.append)
     bench.default_cell(t_final=2.0, repeats=1, folder=str(tmp_path), out=lines.append)
-    bench.fixed_costs(folder=str(tmp_path), repeats=1, out=lines.append)
+    # the cold run compiles every kernel into an empty cache (a minute on 2 cores; the
+    # portability test compiles them all cold already): its timer is checked on its own below
+    bench.fixed_costs(folder=str(tmp_path), repeats=1, out=lines.append, cold=False)
     rows = bench.interaction_terms(t_final=2.0, repeats=1, out=lines.append)
     assert all(r["same"] for r in rows)     # the two paths give the same orbit, bit for bit
     steps = bench.step_costs(t_final=2.0, repeats=1, lanes=(1, 16), out=lines.append)
@@ -34,4 +41,16 @@ def test_bench_parts_run_and_print_their_ratios(tmp_path):
     assert "Where a step goes" in text and "stages+norm" in text
     assert "Newton shooting: one step" in text and "largest idle share" in text
     assert "general/own" in text and "Fixed costs" in text and "shutdown" in text and "python -m survey run" in text
-    assert "cold (every kernel compiled into an empty cache)" in text and "first word" in text
+    assert "warm " in text and "cold (every" not in text
+
+
+def test_the_cold_runs_timer_hears_a_terminals_first_word():
+    """bench's `_timed_command` (the cold run's clock) gives the command a terminal for its
+    stderr and times its first word there; a command that fails raises."""
+    speak = [sys.executable, "-c", "import os, sys\nif os.isatty(2): sys.stderr.write('x')"]
+    first, total = bench._timed_command(speak)
+    assert 0.0 < first <= total             # NaN (never spoke) fails
+    quiet = bench._timed_command([sys.executable, "-c", "pass"])
+    assert math.isnan(quiet[0]) and quiet[1] > 0.0
+    with pytest.raises(RuntimeError, match="exited with 3"):
+        bench._timed_command([sys.executable, "-c", "raise SystemExit(3)"])
