@@ -331,8 +331,8 @@ def _record(k, ln, out, rows, t0, t1, masses, d, megno, events, max_events, n_su
         for e in range(m):
             scan = scan or ln.todo[k, e] > 0
         n_found = np.int64(0)       # not the literal 0: numba would compile scan_events twice
-        y, ynew, F = _lane(ln, k)
-        if scan:
+        if scan:        # (the crossings found below come from a scan: its views)
+            y, ynew, F = _lane(ln, k)
             counts[2] += 3
             nd_ready = n
             xtol = 4.0 * EPS * max(abs(t), abs(t_new)) / abs(h)
