@@ -528,19 +528,19 @@ def command_phases(argv) -> dict:
 def scan_vs_heyoka(cells=101, t_final=2000.0, tol=1e-12, repeats=2, folder="results/bench",
                    heyoka_tols=(1e-10, 1e-11, 1e-12, 1e-13, 1e-14, 1e-15), out=print):
     """The issue's grid: `cells` orbits of the equilateral family, delta in [0, 10], one
-    tangent vector + MEGNO, no section, through survey on 2 local workers, against heyoka
-    at its strongest: the SIMD batch integrator (the machine's recommended width) over the
-    same starts and deviation vectors, one `propagate_until` per batch in
-    `ensemble_propagate_until_batch` on 2 threads, the tangent kept at unit length inside
-    the ODE (no stops), the one-jet written plainly (heyoka_integrator), at the loosest
-    tolerance whose largest energy error is not above survey's (its JIT compilation not
-    counted). survey runs twice: the same work as heyoka (`[tori] extend = 0`: every orbit
-    to t_final once), which the ratios compare, and its default, where the cells whose
-    verdict is in doubt run again to 4 t_final. Reported: survey's compute phase, the
-    in-process run by phase, and the command line (`python -m survey run`, interpreter
-    start to archive) without and with the default torus analysis; best of `repeats`
-    interleaved runs. Targets: compute <= 0.5x heyoka, command line <= 1.0x without the
-    torus analysis, <= 1.2x with it."""
+    tangent vector + MEGNO, no section, through survey on 2 local workers, against heyoka at
+    its strongest: the SIMD batch integrator (in the width heyoka recommends or this
+    machine's vector width, whichever runs faster: `_heyoka_scan`) over the same starts and
+    deviation vectors, one `propagate_until` per batch in `ensemble_propagate_until_batch`
+    on 2 threads, the tangent kept at unit length inside the ODE (no stops), the one-jet
+    written plainly (heyoka_integrator), at the loosest tolerance whose largest energy error
+    is not above survey's (its JIT compilation not counted). survey runs twice: the same
+    work as heyoka (`[tori] extend = 0`: every orbit to t_final once), which the ratios
+    compare, and its default, where the cells whose verdict is in doubt run again to 4
+    t_final. Reported: survey's compute phase, the in-process run by phase, and the command
+    line (`python -m survey run`, interpreter start to archive) without and with the default
+    torus analysis; best of `repeats` interleaved runs. Targets: compute <= 0.5x heyoka,
+    command line <= 1.0x without the torus analysis, <= 1.2x with it."""
     import subprocess
     import sys
     from pathlib import Path
