@@ -4,9 +4,31 @@ import sys
 import numpy as np
 import pytest
 
-sys.path.insert(0, os.path.dirname(__file__))  # tests/reference.py
+sys.path.insert(0, os.path.dirname(__file__))  # tests/reference.py, tests/foreign.py
 
+import foreign  # noqa: E402
 from survey.physics.system import System, rhs  # noqa: E402
+
+
+def pytest_collection_modifyitems(items):
+    """The modules of tests marked `foreign` run last: the other machine's run (below)
+    then has the rest of the suite's time to compile."""
+    later = {item.module for item in items if item.get_closest_marker("foreign")}
+    items.sort(key=lambda item: item.module in later)
+
+
+def pytest_collection_finish(session):
+    """Start the run on the other machine (tests/foreign.py) in the background once a test
+    that needs it is collected: it compiles for minutes on the core the suite leaves idle."""
+    if not session.config.option.collectonly and any(
+            item.get_closest_marker("foreign") for item in session.items):
+        session.config.stash[foreign.RUN] = foreign.ForeignRun()
+
+
+def pytest_unconfigure(config):
+    run = config.stash.get(foreign.RUN, None)
+    if run is not None:
+        run.close()
 
 
 @pytest.fixture(scope="session")

@@ -10,22 +10,15 @@ and the families of periodic orbits and of relative equilibria."""
 import os
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 import xarray as xr
+from foreign import FOREIGN, RUN, STARTS, WORKFLOWS, ForeignRun
 
 from survey.catalog.variables import V
 from survey.pipeline import archive
 from survey.pipeline.sweep import run_survey, verify
-
-WORKFLOWS = Path(__file__).parents[2] / "workflows"
-
-FOREIGN = {"NUMBA_CPU_NAME": "generic", "NUMBA_CPU_FEATURES": "+fma",
-           "NPY_DISABLE_CPU_FEATURES": "X86_V3,X86_V4,AVX512_ICL,AVX512_SPR",
-           "GLIBC_TUNABLES": "glibc.cpu.hwcaps=-AVX2,-FMA,-AVX512F",
-           "OPENBLAS_CORETYPE": "Prescott"}
 
 CONFIG = """
 [survey]
@@ -46,68 +39,28 @@ workers = 1
 
 
 @pytest.fixture(scope="module")
-def foreign_cache(tmp_path_factory):
-    """numba's cache for the other machine's kernels, compiled once for this module."""
-    return str(tmp_path_factory.mktemp("foreign-numba"))
+def foreign(request):
+    """The run on the other machine (tests/foreign.py), which the session started in the
+    background at collection; started here if it did not."""
+    run = request.config.stash.get(RUN, None)
+    if run is None:
+        run = request.config.stash[RUN] = ForeignRun()
+    code, stderr = run.wait()
+    assert code == 0, stderr
+    return run
 
 
-# starts whose every bit a chaotic orbit amplifies: the LJAT trimer and 2-D LJ7 from their
-# equilibria (seeded velocities, a displacement), a 3-D microcanonical start carrying
-# angular momentum, unequal masses; and the reduced coordinates of random states
-STARTS = """
-import sys
-import numpy as np
-from survey.physics.families import initial_state
-from survey.physics.jacobi import reduced
-from survey.physics.system import System
-from survey.physics.terms import make_potential
-LJ = make_potential("lennard_jones", {}, "pair")
-ATM = make_potential("axilrod_teller", dict(strength=0.2))
-hexagon = [[0.0, 0.0], [1.12, 0.0], [0.56, 0.97], [-0.56, 0.97], [-1.12, 0.0],
-           [-0.56, -0.97], [0.56, -0.97]]
-ring = [[1.15, 0.0, 0.02], [0.36, 1.09, 0.0], [-0.93, 0.68, -0.03], [-0.93, -0.68, 0.0],
-        [0.36, -1.09, 0.01]]
-trimer = System(np.ones(3), 2, (LJ, ATM))
-out = dict(
-    trimer=initial_state(trimer, "equilibrium", positions=[[0, 0], [1.12, 0], [0.56, 0.97]],
-                         displacement=0.01, seed=3, energy=-2.5),
-    lj7=initial_state(System(np.ones(7), 2, (LJ, ATM)), "equilibrium", positions=hexagon,
-                      seed=1, energy=-11.9),
-    micro=initial_state(System(np.linspace(0.7, 1.6, 5), 3, (LJ, ATM)), "microcanonical",
-                        positions=ring, energy=-1.0, angular_momentum=0.3, seed=4),
-    sides=initial_state(System(np.array([1.0, 0.3, 0.07]), 2, (ATM,)), "sides"),
-    reduced=np.array(reduced(System(np.array([1.0, 0.3, 0.07])),
-                             np.random.default_rng(5).normal(size=(200, 12)))))
-# families: a Lyapunov family from a relative equilibrium's normal mode (rotating, in the
-# energy), the figure-eight in a mass with its bifurcations bisected, and a family of
-# relative equilibria with its Routh bifurcation
-from survey.pipeline.special import solve_equilibria, solve_periodic
-for name in ("rotating_triangle_breathing", "figure_eight_mass_family"):
-    family = solve_periodic(f"{sys.argv[2]}/{name}.toml")[2]
-    out[name] = np.concatenate([family.parameters, [b.parameter for b in family.bifurcations]]
-                               + [np.concatenate([o.state, [o.period, o.rotation],
-                                                  o.multipliers.real, o.multipliers.imag])
-                                  for o in family.members])
-members, found, _ = solve_equilibria(f"{sys.argv[2]}/lagrange_routh_family.toml")[2]
-out["routh"] = np.concatenate([[b.parameter for b in found]] + [
-    np.concatenate([[p], e.positions.ravel(), e.eigenvalues.real, e.eigenvalues.imag])
-    for p, e in members])
-np.savez(sys.argv[1], **out)
-"""
-
-
+@pytest.mark.foreign
 def test_starts_reduced_coordinates_and_periodic_families_are_the_same_bits_elsewhere(
-        tmp_path, foreign_cache):
+        tmp_path, foreign):
     """Also the periodic families and a family of relative equilibria: their Newton
     corrections stop at the integrator's noise and their continuation steps by it, so a
     last bit of LAPACK's would change the members and where they bifurcate."""
-    here, there = tmp_path / "here.npz", tmp_path / "there.npz"
-    for path, env in ((here, {}), (there, {**FOREIGN, "NUMBA_CACHE_DIR": foreign_cache})):
-        proc = subprocess.run([sys.executable, "-c", STARTS, str(path), str(WORKFLOWS)],
-                              capture_output=True, text=True, timeout=1200,
-                              env={**os.environ, **env})
-        assert proc.returncode == 0, proc.stderr
-    with np.load(here) as a, np.load(there) as b:
+    here = tmp_path / "here.npz"
+    proc = subprocess.run([sys.executable, "-c", STARTS, str(here), str(WORKFLOWS)],
+                          capture_output=True, text=True, timeout=1200)
+    assert proc.returncode == 0, proc.stderr
+    with np.load(here) as a, np.load(foreign.result) as b:
         for name in a.files:
             x, y = a[name], b[name]
             assert np.isfinite(x).all() and x.tobytes() == y.tobytes(), \
@@ -122,8 +75,9 @@ def made_here(tmp_path_factory):
     return run_survey(cfg, progress=False)
 
 
-def test_an_archive_verifies_under_another_cpu_target_and_libraries(made_here, foreign_cache):
-    env = {**os.environ, **FOREIGN, "NUMBA_CACHE_DIR": foreign_cache}
+@pytest.mark.foreign
+def test_an_archive_verifies_under_another_cpu_target_and_libraries(made_here, foreign):
+    env = {**os.environ, **FOREIGN, "NUMBA_CACHE_DIR": str(foreign.cache)}
     proc = subprocess.run([sys.executable, "-m", "survey", "verify", str(made_here)],
                           env=env, capture_output=True, text=True, timeout=1200)
     out = proc.stdout + proc.stderr
