@@ -29,21 +29,26 @@ def checkpoint_dir(config: Config) -> Path:
 def save_chunk(folder: Path, key: str, cell_ids, result: dict):
     """Write one finished chunk atomically (temporary file, fsync, rename), with the key it
     was computed under, at chunk_path. The folder is made again if it was deleted
-    meanwhile."""
+    meanwhile -- also while the file was being written (a user clearing old checkpoints,
+    a race the test of that can hit): then the write is tried once more."""
     name = chunk_path(folder, cell_ids)
     tmp = folder / f".{name.name}.{os.getpid()}.tmp"
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-        with open(tmp, "wb") as fh:
-            np.savez(fh, cell_ids=np.asarray(cell_ids, dtype=np.int64), result_key=key,
-                     **result)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, name)
-    except OSError as exc:
-        with contextlib.suppress(OSError):
-            tmp.unlink()
-        raise write_error(exc, name, folder) from None
+    for attempt in (1, 2):
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            with open(tmp, "wb") as fh:
+                np.savez(fh, cell_ids=np.asarray(cell_ids, dtype=np.int64), result_key=key,
+                         **result)
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.replace(tmp, name)
+            return
+        except OSError as exc:
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+            if attempt == 1 and exc.errno == errno.ENOENT and not folder.exists():
+                continue
+            raise write_error(exc, name, folder) from None
 
 
 def chunk_path(folder: Path, cell_ids) -> Path:

@@ -89,15 +89,39 @@ def _client(config: Config, workers, address):
                       preload=[__name__], silence_logs=logging.ERROR) as cluster:
         dask.config.set({"distributed.worker.multiprocessing-method": "spawn"})
         with Client(cluster) as client:
-            try:
-                yield client
-            except KeyboardInterrupt:
-                # shut down mid-task, dask and tornado log the cancelled work as errors (at
-                # times a traceback from distributed's own cancel); the user asked for the
-                # stop and the command line says how to resume
-                for name in ("distributed", "tornado"):
-                    logging.getLogger(name).setLevel(logging.CRITICAL + 1)
-                raise
+            yield client
+
+
+@contextlib.contextmanager
+def _quiet_interrupt():
+    """A Ctrl-C silences dask's and tornado's logs before it interrupts. Shut down mid-task,
+    they log the cancelled work as errors, and distributed's `sync` (2026.8) schedules a
+    cancel on its loop thread that fails with a NameError traceback when the interrupt
+    lands before its future exists -- at once, on that thread, so silencing them in an
+    `except` here came too late at times (a CI run). The user asked for the stop; the
+    command line says how to resume. A SIGINT ignored (a background job) stays ignored;
+    off the main thread no handler can be set, and the `except` is all there is."""
+    def silence():      # their loggers below the top carry levels of their own
+        for name in list(logging.root.manager.loggerDict):
+            if name.split(".")[0] in ("distributed", "tornado"):
+                logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+
+    def interrupt(signum, frame):
+        silence()
+        raise KeyboardInterrupt
+
+    own = (threading.current_thread() is threading.main_thread()
+           and signal.getsignal(signal.SIGINT) is signal.default_int_handler)
+    if own:
+        signal.signal(signal.SIGINT, interrupt)
+    try:
+        yield
+    except KeyboardInterrupt:
+        silence()
+        raise
+    finally:
+        if own:
+            signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def dask_setup(worker):
@@ -372,6 +396,7 @@ def _start(stack, config, task, first, starts, workers, address, clock, progress
     cluster = f"connecting to the dask scheduler at {address}" if address else \
         f"starting {workers or config.tables['dask']['workers']} local dask workers"
     with notice(cluster, progress):
+        stack.enter_context(_quiet_interrupt())
         client = stack.enter_context(_client(config, workers, address))
         client.run(warm_up, task, first, at)
         if clock["stream"]:

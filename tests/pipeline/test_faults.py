@@ -448,6 +448,60 @@ def test_ctrl_c_says_how_to_resume_and_the_rerun_finishes(tmp_path):
     same_data(xr.open_dataset(tmp_path / "g.nc"), fresh(tmp_path, cfg))
 
 
+def test_a_ctrl_c_before_dask_has_begun_the_call_prints_no_traceback(caplog):
+    """distributed's `sync` answers a Ctrl-C by scheduling a cancel on its loop thread,
+    which fails with a logged NameError when its call has not begun; the loop busy, that
+    is certain. The survey's handler silences the logs before the interrupt is raised, not
+    once it has unwound to an `except`, which the cancel can beat."""
+    import asyncio
+    import logging
+
+    from distributed.utils import LoopRunner, sync
+    loggers = {n: logging.getLogger(n).level for n in list(logging.root.manager.loggerDict)}
+    handler = signal.signal(signal.SIGINT, signal.default_int_handler)
+    runner = LoopRunner(asynchronous=False)
+    runner.start()
+    try:
+        with caplog.at_level(logging.ERROR), pytest.raises(KeyboardInterrupt):
+            with sweep._quiet_interrupt():
+                runner.loop.add_callback(time.sleep, 1.0)   # the loop busy: no call begun
+                threading.Timer(0.1, os.kill, (os.getpid(), signal.SIGINT)).start()
+                try:
+                    sync(runner.loop, asyncio.sleep, 5)
+                finally:        # the unwinding (a client's close) outlasts the busy loop
+                    time.sleep(2.0)
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+        with caplog.at_level(logging.ERROR):
+            sync(runner.loop, asyncio.sleep, 0)         # after the cancel has run
+        assert not [r for r in caplog.records if r.name.startswith("tornado")], caplog.text
+    finally:
+        runner.stop()
+        signal.signal(signal.SIGINT, handler)
+        for name, level in loggers.items():
+            logging.getLogger(name).setLevel(level)
+
+
+def test_a_checkpoint_written_while_its_folder_is_deleted(tmp_path, monkeypatch):
+    """The folder removed between its making and the file's rename (what the test below
+    can hit, a user clearing old checkpoints): the chunk is written again, once."""
+    import shutil
+
+    import survey.pipeline.checkpoints as checkpoints
+    folder, fsync, calls = tmp_path / "c" / "key", os.fsync, []
+
+    def deleting(fd):
+        fsync(fd)
+        calls.append(fd)
+        if len(calls) == 1:
+            shutil.rmtree(folder.parent)
+    monkeypatch.setattr(checkpoints.os, "fsync", deleting)
+    checkpoints.save_chunk(folder, "k", [3, 5], {"x": np.arange(2.0)})
+    assert len(calls) == 2 and [p.name for p in folder.iterdir()] == \
+        [checkpoints.chunk_path(folder, [3, 5]).name]
+    with np.load(checkpoints.chunk_path(folder, [3, 5])) as z:
+        assert z["x"].tolist() == [0.0, 1.0] and z["cell_ids"].tolist() == [3, 5]
+
+
 def test_the_checkpoint_folder_deleted_mid_run(tmp_path):
     import shutil
     cfg = grid(tmp_path, delta="{start = 0.0, stop = 6.0, num = 24}", t_final=200.0)
