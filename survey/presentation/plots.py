@@ -14,10 +14,11 @@ import textwrap
 from pathlib import Path
 
 import numpy as np
+from matplotlib.collections import PolyCollection
 from matplotlib.colors import BoundaryNorm, ListedColormap
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
-from matplotlib.patches import Patch
+from matplotlib.patches import Patch, Rectangle
 
 from ..analysis.classify import regular_share, stored_table
 from ..analysis.refine import as_grid, painted, refined_axes
@@ -640,6 +641,50 @@ def section(ds, x="sigma", y="p_sigma", colour_by=V.regime) -> Figure:
         + f"crossing projected onto ({x}, {y}); the section of the reduced 3-degree-of-freedom "
         f"flow is 4-D, so a torus need not draw a curve", int(13 * fig.get_figwidth())),
         fontsize="small")
+    return place_legends(fig)
+
+
+def place_legends(fig: Figure) -> Figure:
+    """Fix each axes' legend at the place, of matplotlib's in its order of preference, that
+    covers the fewest data (scatter points, marked line vertices, texts, bars), and of those
+    the fewest vertices and crossings of unmarked lines. matplotlib's loc="best" counts them
+    all alike -- a frequency map's resonance lines, the background, pushed its legend over
+    cells -- and gathers a scatter's points into a Python list counted again for each place:
+    2.2 s of a section figure's 2.9 s at 1.5e5 crossings, 0.5 s of a frequency map. The
+    layout is run first, as saving will, so that the legend's size is its final one."""
+    engine = fig.get_layout_engine()
+    if engine is not None:
+        engine.execute(fig)
+    for ax in fig.axes:
+        legend = ax.get_legend()
+        if legend is None or not ax.get_visible():
+            continue
+        marked = [ln for ln in ax.lines if ln.get_marker() not in (None, "None", "", " ")]
+        points = [c.get_offset_transform().transform(np.asarray(c.get_offsets(), float))
+                  for c in ax.collections
+                  if len(c.get_offsets()) and not isinstance(c, PolyCollection)]
+        points += [ln.get_transform().transform(ln.get_xydata()) for ln in marked
+                   if len(ln.get_xydata())]
+        points = np.concatenate(points) if points else np.zeros((0, 2))
+        boxes = [a.get_bbox().transformed(a.get_data_transform()) for a in ax.patches
+                 if isinstance(a, Rectangle)] + [t.get_window_extent() for t in ax.texts]
+        paths = [a.get_transform().transform_path(a.get_path()) for a in
+                 [ln for ln in ax.lines if ln not in marked] + list(ax.patches)
+                 if not isinstance(a, Rectangle)]
+        paths += [c.get_transform().transform_path(q) for c in ax.collections
+                  if isinstance(c, PolyCollection) for q in c.get_paths()]
+        best = None
+        for code in range(1, len(legend.codes)):        # 0 is "best" itself
+            legend.set_loc(code)
+            box = legend.get_window_extent()
+            badness = (box.count_contains(points) + (box.count_overlaps(boxes) if boxes else 0),
+                       sum(box.count_contains(q.vertices) + q.intersects_bbox(box, filled=False)
+                           for q in paths))
+            if best is None or badness < best[0]:
+                best = (badness, code)
+            if badness == (0, 0):
+                break
+        legend.set_loc(best[1])
     return fig
 
 
@@ -836,7 +881,7 @@ def frequency_map(ds, order: int = 5) -> Figure:
     ax.set_ylabel(rf"$\nu_2/\nu_{{{names[ref]}}}$")
     ax.set_title(f"frequency map; lines: resonances m1 x + m2 y + m3 = 0, |m| <= {order}",
                  fontsize="medium")
-    return fig
+    return place_legends(fig)
 
 
 def family_diagram(ds, title: str = "") -> Figure:

@@ -599,3 +599,49 @@ def test_a_section_panel_of_one_point_is_drawn_as_a_point():
     ax.scatter(xs + 0.1 * rng.normal(size=xs.shape), ys)
     plots._one_point(ax, xs + 0.1 * rng.normal(size=xs.shape), ys)
     assert not ax.texts and np.diff(ax.get_xlim())[0] < 1.0
+
+
+def _legend_box(fig):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    FigureCanvasAgg(fig).draw()
+    return fig.axes[0].get_legend().get_window_extent().bounds
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_legend_goes_where_matplotlibs_best_puts_it_among_points(seed):
+    """Points alone (a section's crossings): the place loc="best" finds, without its cost."""
+    from matplotlib.figure import Figure
+    rng = np.random.default_rng(seed)
+    x, y = rng.normal(size=(2, 3000)) * [[1.0], [0.6]] + rng.uniform(-1, 1, size=(2, 1))
+    boxes = []
+    for place in (False, True):
+        fig = Figure(figsize=(5, 4), layout="constrained")
+        ax = fig.subplots()
+        ax.scatter(x, y, s=1, label="crossings")
+        ax.scatter(x[:5], y[:5], s=4, label="first")
+        ax.set_xlim(-4, 4)
+        ax.legend(fontsize="small")
+        boxes.append(_legend_box(plots.place_legends(fig) if place else fig))
+    assert boxes[1] == pytest.approx(boxes[0], abs=0.5)      # the layout run twice: roundoff
+
+
+def test_a_legend_covers_lines_before_it_covers_points():
+    """A frequency map: resonance lines cross every place for the legend but the lower
+    right, where a cell lies. loc="best" weighs a line crossing like a point and covers the
+    cell; the legend is put over lines instead."""
+    from matplotlib.figure import Figure
+    covered = []
+    for place in (False, True):
+        fig = Figure(figsize=(5, 4), layout="constrained")
+        ax = fig.subplots()
+        for c in np.linspace(-0.3, 1.0, 40):            # clear of the lower right only
+            ax.plot([0, 1], [c, c + 1.0], color="0.5")
+        cell = ax.scatter([0.93], [0.07], label="a cell")
+        ax.scatter([0.5], [0.5], label="another")
+        ax.set_xlim(0, 1)
+        ax.set_ylim(0, 1)
+        ax.legend()
+        x0, y0, w, h = _legend_box(plots.place_legends(fig) if place else fig)
+        px, py = ax.transData.transform(cell.get_offsets()[0])
+        covered.append(x0 <= px <= x0 + w and y0 <= py <= y0 + h)
+    assert covered == [True, False]         # matplotlib's "best", then ours
