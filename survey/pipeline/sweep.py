@@ -54,42 +54,44 @@ from .resources import check_address
 
 @contextlib.contextmanager
 def _client(config: Config, workers, address):
-    """A client of the scheduler at `address` (already reached), or of a local cluster."""
-    from dask.distributed import Client, LocalCluster
-    if address:
-        with Client(address, timeout=f"{config.tables['dask']['connect_timeout']}s") as client:
-            yield client
-        return
-    # One numba thread per worker process, and none of the monitoring meant for interactive
-    # dashboards (a 10 ms stack profiler and 1 ms GIL polling in every worker, a 20 ms
-    # event-loop tick): measured, they cost the workers several percent of two cores. Set
-    # in the environment before the workers start, which they inherit.
-    quiet = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
-             "MKL_NUM_THREADS": "1",
-             "DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED": "False",
-             "DASK_DISTRIBUTED__ADMIN__SYSTEM_MONITOR__GIL__ENABLED": "False",
-             "DASK_DISTRIBUTED__ADMIN__TICK__INTERVAL": "500ms",
-             "DASK_DISTRIBUTED__ADMIN__SYSTEM_MONITOR__INTERVAL": "2s",
-             "DASK_DISTRIBUTED__WORKER__MEMORY__MONITOR_INTERVAL": "1s"}
-    # The first workers are forked from this process, with its modules imported and its
-    # kernels loaded (warm_up ran here first): the cluster starts in 0.5 s instead of 1.4 s,
-    # which spawned workers spend importing numpy, numba, dask and survey again. Forked
-    # while this process only waits for them; a worker restarted later (one that died) is
-    # spawned, as this process then runs threads whose locks a fork would copy held.
-    fork = "fork" in multiprocessing.get_all_start_methods()
-    quiet["DASK_DISTRIBUTED__WORKER__MULTIPROCESSING_METHOD"] = "fork" if fork else "spawn"
-    os.environ.update(quiet)
-    import dask
-    dask.config.refresh()
-    # no dashboard; the scheduler's plain HTTP endpoints on a free loopback port, not 8787
-    # (which warns "port 8787 is already in use" whenever another cluster runs)
-    with LocalCluster(n_workers=workers or config.tables["dask"]["workers"],
-                      threads_per_worker=1, processes=True, dashboard_address=None,
-                      scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
-                      preload=[__name__], silence_logs=logging.ERROR) as cluster:
-        dask.config.set({"distributed.worker.multiprocessing-method": "spawn"})
-        with Client(cluster) as client:
-            yield client
+    """A client of the scheduler at `address` (already reached), or of a local cluster; a
+    Ctrl-C while it lives interrupts quietly (`_quiet_interrupt`)."""
+    with _quiet_interrupt():
+        from dask.distributed import Client, LocalCluster
+        if address:
+            with Client(address, timeout=f"{config.tables['dask']['connect_timeout']}s") as client:
+                yield client
+            return
+        # One numba thread per worker process, and none of the monitoring meant for interactive
+        # dashboards (a 10 ms stack profiler and 1 ms GIL polling in every worker, a 20 ms
+        # event-loop tick): measured, they cost the workers several percent of two cores. Set
+        # in the environment before the workers start, which they inherit.
+        quiet = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
+                 "MKL_NUM_THREADS": "1",
+                 "DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED": "False",
+                 "DASK_DISTRIBUTED__ADMIN__SYSTEM_MONITOR__GIL__ENABLED": "False",
+                 "DASK_DISTRIBUTED__ADMIN__TICK__INTERVAL": "500ms",
+                 "DASK_DISTRIBUTED__ADMIN__SYSTEM_MONITOR__INTERVAL": "2s",
+                 "DASK_DISTRIBUTED__WORKER__MEMORY__MONITOR_INTERVAL": "1s"}
+        # The first workers are forked from this process, with its modules imported and its
+        # kernels loaded (warm_up ran here first): the cluster starts in 0.5 s instead of 1.4 s,
+        # which spawned workers spend importing numpy, numba, dask and survey again. Forked
+        # while this process only waits for them; a worker restarted later (one that died) is
+        # spawned, as this process then runs threads whose locks a fork would copy held.
+        fork = "fork" in multiprocessing.get_all_start_methods()
+        quiet["DASK_DISTRIBUTED__WORKER__MULTIPROCESSING_METHOD"] = "fork" if fork else "spawn"
+        os.environ.update(quiet)
+        import dask
+        dask.config.refresh()
+        # no dashboard; the scheduler's plain HTTP endpoints on a free loopback port, not 8787
+        # (which warns "port 8787 is already in use" whenever another cluster runs)
+        with LocalCluster(n_workers=workers or config.tables["dask"]["workers"],
+                          threads_per_worker=1, processes=True, dashboard_address=None,
+                          scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+                          preload=[__name__], silence_logs=logging.ERROR) as cluster:
+            dask.config.set({"distributed.worker.multiprocessing-method": "spawn"})
+            with Client(cluster) as client:
+                yield client
 
 
 @contextlib.contextmanager
@@ -396,7 +398,6 @@ def _start(stack, config, task, first, starts, workers, address, clock, progress
     cluster = f"connecting to the dask scheduler at {address}" if address else \
         f"starting {workers or config.tables['dask']['workers']} local dask workers"
     with notice(cluster, progress):
-        stack.enter_context(_quiet_interrupt())
         client = stack.enter_context(_client(config, workers, address))
         client.run(warm_up, task, first, at)
         if clock["stream"]:
