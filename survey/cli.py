@@ -421,7 +421,7 @@ def main(argv=None):
         from .physics.jit import kernels_cached
         if not kernels_cached():
             print("survey: first run here: the kernels compile before the work starts "
-                  "(about half a minute on 2 cores, once)", file=sys.stderr, flush=True)
+                  "(about a minute on 2 cores, once)", file=sys.stderr, flush=True)
     try:
         if getattr(args, "workers", None) is not None and args.workers < 1:
             raise ConfigError("--workers", f"must be >= 1, got {args.workers}")

@@ -10,7 +10,7 @@ import threading
 import time
 
 COMPILING = ("compiling survey's kernels for this kind of system (the first run only: about "
-             "half a minute on 2 cores; later runs load them from numba's disk cache)")
+             "a minute on 2 cores; later runs load them from numba's disk cache)")
 
 
 @contextlib.contextmanager
