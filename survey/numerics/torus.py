@@ -272,12 +272,14 @@ def _take_from_spectrum(S, f, a):
     G = np.empty(2 * K + 5, dtype=np.complex128)          # G at u = x - (k0 + j - K - 2)
     for j in range(2 * K + 5):
         u = x - (k0 + j - K - 2)
-        den = portable.sin(math.pi * u / N)
-        r = portable.sin(math.pi * u) / den if den != 0.0 else float(N)
-        phase = math.pi * u * (N - 1) / N
-        G[j] = complex(r * portable.cos(phase), r * portable.sin(phase))
-    c1 = complex(portable.cos(math.pi / N), portable.sin(math.pi / N))
-    c2 = complex(portable.cos(2.0 * math.pi / N), portable.sin(2.0 * math.pi / N))
+        den = portable.cis(math.pi * u / N)[1]
+        r = portable.cis(math.pi * u)[1] / den if den != 0.0 else float(N)
+        c, s = portable.cis(math.pi * u * (N - 1) / N)
+        G[j] = complex(r * c, r * s)
+    c, s = portable.cis(math.pi / N)
+    c1 = complex(c, s)
+    c, s = portable.cis(2.0 * math.pi / N)
+    c2 = complex(c, s)
     for j in range(2, 2 * K + 3):                 # bin k = k0 + j - K - 2: its u is G[j]'s;
         D = 1.5 * G[j] - (c1 * G[j - 1] + c1.conjugate() * G[j + 1]) \
             + 0.25 * (c2 * G[j - 2] + c2.conjugate() * G[j + 2])       # u + m is G[j - m]
@@ -289,7 +291,7 @@ def _window(N):
     """(1 - cos(2 pi (n + 1/2) / N))^2, n = 0..N-1: the Hann window squared."""
     w = np.empty(N)
     for n in range(N):
-        c = 1.0 - portable.cos(TWO_PI * (n + 0.5) / N)
+        c = 1.0 - portable.cis(TWO_PI * (n + 0.5) / N)[0]
         w[n] = c * c
     return w
 
@@ -314,10 +316,10 @@ def _phases(f, sign, E):
     """E[:BLOCK] + i E[BLOCK:2 BLOCK] = exp(sign 2 pi i f j), j < BLOCK, and E[2 BLOCK:] the
     step exp(sign 2 pi i f BLOCK), from the portable cosine and sine."""
     for j in range(BLOCK):
-        E[j] = portable.cos(TWO_PI * f * j)
-        E[BLOCK + j] = sign * portable.sin(TWO_PI * f * j)
-    E[2 * BLOCK] = portable.cos(TWO_PI * f * BLOCK)
-    E[2 * BLOCK + 1] = sign * portable.sin(TWO_PI * f * BLOCK)
+        c, s = portable.cis(TWO_PI * f * j)
+        E[j], E[BLOCK + j] = c, sign * s
+    c, s = portable.cis(TWO_PI * f * BLOCK)
+    E[2 * BLOCK], E[2 * BLOCK + 1] = c, sign * s
 
 
 @lanes
