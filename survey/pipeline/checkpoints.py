@@ -161,6 +161,10 @@ def _remove_stale_temporaries(output: Path):
             f.unlink()
 
 
+class CheckpointVanished(Exception):
+    """A checked checkpoint file was deleted before the archive read it (its path)."""
+
+
 def loader(config: Config, files: dict[Path, np.ndarray], cells=None):
     """Reads variables over all cells (or over the sorted ids `cells` of a refined survey:
     a checkpoint's other cells are left out) from the checked checkpoint files, opening
@@ -178,7 +182,11 @@ def loader(config: Config, files: dict[Path, np.ndarray], cells=None):
                 rows = np.searchsorted(cells, ids)
                 keep = (rows < len(cells)) & (cells[np.minimum(rows, len(cells) - 1)] == ids)
                 rows = rows[keep]
-            with np.load(path) as z:
+            try:
+                z = np.load(path)
+            except FileNotFoundError:
+                raise CheckpointVanished(path) from None
+            with z:
                 for name in names:
                     out[name][rows] = z[name][keep]
         return out

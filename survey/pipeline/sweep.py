@@ -38,6 +38,7 @@ from .cells import (
     warm_up,
 )
 from .checkpoints import (
+    CheckpointVanished,
     checkpoint_dir,
     chunk_path,
     loader,
@@ -195,21 +196,26 @@ def run_survey(source, *, workers: int | None = None, scheduler: str | None = No
     key = config.result_key()
     folder = checkpoint_dir(config)
     with output_lock(config.output):
-        if config.refined:
-            done, cells = _refined(config, key, folder, workers, address, clock, progress)
-            load = loader(config.fine(), done, cells)
-        else:
-            done, cells = _grid(config, key, folder, workers, address, clock, progress), None
-            load = loader(config, done)
-        clock["archive"] = time.perf_counter()
-        try:
-            with notice(f"writing {config.output}", progress):
-                path = archive.write(config, load, command, cells)
-        except OSError as exc:
-            raise write_error(exc, config.output, folder) from None
-        except RuntimeError as exc:     # netCDF4 reports a full disk as an HDF error
-            raise write_error(OSError(errno.EIO, f"{exc}; is the disk full?"), config.output,
-                              folder) from None
+        for attempt in range(3):    # again when a checkpoint vanishes before it is read
+            if config.refined:
+                done, cells = _refined(config, key, folder, workers, address, clock,
+                                       progress)
+                load = loader(config.fine(), done, cells)
+            else:
+                done, cells = _grid(config, key, folder, workers, address, clock,
+                                    progress), None
+                load = loader(config, done)
+            clock["archive"] = time.perf_counter()
+            try:
+                path = _write(config, load, command, cells, folder, progress)
+                break
+            except CheckpointVanished as exc:
+                if attempt == 2:
+                    raise SurveyError(f"checkpoints keep vanishing from {folder} before "
+                                      "the archive reads them (is something deleting "
+                                      "them?); run the same command again") from None
+                warn(f"{exc.args[0].name} went missing from {folder} before the archive "
+                     "read it; computing its cells again")
         shutil.rmtree(folder, ignore_errors=True)
         with contextlib.suppress(OSError):
             folder.parent.rmdir()
@@ -223,6 +229,19 @@ def run_survey(source, *, workers: int | None = None, scheduler: str | None = No
                        archive=now - c["archive"], total=now - c["start"],
                        tasks=c.get("tasks", []))
     return path
+
+
+def _write(config, load, command, cells, folder, progress) -> Path:
+    """The archive from the checkpoints `load` reads; a failed write is a SurveyError that
+    says what to do."""
+    try:
+        with notice(f"writing {config.output}", progress):
+            return archive.write(config, load, command, cells)
+    except OSError as exc:
+        raise write_error(exc, config.output, folder) from None
+    except RuntimeError as exc:     # netCDF4 reports a full disk as an HDF error
+        raise write_error(OSError(errno.EIO, f"{exc}; is the disk full?"), config.output,
+                          folder) from None
 
 
 def _grid(config, key, folder, workers, address, clock, progress) -> dict:

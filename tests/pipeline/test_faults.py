@@ -502,6 +502,24 @@ def test_a_checkpoint_written_while_its_folder_is_deleted(tmp_path, monkeypatch)
         assert z["x"].tolist() == [0.0, 1.0] and z["cell_ids"].tolist() == [3, 5]
 
 
+def test_a_checkpoint_deleted_before_the_archive_reads_it(tmp_path, monkeypatch, capsys):
+    """Every checkpoint was there when the computing ended, one is gone when the archive
+    reads it: its cells are computed again and the archive is whole, not "cannot write"."""
+    cfg = grid(tmp_path)
+    real, calls = sweep.loader, []
+
+    def deleting(config, files, cells=None):
+        calls.append(sorted(files))
+        if len(calls) == 1:
+            sorted(files)[0].unlink()
+        return real(config, files, cells)
+    monkeypatch.setattr(sweep, "loader", deleting)
+    with xr.open_dataset(run_survey(cfg)) as ds:
+        assert len(calls) == 2 and calls[0][0] in calls[1]   # written again, then read
+        assert "went missing" in capsys.readouterr().err
+        same_data(ds, fresh(tmp_path, cfg))
+
+
 def test_the_checkpoint_folder_deleted_mid_run(tmp_path):
     import shutil
     cfg = grid(tmp_path, delta="{start = 0.0, stop = 6.0, num = 24}", t_final=200.0)
