@@ -30,10 +30,11 @@ def save_chunk(folder: Path, key: str, cell_ids, result: dict):
     """Write one finished chunk atomically (temporary file, fsync, rename), with the key it
     was computed under, at chunk_path. The folder is made again if it was deleted
     meanwhile -- also while the file was being written (a user clearing old checkpoints,
-    a race the test of that can hit): then the write is tried once more."""
+    a race the test of that can hit: the deletion may take the temporary file before the
+    folder, or the folder made again): then the write is tried again, up to 5 times."""
     name = chunk_path(folder, cell_ids)
     tmp = folder / f".{name.name}.{os.getpid()}.tmp"
-    for attempt in (1, 2):
+    for attempt in range(1, 6):
         try:
             folder.mkdir(parents=True, exist_ok=True)
             with open(tmp, "wb") as fh:
@@ -46,7 +47,7 @@ def save_chunk(folder: Path, key: str, cell_ids, result: dict):
         except OSError as exc:
             with contextlib.suppress(OSError):
                 tmp.unlink()
-            if attempt == 1 and exc.errno == errno.ENOENT and not folder.exists():
+            if attempt < 5 and exc.errno == errno.ENOENT:
                 continue
             raise write_error(exc, name, folder) from None
 

@@ -502,6 +502,30 @@ def test_a_checkpoint_written_while_its_folder_is_deleted(tmp_path, monkeypatch)
         assert z["x"].tolist() == [0.0, 1.0] and z["cell_ids"].tolist() == [3, 5]
 
 
+def test_a_checkpoint_whose_file_is_deleted_before_its_folder(tmp_path, monkeypatch):
+    """A deletion running beside the write (shutil.rmtree takes the files, then the folder):
+    the temporary file gone before the rename, the folder still there; then the folder too
+    on the next try. The chunk is written on the third."""
+    import shutil
+
+    import survey.pipeline.checkpoints as checkpoints
+    folder, fsync, calls = tmp_path / "c" / "key", os.fsync, []
+
+    def deleting(fd):
+        fsync(fd)
+        calls.append(fd)
+        if len(calls) == 1:
+            next(folder.glob(".*.tmp")).unlink()
+        elif len(calls) == 2:
+            shutil.rmtree(folder.parent)
+    monkeypatch.setattr(checkpoints.os, "fsync", deleting)
+    checkpoints.save_chunk(folder, "k", [3, 5], {"x": np.arange(2.0)})
+    assert len(calls) == 3 and [p.name for p in folder.iterdir()] == \
+        [checkpoints.chunk_path(folder, [3, 5]).name]
+    with np.load(checkpoints.chunk_path(folder, [3, 5])) as z:
+        assert z["x"].tolist() == [0.0, 1.0] and z["cell_ids"].tolist() == [3, 5]
+
+
 def test_a_checkpoint_deleted_before_the_archive_reads_it(tmp_path, monkeypatch, capsys):
     """Every checkpoint was there when the computing ended, one is gone when the archive
     reads it: its cells are computed again and the archive is whole, not "cannot write"."""
