@@ -481,9 +481,13 @@ def test_a_ctrl_c_before_dask_has_begun_the_call_prints_no_traceback(caplog):
             logging.getLogger(name).setLevel(level)
 
 
-def test_a_checkpoint_written_while_its_folder_is_deleted(tmp_path, monkeypatch):
-    """The folder removed between its making and the file's rename (what the test below
-    can hit, a user clearing old checkpoints): the chunk is written again, once."""
+@pytest.mark.parametrize("deletions", [("folder",), ("file", "folder")],
+                         ids=["folder", "file-then-folder"])
+def test_a_checkpoint_written_while_it_is_deleted(tmp_path, monkeypatch, deletions):
+    """A deletion beside the write (a user clearing old checkpoints; what the test below
+    can hit): the folder removed between its making and the file's rename, or first the
+    temporary file alone while the folder is still there (shutil.rmtree takes the files,
+    then the folder). The chunk is written again after each."""
     import shutil
 
     import survey.pipeline.checkpoints as checkpoints
@@ -492,35 +496,14 @@ def test_a_checkpoint_written_while_its_folder_is_deleted(tmp_path, monkeypatch)
     def deleting(fd):
         fsync(fd)
         calls.append(fd)
-        if len(calls) == 1:
-            shutil.rmtree(folder.parent)
+        if len(calls) <= len(deletions):
+            if deletions[len(calls) - 1] == "file":
+                next(folder.glob(".*.tmp")).unlink()
+            else:
+                shutil.rmtree(folder.parent)
     monkeypatch.setattr(checkpoints.os, "fsync", deleting)
     checkpoints.save_chunk(folder, "k", [3, 5], {"x": np.arange(2.0)})
-    assert len(calls) == 2 and [p.name for p in folder.iterdir()] == \
-        [checkpoints.chunk_path(folder, [3, 5]).name]
-    with np.load(checkpoints.chunk_path(folder, [3, 5])) as z:
-        assert z["x"].tolist() == [0.0, 1.0] and z["cell_ids"].tolist() == [3, 5]
-
-
-def test_a_checkpoint_whose_file_is_deleted_before_its_folder(tmp_path, monkeypatch):
-    """A deletion running beside the write (shutil.rmtree takes the files, then the folder):
-    the temporary file gone before the rename, the folder still there; then the folder too
-    on the next try. The chunk is written on the third."""
-    import shutil
-
-    import survey.pipeline.checkpoints as checkpoints
-    folder, fsync, calls = tmp_path / "c" / "key", os.fsync, []
-
-    def deleting(fd):
-        fsync(fd)
-        calls.append(fd)
-        if len(calls) == 1:
-            next(folder.glob(".*.tmp")).unlink()
-        elif len(calls) == 2:
-            shutil.rmtree(folder.parent)
-    monkeypatch.setattr(checkpoints.os, "fsync", deleting)
-    checkpoints.save_chunk(folder, "k", [3, 5], {"x": np.arange(2.0)})
-    assert len(calls) == 3 and [p.name for p in folder.iterdir()] == \
+    assert len(calls) == len(deletions) + 1 and [p.name for p in folder.iterdir()] == \
         [checkpoints.chunk_path(folder, [3, 5]).name]
     with np.load(checkpoints.chunk_path(folder, [3, 5])) as z:
         assert z["x"].tolist() == [0.0, 1.0] and z["cell_ids"].tolist() == [3, 5]
