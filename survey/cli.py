@@ -419,9 +419,10 @@ def main(argv=None):
     if args.command in COMPILING_COMMANDS and sys.stderr.isatty():
         # before the heavy imports, so that it shows at once
         from .physics.jit import kernels_cached
+        from .pipeline.progress import FIRST_COMPILE
         if not kernels_cached():
             print("survey: first run here: the kernels compile before the work starts "
-                  "(about a minute on 2 cores, once)", file=sys.stderr, flush=True)
+                  f"({FIRST_COMPILE}, once)", file=sys.stderr, flush=True)
     try:
         if getattr(args, "workers", None) is not None and args.workers < 1:
             raise ConfigError("--workers", f"must be >= 1, got {args.workers}")

@@ -9,8 +9,11 @@ import sys
 import threading
 import time
 
-COMPILING = ("compiling survey's kernels for this kind of system (the first run only: about "
-             "a minute on 2 cores; later runs load them from numba's disk cache)")
+# how long the kernels take to compile on a machine's first run (README: measured), said
+# wherever a user waits for it
+FIRST_COMPILE = "about a minute on 2 cores"
+COMPILING = ("compiling survey's kernels for this kind of system (the first run only: "
+             f"{FIRST_COMPILE}; later runs load them from numba's disk cache)")
 
 
 @contextlib.contextmanager

@@ -49,7 +49,7 @@ from .checkpoints import (
     write_error,
 )
 from .config import Config, load_config, parse_config
-from .progress import COMPILING, notice
+from .progress import COMPILING, FIRST_COMPILE, notice
 from .resources import check_address
 
 
@@ -553,7 +553,7 @@ def verify(path, cells: int = 8, seed: int = 0, differences: dict | None = None)
     timed_out = stored[V.status][sample] == Status.TIME_LIMIT
     sample = sample[~timed_out]
     with notice(f"recomputing {len(sample)} cells (compiling the kernels if this kind of "
-                "system has not run here before: about a minute)", sys.stderr.isatty()):
+                f"system has not run here before: {FIRST_COMPILE})", sys.stderr.isatty()):
         fresh = run_cells(CellTask.of(grid), ids[sample], build_starts(grid, ids[sample]))
     here = archive.machine()
     lines = compare({k: v[sample] for k, v in stored.items()}, fresh, differences)
