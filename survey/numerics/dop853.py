@@ -669,12 +669,13 @@ def error_norms(y, ynew, K, L, n_err, rtol, atol, h, err, scratch):
 
 
 @lanes
-def dense_prepare(masses, d, measure, prof, par, n_tan, L, nd, full, y, ynew, hh, K, yt, F,
-                  W):
+def dense_prepare(masses, d, measure, prof, par, L, nd, y, ynew, hh, K, yt, F, W):
     """Coefficients of the 7th-order interpolants of L lanes over their last steps for
-    components < nd (variable-major, so the first nd * L entries); K[12] must hold
-    f(ynew). Stages 14-16 are evaluated for the orbits alone unless full."""
-    nt = n_tan if full else 0
+    components < nd (variable-major, so the first nd * L entries: the orbits', or theirs
+    and their tangent vectors'); K[12] must hold f(ynew). No flag or count of tangents
+    among the arguments: a literal one (the waiting slots hold orbits alone) compiled a
+    second copy of this function and its right-hand sides."""
+    nt = nd // (2 * masses.size * d) - 1
     M = nd * L
     for i in range(M):
         yt[i] = fma(hh[i], _dot(K, i, A14), y[i])

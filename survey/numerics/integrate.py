@@ -472,8 +472,7 @@ def _flush(ln, out, masses, d, measure, prof, par, t_fine):
         return
     n = w.Y.size // P
     _spread(w.h, w.HH, P, n)
-    dense_prepare(masses, d, measure, prof, par, 0, P, n, False, w.Y, w.YN, w.HH, w.K,
-                  w.YT, w.F, w.W)
+    dense_prepare(masses, d, measure, prof, par, P, n, w.Y, w.YN, w.HH, w.K, w.YT, w.F, w.W)
     for p in range(P):
         w.x[p] = (t_fine[w.first[p]] - w.t[p]) / w.h[p] if p < c else 0.0
     _spread(w.x, w.XX, P, n)
@@ -628,9 +627,8 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
             later += need == DENSE_LATER
             dense = max(dense, need)
         if dense >= DENSE_ORBIT:    # the orbits' interpolant where no lane needs more
-            dense_prepare(masses, d, measure, prof, par, n_tan, L,
-                          nf if dense == DENSE_ALL else n, dense == DENSE_ALL, ln.Y, ln.YN,
-                          ln.HH, ln.K, ln.YT, ln.F, ln.W)
+            dense_prepare(masses, d, measure, prof, par, L, nf if dense == DENSE_ALL else n,
+                          ln.Y, ln.YN, ln.HH, ln.K, ln.YT, ln.F, ln.W)
         elif dense == DENSE_LATER and ln.wait.count[0] + later > ln.wait.t.size:
             _flush(ln, out, masses, d, measure, prof, par, t_fine)   # room for the steps
         for k in range(L):

@@ -103,6 +103,22 @@ def test_same_archive_whatever_the_chunking_or_worker_count(tmp_path, reference,
     assert_same_data(run(cfg), reference[1])
 
 
+def test_a_first_run_starts_the_workers_first_and_gives_the_same_archive(tmp_path, reference,
+                                                                          monkeypatch):
+    """On a cold kernel cache the local workers start before the driver compiles, one of
+    them compiling the analysis's kernels beside it (warm_beside), and load the integrator
+    from the disk cache afterwards: the same archive."""
+    import survey.pipeline.cells as cells
+    import survey.pipeline.sweep as sweep
+    ran = tmp_path / "warm_beside ran"          # in a worker: a file says it ran
+    monkeypatch.setattr(sweep, "kernels_cached", lambda: False)
+    monkeypatch.setattr(sweep, "warm_beside",
+                        lambda *args: ran.touch() or cells.warm_beside(*args))
+    cfg = write_config(tmp_path, "ref", chunk=5, workers=2)
+    assert_same_data(run(cfg), reference[1])
+    assert ran.exists()
+
+
 def test_the_same_start_gives_the_same_numbers_in_any_grid(tmp_path, reference):
     """Seeds follow the start, not the cell index: delta = ref[6] in a grid of one cell is
     the reference's cell (6, 0) bit for bit (its deviation vectors and perturbed start
