@@ -862,6 +862,43 @@ def _zeros(shape, dtype=np.float64) -> np.ndarray:
     return raw[start:start + size].view(dtype).reshape(shape)
 
 
+def _lanes(L, n, nf, n_tan, m, n_sub) -> Lanes:
+    """A driver's state for L lanes of orbits of n components with n_tan tangent vectors
+    each (nf in all), m watched events scanned in n_sub parts of a step."""
+    return Lanes(
+        _zeros(nf * L), _zeros((16, nf * L)), _zeros(nf * L), _zeros(nf * L),
+        _zeros((7, nf * L)), _zeros(nf * L), _zeros(workspace_size(L, nf)),
+        _zeros(2 * (nf + 1) * L),
+        _zeros(L), _zeros(L), _zeros(L), _zeros(L), _zeros((2 * n_tan + 1) * L),
+        _zeros(L, dtype=np.int64),
+        np.full(L, -1, dtype=np.int64),
+        _zeros(L), _zeros(L),
+        _zeros(L), _zeros(L), _zeros((L, 4), dtype=np.int64),
+        _zeros(L, dtype=np.int64), _zeros(L, dtype=np.int64), _zeros(L),
+        _zeros((L, 4)), _zeros((L, max(m, 1))), _zeros((L, max(m, 1))),
+        _zeros((L, max(m, 1))), _zeros((L, max(m, 1))),
+        _zeros((L, max(m, 1)), dtype=np.int64),
+        _zeros(max(1, m * n_sub)), _zeros(max(1, m * n_sub), dtype=np.int64),
+        _zeros(nf), _zeros(nf), _zeros((2, nf)), _deferred(2 * max(L, SIMD_LANES), n))
+
+
+def _deferred(P, n) -> Deferred:
+    return Deferred(
+        _zeros(n * P), _zeros(n * P), _zeros((16, n * P)), _zeros((7, n * P)),
+        _zeros(n * P), _zeros(n * P), _zeros(workspace_size(P, n)),
+        _zeros(P), _zeros(n * P), _zeros(n * P), _zeros(P),
+        _zeros(P), _zeros(P), _zeros(P, dtype=np.int64),
+        _zeros(P, dtype=np.int64), _zeros(P, dtype=np.int64),
+        _zeros(1, dtype=np.int64))
+
+
+def compile_handoff():
+    """Compile (or load) `_adopt`, the move of a lane to a batch of fewer, which a survey
+    first calls in its first real task (warm_up's short run ends before any): its types
+    are those of every Lanes, whatever the sizes (cells.warm_beside)."""
+    _adopt(_lanes(1, 2, 2, 0, 0, 1), 0, _lanes(2, 2, 2, 0, 0, 1), 0)
+
+
 def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol,
            n_err, max_steps, h0, h_max, h_min, events, max_events, n_sub, t_eval, n_eval,
            renorm_dt, time_limit, t_fine, L):
@@ -907,32 +944,6 @@ def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol,
         np.full((Mf, Tf, n), np.nan), np.zeros((M, 2)), np.zeros((M, 2)),
         np.full((Ms, T, 2), np.nan))
 
-    def lanes(L):
-        return Lanes(
-            _zeros(nf * L), _zeros((16, nf * L)), _zeros(nf * L), _zeros(nf * L),
-            _zeros((7, nf * L)), _zeros(nf * L), _zeros(workspace_size(L, nf)),
-            _zeros(2 * (nf + 1) * L),
-            _zeros(L), _zeros(L), _zeros(L), _zeros(L), _zeros((2 * n_tan + 1) * L),
-            _zeros(L, dtype=np.int64),
-            np.full(L, -1, dtype=np.int64),
-            _zeros(L), _zeros(L),
-            _zeros(L), _zeros(L), _zeros((L, 4), dtype=np.int64),
-            _zeros(L, dtype=np.int64), _zeros(L, dtype=np.int64), _zeros(L),
-            _zeros((L, 4)), _zeros((L, max(m, 1))), _zeros((L, max(m, 1))),
-            _zeros((L, max(m, 1))), _zeros((L, max(m, 1))),
-            _zeros((L, max(m, 1)), dtype=np.int64),
-            _zeros(max(1, m * n_sub)), _zeros(max(1, m * n_sub), dtype=np.int64),
-            _zeros(nf), _zeros(nf), _zeros((2, nf)), deferred(2 * max(L, SIMD_LANES)))
-
-    def deferred(P):
-        return Deferred(
-            _zeros(n * P), _zeros(n * P), _zeros((16, n * P)), _zeros((7, n * P)),
-            _zeros(n * P), _zeros(n * P), _zeros(workspace_size(P, n)),
-            _zeros(P), _zeros(n * P), _zeros(n * P), _zeros(P),
-            _zeros(P), _zeros(P), _zeros(P, dtype=np.int64),
-            _zeros(P, dtype=np.int64), _zeros(P, dtype=np.int64),
-            _zeros(1, dtype=np.int64))
-
     def drive(ln, next_job):
         # with a time limit, back every 256 rounds to read the clock
         rounds = 256 if time_limit > 0.0 else 1 << 62
@@ -947,16 +958,16 @@ def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol,
     # The SIMD loops cost all L lanes whether they run a job or not: once every job has
     # started and at most half the lanes run one (their lengths differ 2x and more), those
     # go on in half as many lanes, and below SIMD_MIN one after another in one lane.
-    ln, next_job = lanes(L), 0
+    ln, next_job = _lanes(L, n, nf, n_tan, m, n_sub), 0
     while drive(ln, next_job) == HANDOFF:
         next_job, running = M, np.flatnonzero(ln.job >= 0)
         if ln.job.size // 2 >= SIMD_MIN:
-            fewer = lanes(ln.job.size // 2)
+            fewer = _lanes(ln.job.size // 2, n, nf, n_tan, m, n_sub)
             for slot, k in enumerate(running):
                 _adopt(fewer, slot, ln, k)
             ln = fewer
             continue
-        one, handed = lanes(1), time.perf_counter()
+        one, handed = _lanes(1, n, nf, n_tan, m, n_sub), time.perf_counter()
         for k in running:
             _adopt(one, 0, ln, k)
             if time_limit > 0.0:    # a job's budget does not run while it waits its turn

@@ -27,7 +27,7 @@ from ..catalog.variables import (
 )
 from ..numerics import torus
 from ..numerics.indicators import batch_options, combine, conservation_errors, ensemble
-from ..numerics.integrate import integrate_batch
+from ..numerics.integrate import compile_handoff, integrate_batch
 from ..physics import linalg
 from ..physics.families import initial_state
 from ..physics.jacobi import reduced
@@ -318,11 +318,11 @@ def warm_up(task: CellTask, first, starts):
 def warm_beside(task: CellTask, first, starts):
     """On a first run, in a worker while the driver compiles the integrator (warm_up, one
     core for a minute): compile the kernels that warm_up's short run does not reach -- the
-    torus analysis, which a cell's first real run compiles in every worker, and the linear
-    algebra of the report's special solutions, which the driver compiled after the survey
-    -- on stand-in data of the types they are given: a smooth quasi-periodic motion near
-    the first start, small matrices (the wrappers of physics.linalg make their kernels'
-    arguments contiguous float64)."""
+    torus analysis and the move of lanes to a smaller batch, which a cell's first real run
+    compiles in every worker, and the linear algebra of the report's special solutions,
+    which the driver compiled after the survey -- on stand-in data of the types they are
+    given: a smooth quasi-periodic motion near the first start, small matrices (the
+    wrappers of physics.linalg make their kernels' arguments contiguous float64)."""
     if not first.size:
         return
     system = next(_systems(task, first, starts))[0]
@@ -346,3 +346,7 @@ def warm_beside(task: CellTask, first, starts):
     linalg.svd(a)
     linalg.lstsq(a, a[0], 1e-14)
     linalg.chain(a, a, a)
+    # last: it builds lanes, as the driver does first (workspace_size). numba's disk cache
+    # index of a function is read, extended and written back by each process compiling
+    # it, so this job keeps to what the driver is not compiling at the same time.
+    compile_handoff()
