@@ -424,7 +424,7 @@ def _start(stack, config, task, first, starts, workers, address, clock, progress
     if not address and not kernels_cached():
         with notice(cluster, progress):
             client = stack.enter_context(_client(config, workers, address))
-        beside = client.submit(warm_beside, task, first, at, pure=False)
+        beside = client.submit(_head_start, warm_beside, task, first, at, pure=False)
     with notice(COMPILING, progress):
         warm_up(task, first, at)
         if beside is not None:
@@ -439,6 +439,15 @@ def _start(stack, config, task, first, starts, workers, address, clock, progress
             client.get_task_stream()        # records from here on
     clock["cluster"] = time.perf_counter()
     return client
+
+
+def _head_start(warm, *args):
+    """warm(*args) in a worker, where an exception would be logged as a failed task: a
+    head start that fails leaves its kernels to compile where first used, as without it."""
+    try:
+        warm(*args)
+    except Exception:
+        pass
 
 
 def chunk_size(cells: int, workers: int, per_cell: int) -> int:

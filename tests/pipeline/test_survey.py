@@ -103,17 +103,24 @@ def test_same_archive_whatever_the_chunking_or_worker_count(tmp_path, reference,
     assert_same_data(run(cfg), reference[1])
 
 
+@pytest.mark.parametrize("fails", [False, True])
 def test_a_first_run_starts_the_workers_first_and_gives_the_same_archive(tmp_path, reference,
-                                                                          monkeypatch):
+                                                                          monkeypatch, fails):
     """On a cold kernel cache the local workers start before the driver compiles, one of
     them compiling the analysis's kernels beside it (warm_beside), and load the integrator
-    from the disk cache afterwards: the same archive."""
+    from the disk cache afterwards: the same archive -- also if that head start fails."""
     import survey.pipeline.cells as cells
     import survey.pipeline.sweep as sweep
     ran = tmp_path / "warm_beside ran"          # in a worker: a file says it ran
+
+    def beside(*args):
+        ran.touch()
+        if fails:
+            raise ValueError("a stand-in the analysis rejects")
+        cells.warm_beside(*args)
+
     monkeypatch.setattr(sweep, "kernels_cached", lambda: False)
-    monkeypatch.setattr(sweep, "warm_beside",
-                        lambda *args: ran.touch() or cells.warm_beside(*args))
+    monkeypatch.setattr(sweep, "warm_beside", beside)
     cfg = write_config(tmp_path, "ref", chunk=5, workers=2)
     assert_same_data(run(cfg), reference[1])
     assert ran.exists()
