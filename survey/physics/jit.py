@@ -25,14 +25,27 @@ KERNEL_FOLDERS = (".", "physics", "numerics")
 
 
 def cache_folder(source_folder: Path) -> Path:
-    """Where numba caches the kernels of a source folder: its __pycache__, or with
-    NUMBA_CACHE_DIR set, <that>/<folder name>_<sha1 of its absolute path> (numba's
-    _UserProvidedCacheLocator)."""
-    root = os.environ.get("NUMBA_CACHE_DIR")
-    if not root:
-        return source_folder / "__pycache__"
+    """Where numba caches the kernels of a source folder, as its cache locators choose in
+    turn: with NUMBA_CACHE_DIR set, <that>/<folder name>_<sha1 of its absolute path>; else
+    its __pycache__ where that can be written; else (a read-only install) the same
+    subfolder of numba's cache folder in the user's home."""
     path = os.path.abspath(source_folder)
-    return Path(root) / f"{os.path.basename(path)}_{hashlib.sha1(path.encode()).hexdigest()}"
+    subfolder = f"{os.path.basename(path)}_{hashlib.sha1(path.encode()).hexdigest()}"
+    root = os.environ.get("NUMBA_CACHE_DIR")
+    if root:
+        return Path(root) / subfolder
+    in_tree = source_folder / "__pycache__"
+    if _writable(in_tree):
+        return in_tree
+    from numba.misc.appdirs import AppDirs
+    return Path(AppDirs(appname="numba", appauthor=False).user_cache_dir) / subfolder
+
+
+def _writable(folder: Path) -> bool:
+    """Whether a folder can be written, or made and written where it does not exist."""
+    while not folder.exists():
+        folder = folder.parent
+    return os.access(folder, os.W_OK)
 
 
 def refresh_kernel_cache(package: Path = PACKAGE):

@@ -1,6 +1,7 @@
 """A phase without a progress bar says what it is doing once it has taken a second, and
 nothing if it is quick."""
 import io
+from pathlib import Path
 import time
 from contextlib import redirect_stderr
 
@@ -54,6 +55,28 @@ def test_kernel_caches_elsewhere_are_found_and_refreshed(tmp_path, monkeypatch):
     (package / "numerics" / "integrate.py").write_text("# edited\n")
     refresh_kernel_cache(package)
     assert not kernels_cached(package)
+
+
+def test_a_read_only_install_is_looked_for_in_numbas_cache_in_the_home(tmp_path, monkeypatch):
+    """Where a package's __pycache__ cannot be written, numba caches its kernels under its
+    cache folder in the user's home: the first-run notice and the refresh of stale kernels
+    look there (not at the empty __pycache__, which said "first run" every time)."""
+    import survey.physics.jit as jit
+    from numba.misc.appdirs import AppDirs
+    package = tmp_path / "survey"
+    (package / "numerics").mkdir(parents=True)
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "home-cache"))
+    assert jit.cache_folder(package / "numerics") == package / "numerics" / "__pycache__"
+    monkeypatch.setattr(jit.os, "access", lambda path, mode: not str(path).startswith(
+        str(package)))
+    folder = jit.cache_folder(package / "numerics")
+    assert folder.parent == Path(AppDirs(appname="numba", appauthor=False).user_cache_dir)
+    assert folder.parent.is_relative_to(tmp_path / "home-cache")
+    assert folder.name.startswith("numerics_")
+    folder.mkdir(parents=True)
+    (folder / "integrate._run-400.py311.nbi").write_bytes(b"")
+    assert jit.kernels_cached(package)
 
 
 COVERAGE = r"""
