@@ -28,7 +28,7 @@ from ..catalog.variables import (
 from ..numerics import torus
 from ..numerics.indicators import batch_options, combine, conservation_errors, ensemble
 from ..numerics.integrate import compile_handoff, integrate_batch
-from ..physics import linalg
+from ..physics import linalg, portable
 from ..physics.families import initial_state
 from ..physics.jacobi import reduced
 from . import archive
@@ -317,30 +317,37 @@ def warm_up(task: CellTask, first, starts):
 
 def warm_beside(task: CellTask, first, starts):
     """On a first run, in a worker while the driver compiles the integrator (warm_up, one
-    core for a minute): compile the kernels that warm_up's short run does not reach -- the
-    torus analysis and the move of lanes to a smaller batch, which a cell's first real run
-    compiles in every worker, and the linear algebra of the report's special solutions,
-    which the driver compiled after the survey -- on stand-in data of the types they are
-    given: a smooth quasi-periodic motion near the first start, small matrices (the
-    wrappers of physics.linalg make their kernels' arguments contiguous float64)."""
+    core for a minute): compile the kernels the survey needs after it -- the energies a
+    cell's results take (which warm_up compiled after the integrator), the torus analysis
+    and the move of lanes to a smaller batch (which a cell's first real run compiled in
+    every worker) and the linear algebra of the report's special solutions (which the
+    driver compiled after the survey) -- on stand-in data of the types they are given: a
+    smooth quasi-periodic motion near the first start, small matrices (the wrappers of
+    physics.linalg make their kernels' arguments contiguous float64)."""
     if not first.size:
         return
     system = next(_systems(task, first, starts))[0]
     y0 = np.asarray(starts[0], dtype=np.float64)
     rng = np.random.default_rng(0)
-    if task.tori["analyse"]:
-        dt = task.tori["sample_interval"]
-        # samples enough for every path: NAFF updates its spectrum in place on halves of
-        # over 4 x SPECTRUM_BINS samples (a long run, or a cell in doubt extended)
-        t = (np.arange(16 * torus.SPECTRUM_BINS) + 0.5) * dt
-        modes = rng.standard_normal((3, y0.size))
-        modes *= 1e-2 * max(float(np.max(np.abs(y0))), 1.0) / np.linalg.norm(modes, axis=1,
-                                                                             keepdims=True)
-        waves = np.stack([np.sin(t), np.cos(np.sqrt(2.0) * t), np.sin(np.sqrt(5.0) * t)], 1)
-        with np.errstate(all="ignore"):
-            torus.analyse(system, np.ascontiguousarray(y0 + waves @ modes), dt, 1e-12,
-                          task.tori["observables"], task.tori["lines"],
-                          task.tori["resonance_order"])
+    dt = task.tori["sample_interval"]
+    # samples enough for every path: NAFF updates its spectrum in place on halves of over
+    # 4 x SPECTRUM_BINS samples (a long run, or a cell in doubt extended)
+    t = (np.arange(16 * torus.SPECTRUM_BINS) + 0.5) * dt
+    modes = rng.standard_normal((3, y0.size))
+    modes *= 1e-2 * max(float(np.max(np.abs(y0))), 1.0) / np.linalg.norm(modes, axis=1,
+                                                                         keepdims=True)
+    waves = np.stack([np.sin(t), np.cos(np.sqrt(2.0) * t), np.sin(np.sqrt(5.0) * t)], 1)
+    states = np.ascontiguousarray(y0 + waves @ modes)
+    with np.errstate(all="ignore"):
+        # what every cell's result takes after its orbits, which warm_up's driver would
+        # otherwise compile after the integrator: energies, the scale-free energy, the
+        # logs of the tangent vectors' norms
+        conservation_errors(system, y0, states)
+        system.scale_free_energy(y0)
+        portable.vlog(portable.vnorm(states))
+        if task.tori["analyse"]:
+            torus.analyse(system, states, dt, 1e-12, task.tori["observables"],
+                          task.tori["lines"], task.tori["resonance_order"])
     a = rng.standard_normal((6, 6))
     linalg.eig(a)
     linalg.svd(a)

@@ -83,14 +83,18 @@ COVERAGE = r"""
 import numpy as np
 from numba.core.dispatcher import Dispatcher
 from survey.numerics import integrate, torus
-from survey.physics import linalg
+from survey.physics import linalg, portable, system as system_module
 from survey.physics.equilibria import relative_equilibrium
 from survey.pipeline import cells
 from survey.pipeline.config import parse_config
 
 def signatures():
     kernels = [(m.__name__, k, v) for m in (torus, linalg) for k, v in vars(m).items()
-               if isinstance(v, Dispatcher)] + [("integrate", "_adopt", integrate._adopt)]
+               if isinstance(v, Dispatcher)] + [
+        ("integrate", "_adopt", integrate._adopt),
+        ("system", "_potential_energies", system_module._potential_energies),
+        ("portable", "_elementwise", portable._elementwise),
+        ("portable", "power", portable.power)]
     return {(m, k): set(map(str, v.signatures)) for m, k, v in kernels}
 
 config = parse_config('''
@@ -107,7 +111,9 @@ perturbations = 1
 task, starts = cells.CellTask.of(config), cells.build_starts(config)
 cells.warm_beside(task, np.array([0]), starts[:1])
 warm = signatures()
-assert sum(map(len, warm.values())) > 10 and warm[("integrate", "_adopt")], warm
+assert sum(map(len, warm.values())) > 10, warm
+assert all(warm[k] for k in [("integrate", "_adopt"), ("system", "_potential_energies"),
+                             ("portable", "_elementwise"), ("portable", "power")]), warm
 res = cells.run_cells(task, np.array([0, 1]), starts)        # real samples, analysed
 assert np.isfinite(res["frequency"]).any()
 system = config.system()
@@ -120,12 +126,13 @@ print(new)
 
 
 def test_the_kernels_compiled_beside_the_driver_are_those_a_survey_uses(tmp_path):
-    """A first run compiles the torus analysis's, the lanes' handoff and the linear algebra's
-    kernels in a worker while the driver compiles the integrator (cells.warm_beside), on
-    stand-in data: a kernel that a survey's cells and the report's relative equilibria
-    then call with arguments of another type -- or one the stand-in never reached -- would
-    compile again, in the workers and the driver after the survey. Run in a fresh process,
-    where numba's dispatchers list what that process compiled or loaded."""
+    """A first run compiles the energies', the torus analysis's, the lanes' handoff and the
+    linear algebra's kernels in a worker while the driver compiles the integrator
+    (cells.warm_beside), on stand-in data: a kernel that a survey's cells and the
+    report's relative equilibria then call with arguments of another type -- or one the
+    stand-in never reached -- would compile again, in the workers and the driver after
+    the survey. Run in a fresh process, where numba's dispatchers list what that process
+    compiled or loaded."""
     import subprocess
     import sys
     out = subprocess.run([sys.executable, "-c", COVERAGE], capture_output=True, text=True,
