@@ -77,10 +77,12 @@ def _client(config: Config, workers, address):
                  "DASK_DISTRIBUTED__ADMIN__SYSTEM_MONITOR__INTERVAL": "2s",
                  "DASK_DISTRIBUTED__WORKER__MEMORY__MONITOR_INTERVAL": "1s"}
         # The first workers are forked from this process, with its modules imported and its
-        # kernels loaded (warm_up ran here first): the cluster starts in 0.5 s instead of 1.4 s,
-        # which spawned workers spend importing numpy, numba, dask and survey again. Forked
-        # while this process only waits for them; a worker restarted later (one that died) is
-        # spawned, as this process then runs threads whose locks a fork would copy held.
+        # kernels loaded (warm_up ran here first; on a first run they are forked before it
+        # and load them from the disk cache, see _start): the cluster starts in 0.5 s
+        # instead of 1.4 s, which spawned workers spend importing numpy, numba, dask and
+        # survey again. Forked while this process only waits for them; a worker restarted
+        # later (one that died) is spawned, as this process then runs threads whose locks a
+        # fork would copy held.
         fork = "fork" in multiprocessing.get_all_start_methods()
         quiet["DASK_DISTRIBUTED__WORKER__MULTIPROCESSING_METHOD"] = "fork" if fork else "spawn"
         os.environ.update(quiet)
@@ -416,10 +418,10 @@ def _start(stack, config, task, first, starts, workers, address, clock, progress
     cluster = f"connecting to the dask scheduler at {address}" if address else \
         f"starting {workers or config.tables['dask']['workers']} local dask workers"
     # A first run: the local workers start first (forked without the kernels, which they
-    # then load from the disk cache), so that one compiles what warm_up does not reach
-    # while this process compiles the integrator -- the second core idled for that minute
-    # (the default survey: 96 -> ~80 s on 2 cores). Otherwise they are forked after
-    # warm_up, with the kernels loaded.
+    # then load from the disk cache), so that one compiles everything but the integrator
+    # (warm_beside) while this process compiles the integrator -- the second core idled
+    # for that minute (the default survey: 96-104 -> 64-78 s on 2 cores). Otherwise they
+    # are forked after warm_up, with the kernels loaded.
     beside = None
     if not address and not kernels_cached():
         with notice(cluster, progress):
