@@ -134,11 +134,21 @@ def _quiet_interrupt():
 def dask_setup(worker):
     """Preload of our local workers. A terminal's Ctrl-C reaches every process of its group;
     the driver stops the cluster and says how to resume, so the workers ignore it rather
-    than each print a traceback. A worker process leaves without the interpreter's teardown
-    of numba and LLVM (registered first, this runs after every other exit handler): the
-    cluster's shutdown waits for it."""
+    than each print a traceback -- also the one a worker's heartbeat logs when the
+    scheduler (in the driver) is gone before the worker is stopped (a loaded machine, a
+    test run). A worker process leaves without the interpreter's teardown of numba and
+    LLVM (registered first, this runs after every other exit handler): the cluster's
+    shutdown waits for it."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    logging.getLogger("distributed.worker").addFilter(_scheduler_gone)
     atexit.register(os._exit, 0)
+
+
+def _scheduler_gone(record: logging.LogRecord) -> bool:
+    """False for a worker's heartbeat that found the scheduler gone: a local cluster's
+    scheduler goes only when the driver stops it. Other worker errors pass."""
+    return not record.getMessage().startswith("Failed to communicate with scheduler during "
+                                              "heartbeat")
 
 
 def _reach(address: str, timeout: float):

@@ -448,6 +448,20 @@ def test_ctrl_c_says_how_to_resume_and_the_rerun_finishes(tmp_path):
     same_data(xr.open_dataset(tmp_path / "g.nc"), fresh(tmp_path, cfg))
 
 
+def test_a_worker_says_nothing_of_the_scheduler_the_driver_stopped():
+    """A Ctrl-C stops the driver's scheduler while the workers, which ignore it, still run:
+    a heartbeat then failed and printed dask's traceback above the survey's one line (a
+    loaded machine, 2026-11-28). Our workers drop that record and keep their other errors."""
+    script = ("import logging; from survey.pipeline import sweep; sweep.dask_setup(None); "
+              "log = logging.getLogger('distributed.worker'); "
+              "log.error('Failed to communicate with scheduler during heartbeat.'); "
+              "log.error('Compute Failed')")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stderr.strip() == "Compute Failed", done.stderr
+
+
 def test_a_ctrl_c_before_dask_has_begun_the_call_prints_no_traceback(caplog):
     """distributed's `sync` answers a Ctrl-C by scheduling a cancel on its loop thread,
     which fails with a logged NameError when its call has not begun; the loop busy, that
