@@ -228,10 +228,9 @@ def indicator_overhead(t_final=2000.0, repeats=7, deviations=2, out=print):
 
 def interaction_terms(t_final=2000.0, repeats=5, out=print):
     """The paper's one-term systems have a compiled path of their own (a 1-D `par`, in which
-    further terms do not exist); sums of terms take the general one (a 2-D `par`). Here the
-    same paper orbit runs both ways, interleaved, best of `repeats`: general / own, with the
-    results compared bit for bit. (Against the code before sums of terms existed, the own
-    path measured +2-5%, at this machine's run-to-run spread.)"""
+    further terms do not exist; the relative motion alone integrated); sums of terms take
+    the general one (a 2-D `par`). Here the same paper orbit runs both ways, interleaved,
+    best of `repeats`: general / own, the orbits compared over t = 10."""
     from dataclasses import dataclass
 
     @dataclass(frozen=True, eq=False)
@@ -253,13 +252,16 @@ def interaction_terms(t_final=2000.0, repeats=5, out=print):
                 t = time.perf_counter()
                 res[name] = integrate(system, y0, t_final, **kw)
                 best[name] = min(best.get(name, math.inf), time.perf_counter() - t)
-        same = np.array_equal(res["own"].y, res["general"].y) and \
-            res["own"].n_steps == res["general"].n_steps
+        # the own path integrates the relative motion (8 components, integrate._Frame), the
+        # general one all 12: the same orbit to the tolerance, not the same bits; compared
+        # over t = 10 (the 'sides' orbit is chaotic)
+        short = [integrate(s, y0, min(t_final, 10.0), **kw).y for s in (own, general)]
+        same = np.allclose(short[0], short[1], rtol=1e-8, atol=1e-10)
         rows.append(dict(case=label, own=best["own"], general=best["general"], same=same))
     out("")
     out(f"The paper's system on its own compiled path vs the general path of sums of terms "
         f"('sides' orbit, t = {t_final:g}, best of {repeats} interleaved runs)")
-    out(f"{'case':26s} {'own s':>8s} {'general s':>10s} {'general/own':>12s} identical")
+    out(f"{'case':26s} {'own s':>8s} {'general s':>10s} {'general/own':>12s} agree")
     for r in rows:
         out(f"{r['case']:26s} {r['own']:8.3f} {r['general']:10.3f} "
             f"{r['general'] / r['own']:11.2f}x {'yes' if r['same'] else 'NO'}")

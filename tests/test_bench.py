@@ -17,7 +17,7 @@ def test_bench_parts_run_and_print_their_ratios(tmp_path):
     # portability test compiles them all cold already): its timer is checked on its own below
     bench.fixed_costs(folder=str(tmp_path), repeats=1, out=lines.append, cold=False)
     rows = bench.interaction_terms(t_final=2.0, repeats=1, out=lines.append)
-    assert all(r["same"] for r in rows)     # the two paths give the same orbit, bit for bit
+    assert all(r["same"] for r in rows)     # the two paths give the same orbit
     steps = bench.step_costs(t_final=2.0, repeats=1, lanes=(1, 16), out=lines.append)
     assert [(r[0], r[1], r[2]) for r in steps] == [(c[0], k, L) for c in bench.CASES
                                                    for k in (0, 1) for L in (1, 16)]

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..physics.jit import helper, lanes, leaf
 from ..physics.portable import fma
-from ..physics.system import rhs, rhs_lanes
+from ..physics.system import REDUCED, rhs, rhs_lanes, state_size
 
 EPS = np.finfo(np.float64).eps
 
@@ -576,7 +576,7 @@ def _dot_long(K, i, parts):
 def _rhs(y, dy, L, masses, d, measure, prof, par, n_tan, W):
     """The right-hand side of L lanes; one orbit straight through `rhs` (a call less: 16 ns
     of a 44 ns evaluation). The systems are autonomous: it is given no time."""
-    if L == 1:
+    if L == 1 and measure < REDUCED:
         rhs(0.0, y, dy, masses, d, measure, prof, par, n_tan)
     else:
         rhs_lanes(0.0, y, dy, L, masses, d, measure, prof, par, n_tan, W)
@@ -675,7 +675,7 @@ def dense_prepare(masses, d, measure, prof, par, L, nd, y, ynew, hh, K, yt, F, W
     and their tangent vectors'); K[12] must hold f(ynew). No flag or count of tangents
     among the arguments: a literal one (the waiting slots hold orbits alone) compiled a
     second copy of this function and its right-hand sides."""
-    nt = nd // (2 * masses.size * d) - 1
+    nt = nd // state_size(masses, d, measure) - 1
     M = nd * L
     for i in range(M):
         yt[i] = fma(hh[i], _dot(K, i, A14), y[i])

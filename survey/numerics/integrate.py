@@ -37,8 +37,9 @@ from ..catalog import defaults
 from ..catalog.status import Status
 from ..physics import portable
 from ..physics.jit import helper, kernel, lanes, leaf
+from ..physics.terms import AREA, PERIMETER
 from ..physics.system import (
-    SIMD_LANES, SIMD_MIN, System, rhs, rhs_lanes, workspace_size,
+    REDUCED, SIMD_LANES, SIMD_MIN, System, rhs, rhs_lanes, state_size, workspace_size,
 )
 from .dop853 import (
     BETA_ROOTS,
@@ -181,7 +182,7 @@ def _finite(x):
 
 @helper
 def _initial_step(masses, d, measure, prof, par, n_tan, nf, n_err, t, y, K, yt, direction,
-                  h_max, rtol, atol):
+                  h_max, rtol, atol, W):
     """Hairer's hinit: a first step from the sizes of y, f(y) (in K[0]) and an estimate
     of the second derivative (one evaluation, into K[1]), at most h_max."""
     dnf = 0.0
@@ -194,7 +195,7 @@ def _initial_step(masses, d, measure, prof, par, n_tan, nf, n_err, t, y, K, yt, 
     h = min(h, h_max)
     for a in range(nf):
         yt[a] = y[a] + direction * h * K[0, a]
-    rhs(t + direction * h, yt, K[1], masses, d, measure, prof, par, n_tan)
+    _rhs_one(t + direction * h, yt, K[1], masses, d, measure, prof, par, n_tan, W)
     der2 = 0.0
     for a in range(n_err):
         sk = atol + rtol * abs(y[a])
@@ -226,7 +227,7 @@ def _start(k, j, ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_ta
     and first step. Returns False if the job ended at once (nonfinite start, zero span)."""
     L = ln.job.size
     nf = y0s.shape[1]
-    n = 2 * masses.size * d
+    n = state_size(masses, d, measure)
     eoff, ep, direc, terminal, guard, watch = events
     y, K = ln.y1, ln.k1
     ln.job[k] = j
@@ -248,8 +249,12 @@ def _start(k, j, ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_ta
         _finish(k, ln, out, NONFINITE_, rows)
         return False
     for tt in range(n_tan):
-        out.log_growth[j, tt] = -portable.log(norm_block(y, n * (1 + tt), n))
-    rhs(t0, y, K[0], masses, d, measure, prof, par, n_tan)
+        if measure >= REDUCED:
+            w = tangent_norm(y, n * (1 + tt), n, _ratios(masses))
+        else:
+            w = tangent_norm(y, n * (1 + tt), n, None)
+        out.log_growth[j, tt] = -portable.log(w)
+    _rhs_one(t0, y, K[0], masses, d, measure, prof, par, n_tan, ln.W)
     out.counts[j, 2] += 1
     for i in range(nf):
         ln.K[0, i * L + k] = K[0, i]
@@ -286,7 +291,7 @@ def _start(k, j, ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_ta
         h = min(h0, ln.h_max[k])
     else:
         h = _initial_step(masses, d, measure, prof, par, n_tan, nf, n_err, t0, y, K, ln.YT,
-                          direction, ln.h_max[k], rtol, atol)
+                          direction, ln.h_max[k], rtol, atol, ln.W)
         out.counts[j, 2] += 1
     ln.h[k] = h * direction
     return True
@@ -302,13 +307,13 @@ def _lane(ln, k):
 
 
 @helper
-def _record(k, ln, out, rows, t0, t1, masses, d, megno, events, max_events, n_sub, t_eval,
-            n_eval, t_fine, later):
+def _record(k, ln, out, rows, t0, t1, masses, d, n, rb, megno, events, max_events, n_sub,
+            t_eval, n_eval, t_fine, later):
     """What lane k's accepted step [t, t + h] records, before the lane takes its new state
     (its dense output prepared if it needs one now): counters, event crossings, samples;
     with `later`, its samples at t_fine wait in ln.wait. Returns EVENT_ at a terminal event
-    (the state and time then the event's), else RUNNING."""
-    n = 2 * masses.size * d
+    (the state and time then the event's), else RUNNING. n: the orbit's components in the
+    state; rb: see tangent_norm."""
     j = ln.job[k]
     yd = ln.yd
     t, h = ln.t[k], ln.h[k]
@@ -386,7 +391,7 @@ def _record(k, ln, out, rows, t0, t1, masses, d, megno, events, max_events, n_su
             out.sample_log[rs, i_eval, tt] = log_growth[tt]
         if megno and n_eval >= 2 * n:
             part = t_eval[i_eval] - t
-            L_at = log_growth[0] + portable.log(norm_block(sample, n, n))
+            L_at = log_growth[0] + portable.log(tangent_norm(sample, n, n, rb))
             elapsed = t_eval[i_eval] - t0
             int_at = int_L + 0.5 * part * (L_prev + L_at)
             Y_at = 2.0 * (elapsed * L_at - int_at) / elapsed if elapsed != 0.0 else 0.0
@@ -596,7 +601,7 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
         rhs_lanes(0.0, ln.YN, ln.K[12], L, masses, d, measure, prof, par, n_tan, ln.W)
         _finite_lanes(ln.YN, ln.K[12], L, nf, ln.NW)
         dense = later = 0
-        n = 2 * masses.size * d
+        n = state_size(masses, d, measure)
         for k in range(L):
             j = ln.job[k]
             ln.flags[k, 3] = 0
@@ -632,21 +637,31 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
         elif dense == DENSE_LATER and ln.wait.count[0] + later > ln.wait.t.size:
             _flush(ln, out, masses, d, measure, prof, par, t_fine)   # room for the steps
         for k in range(L):
-            if ln.flags[k, 3] and _record(k, ln, out, rows, t0, t1, masses, d, megno,
-                                          events, max_events, n_sub, t_eval, n_eval,
-                                          t_fine, dense == DENSE_LATER) == EVENT_:
-                _finish(k, ln, out, EVENT_, rows)
-                ln.flags[k, 3] = 0
+            if ln.flags[k, 3]:
+                if measure >= REDUCED:
+                    ended = _record(k, ln, out, rows, t0, t1, masses, d, n, _ratios(masses),
+                                    megno, events, max_events, n_sub, t_eval, n_eval,
+                                    t_fine, dense == DENSE_LATER)
+                else:
+                    ended = _record(k, ln, out, rows, t0, t1, masses, d, n, None, megno,
+                                    events, max_events, n_sub, t_eval, n_eval, t_fine,
+                                    dense == DENSE_LATER)
+                if ended == EVENT_:
+                    _finish(k, ln, out, EVENT_, rows)
+                    ln.flags[k, 3] = 0
             ln.taken[k] = -ln.flags[k, 3]
         # ---- accepted lanes take their new states, then their tangent vectors' norms
         _take(ln.Y, ln.YN, ln.K[0], ln.K[12], ln.taken, L, nf)
-        _tangent_norms(ln.Y, L, 2 * masses.size * d, n_tan, ln.NW)
+        if measure >= REDUCED:
+            _tangent_norms(ln.Y, L, n, n_tan, ln.NW, _ratios(masses))
+        else:
+            _tangent_norms(ln.Y, L, n, n_tan, ln.NW, None)
         if n_tan > 0:
             _growth_terms(ln.NW, ln.t, ln.h, ln.flags, t0, t1, L, n_tan)
         for k in range(L):
             if not ln.flags[k, 3]:
                 continue
-            if _advance(k, ln, out, t0, t1, 2 * masses.size * d, n_tan, megno, renorm_dt,
+            if _advance(k, ln, out, t0, t1, n, n_tan, megno, renorm_dt,
                         ln.NW) == OK_:
                 _finish(k, ln, out, OK_, rows)
                 continue
@@ -738,23 +753,78 @@ def _take(Y, YN, K0, K12, take, L, nf):
 
 
 @lanes
-def _tangent_norms(Y, L, n, n_tan, NW):
+def _tangent_norms(Y, L, n, n_tan, NW, rb):
     """NW[t * L + k]: the norm of lane k's tangent vector t, summed in its components' order
-    as numerics.dop853.norm_block does."""
+    as `tangent_norm` does."""
     if L == 1:
         for t in range(n_tan):
-            NW[t] = norm_block(Y, n * (1 + t), n)
+            NW[t] = tangent_norm(Y, n * (1 + t), n, rb)
         return
     for t in range(n_tan):
         nw = NW[t * L:(t + 1) * L]
         for k in range(L):
             nw[k] = 0.0
-        for i in range(n * (1 + t), n * (2 + t)):
-            w = Y[i * L:]
-            for k in range(L):
-                nw[k] += w[k] * w[k]
+        if rb is None:
+            for i in range(n * (1 + t), n * (2 + t)):
+                w = Y[i * L:]
+                for k in range(L):
+                    nw[k] += w[k] * w[k]
+        else:           # positions, then momenta, each followed by the third body's
+            for h in range(2):
+                b = n * (1 + t) + 4 * h
+                for i in range(b, b + 4):
+                    w = Y[i * L:]
+                    for k in range(L):
+                        nw[k] += w[k] * w[k]
+                _rebuilt_squares(Y, L, b, rb if h == 0 else (1.0, 1.0), nw)
         for k in range(L):
             nw[k] = math.sqrt(nw[k])
+
+
+@helper
+def _rebuilt_squares(Y, L, i0, c, nw):
+    """Add to nw the squares of the third body's rebuilt components -(c0 a + c1 b) from
+    rows i0, i0 + 1 (body 0) and i0 + 2, i0 + 3 (body 1)."""
+    for r in range(2):
+        a, b = Y[(i0 + r) * L:], Y[(i0 + 2 + r) * L:]
+        for k in range(L):
+            x = portable.fma(c[0], a[k], c[1] * b[k])
+            nw[k] += x * x
+
+
+@helper
+def _ratios(masses):
+    """m0/m2, m1/m2: a reduced state's third body (physics.system._lane_positions)."""
+    return masses[0] / masses[2], masses[1] / masses[2]
+
+
+@helper
+def tangent_norm(y, off, n, rb):
+    """|w| of the tangent vector at y[off:off + n]; of a reduced one (rb: the mass ratios)
+    with the third body's rebuilt deviations, in the full vector's order: the norm FTLE,
+    MEGNO and FLI measure whatever the state's form."""
+    if rb is None:
+        return norm_block(y, off, n)
+    s = 0.0
+    for h in range(2):                      # positions, then momenta
+        b = off + 4 * h
+        c = rb if h == 0 else (1.0, 1.0)
+        for i in range(b, b + 4):
+            s += y[i] * y[i]
+        for r in range(2):
+            x = portable.fma(c[0], y[b + r], c[1] * y[b + 2 + r])
+            s += x * x
+    return math.sqrt(s)
+
+
+@helper
+def _rhs_one(t, y, dy, masses, d, measure, prof, par, n_tan, W):
+    """The right-hand side at one state: `rhs`, or for a reduced state its lane loops at
+    L = 1 (W: their workspace)."""
+    if measure >= REDUCED:
+        rhs_lanes(t, y, dy, 1, masses, d, measure, prof, par, n_tan, W)
+    else:
+        rhs(t, y, dy, masses, d, measure, prof, par, n_tan)
 
 
 @lanes
@@ -930,7 +1000,7 @@ def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol,
     loop that turns once, or once per 256 rounds with a time limit.
     """
     M, nf = y0s.shape
-    n = 2 * masses.size * d
+    n = state_size(masses, d, measure)
     m = events[0].size - 1
     Me, Ms, Mf = rows[0].max() + 1, rows[1].max() + 1, rows[2].max() + 1
     T, Tf = t_eval.size, t_fine.size
@@ -1071,18 +1141,22 @@ def integrate_batch(system: System, starts, t_span, *, tangents=None, record=Non
     for r, flag in enumerate((EVENTS, EVAL, FINE)):
         which = (record & flag) != 0
         rows[r, which] = np.arange(which.sum())
-    n_eval = y0s.shape[1] if sample_tangents else n
-    n_err = n * (1 + n_tan) if control_tangents else n
+    masses, d, measure, prof, par = system.kernel_args
+    frame = _Frame.of(system, starts, tan, events)
+    if frame is not None:               # bodies 0 and 1 in the centre-of-mass frame
+        y0s, measure = frame.reduce(y0s, n_tan), measure + REDUCED
+    r = y0s.shape[1] // (1 + n_tan)     # the kernel's block: n, or 8 reduced
+    n_eval = y0s.shape[1] if sample_tangents else r
+    n_err = r * (1 + n_tan) if control_tangents else r
     if not events:
         max_events = 0                  # nothing to record: no room for it
-    masses, d, measure, prof, par = system.kernel_args
     common = dict(t0=t0, masses=masses, d=d, measure=measure, prof=prof, par=par,
                   rtol=float(rtol), atol=float(atol), max_steps=int(max_steps),
                   h0=float(first_step), h_max=float(max_step), h_min=float(min_step),
                   renorm_dt=float(renorm_interval), L=int(lanes or lanes_for(M)))
     # (one lane runs its jobs one after another: their order changes nothing)
-    order = _costliest_first(starts, t1, float(time_limit), common) \
-        if M > common["L"] > 1 else np.arange(M)
+    order = _costliest_first(np.ascontiguousarray(y0s[:, :r]), t1, float(time_limit),
+                             common) if M > common["L"] > 1 else np.arange(M)
     # (rows[:, order] alone would be Fortran-ordered: a second compilation of the kernel)
     res = dop853(y0s=y0s[order], rows=np.ascontiguousarray(rows[:, order]), t1=t1,
                  n_tan=n_tan, megno=megno, n_err=n_err, events=encode_events(events, system),
@@ -1090,8 +1164,86 @@ def integrate_batch(system: System, starts, t_span, *, tangents=None, record=Non
                  n_eval=n_eval, time_limit=float(time_limit), t_fine=t_fine, **common)
     at = np.empty(M, dtype=np.int64)
     at[order] = np.arange(M)
+    if frame is not None:
+        res = frame.restore(res, order, rows, n_tan, t0, t_eval, t_fine)
+        n_eval = y0s.shape[1] // r * n if sample_tangents else n
     return [_outcome(res, at[j], rows[:, j], n, n_tan, tan[j], megno, max_events, t_eval,
                      n_eval, t_fine, sample_tangents) for j in range(M)]
+
+
+class _Frame(NamedTuple):
+    """A batch integrated as reduced states (physics.system.REDUCED): three bodies in the
+    plane under one perimetric or areal term, every orbit moved to its centre-of-mass frame
+    and bodies 0 and 1 integrated (the centre of mass rides along in 12 components -- a
+    third of the stage combinations, error norms and dense output -- though the forces
+    never move it: the scan's task 19% faster). Tangent vectors must have no centre-of-mass
+    part (to roundoff), whose motion is not integrated; events are not yet re-encoded for
+    the reduced state, so a batch with events runs full."""
+
+    masses: np.ndarray
+    Q0: np.ndarray            # (M, 2) each orbit's centre of mass at t0
+    V: np.ndarray             # (M, 2) and its velocity
+
+    @staticmethod
+    def of(system, starts, tan, events):
+        masses, d, measure, prof, par = system.kernel_args
+        if events or masses.size != 3 or d != 2 or par.ndim != 1 or \
+                measure not in (PERIMETER, AREA):
+            return None
+        m = masses[None, :, None]
+        w = tan.reshape(tan.shape[0], tan.shape[1], 2, 3, 2)
+        moments = np.concatenate([(m[:, None] * w[:, :, 0]).sum(2), w[:, :, 1].sum(2)], -1)
+        if np.any(np.abs(moments) > 1e-12 * np.abs(w).max(initial=0.0)):
+            return None
+        q, p = starts[:, :6].reshape(-1, 3, 2), starts[:, 6:].reshape(-1, 3, 2)
+        return _Frame(masses, (m * q).sum(1) / masses.sum(), p.sum(1) / masses.sum())
+
+    def reduce(self, y0s, n_tan):
+        """Each job's orbit in its centre-of-mass frame, then bodies 0 and 1 of it and of
+        its tangent vectors: (M, 8 (1 + n_tan))."""
+        M = y0s.shape[0]
+        blocks = y0s.reshape(M, 1 + n_tan, 2, 3, 2).copy()
+        blocks[:, 0, 0] -= self.Q0[:, None]
+        blocks[:, 0, 1] -= self.masses[None, :, None] * self.V[:, None]
+        return np.ascontiguousarray(blocks[:, :, :, :2].reshape(M, -1))
+
+    def full(self, x, at, t, t0, orbit):
+        """Reduced blocks x (..., 8) back to full states (..., 12): the third body rebuilt
+        as the kernel does; for orbits (orbit), the centre of mass at time t added back
+        (at: each row's job)."""
+        m = self.masses
+        x = x.reshape(*x.shape[:-1], 2, 2, 2)
+        third = -(m[0] / m[2] * x[..., 0, :] + m[1] / m[2] * x[..., 1, :])
+        third[..., 1, :] = -(x[..., 1, 0, :] + x[..., 1, 1, :])
+        y = np.concatenate([x, third[..., None, :]], -2)
+        if orbit:
+            shape = (-1,) + (1,) * (y.ndim - 4)
+            y[..., 0, :, :] += (self.Q0[at].reshape(*shape, 1, 2)
+                                + self.V[at].reshape(*shape, 1, 2)
+                                * (np.asarray(t) - t0)[..., None, None])
+            y[..., 1, :, :] += m[:, None] * self.V[at].reshape(*shape, 1, 2)
+        return y.reshape(*y.shape[:-3], 12)
+
+    def restore(self, res, order, rows, n_tan, t0, t_eval, t_fine):
+        """The kernel's outcome with full states."""
+        def whole(z, at, t):
+            blocks = z.reshape(*z.shape[:-1], -1, 8)
+            orbit = self.full(blocks[..., 0, :], at, t, t0, True)
+            tangents = self.full(blocks[..., 1:, :], at, 0.0, t0, False)
+            return np.concatenate([orbit[..., None, :], tangents], -2).reshape(
+                *z.shape[:-1], -1)
+        owner = np.empty((3, rows.shape[1]), dtype=np.int64)
+        for k in range(3):
+            owner[k, rows[k][rows[k] >= 0]] = np.flatnonzero(rows[k] >= 0)
+        samples = res.samples
+        if samples.size:
+            sampled = owner[1, :samples.shape[0]]
+            samples = whole(samples, sampled, np.broadcast_to(t_eval, samples.shape[:2]))
+        fine = res.fine
+        if fine.shape[-1]:
+            fined = owner[2, :fine.shape[0]]
+            fine = self.full(fine, fined, np.broadcast_to(t_fine, fine.shape[:2]), t0, True)
+        return res._replace(y=whole(res.y, order, res.t), samples=samples, fine=fine)
 
 
 PILOT = 1.0 / 400.0     # of the span: the step counts that order a batch's jobs

@@ -28,7 +28,7 @@ from .forces import (
     vec,
 )
 from .geometry import cross
-from .portable import power, vnorm
+from .portable import fma, power, vnorm
 from .jit import helper, kernel, lanes, leaf
 from .terms import (
     AREA,
@@ -376,6 +376,18 @@ SIMD_LANES = 16
 SIMD_MIN = 4
 
 
+# The kernel's measure code of a reduced state (see _lane_positions): REDUCED + PERIMETER or
+# REDUCED + AREA, three bodies in the plane under that one term (`reducible`).
+REDUCED = 16
+
+
+@helper
+def state_size(masses, d, measure):
+    """Components of an orbit's (or a tangent vector's) block in the kernel's state: 2 N d,
+    or 8 for a reduced state."""
+    return 8 if measure >= REDUCED else 2 * masses.size * d
+
+
 @helper
 def workspace_size(L, nf):
     """Floats of the workspace `rhs_lanes` needs for L lanes of nf components."""
@@ -392,17 +404,28 @@ def rhs_lanes(t, Y, dY, L, masses, d, measure, prof, par, n_tan, W):
     components and accumulations, so every lane gets the bits `rhs` gives
     (tests/physics/test_system.py). Otherwise `rhs` runs lane by lane."""
     N = masses.size
-    if L >= SIMD_MIN and N == 3 and d == 2 and par.ndim == 1 and (measure == PERIMETER
-                                                                  or measure == AREA):
+    if measure >= REDUCED:          # at any L: no scalar path of its own
+        inv = (1.0 / masses[0], 1.0 / masses[1], 1.0 / masses[2])
+        rb = (masses[0] / masses[2], masses[1] / masses[2])
+        if measure == REDUCED + PERIMETER:
+            _perimetric_orbits(Y, dY, L, W, prof, lead_params(par), inv, rb)
+            for t in range(1, 1 + n_tan):
+                _perimetric_tangent(Y[8 * L * t:], dY[8 * L * t:], L, W, inv, rb)
+        else:
+            _areal_orbits(Y, dY, L, W, prof, lead_params(par), inv, rb)
+            for t in range(1, 1 + n_tan):
+                _areal_tangent(Y, Y[8 * L * t:], dY[8 * L * t:], L, W, inv, rb)
+    elif L >= SIMD_MIN and N == 3 and d == 2 and par.ndim == 1 and (measure == PERIMETER
+                                                                    or measure == AREA):
         inv = (1.0 / masses[0], 1.0 / masses[1], 1.0 / masses[2])
         if measure == PERIMETER:
-            _perimetric_orbits(Y, dY, L, W, prof, lead_params(par), inv)
+            _perimetric_orbits(Y, dY, L, W, prof, lead_params(par), inv, None)
             for t in range(1, 1 + n_tan):
-                _perimetric_tangent(Y[12 * L * t:], dY[12 * L * t:], L, W, inv)
+                _perimetric_tangent(Y[12 * L * t:], dY[12 * L * t:], L, W, inv, None)
         else:
-            _areal_orbits(Y, dY, L, W, prof, lead_params(par), inv)
+            _areal_orbits(Y, dY, L, W, prof, lead_params(par), inv, None)
             for t in range(1, 1 + n_tan):
-                _areal_tangent(Y, Y[12 * L * t:], dY[12 * L * t:], L, W, inv)
+                _areal_tangent(Y, Y[12 * L * t:], dY[12 * L * t:], L, W, inv, None)
     elif L == 1:
         rhs(t, Y, dY, masses, d, measure, prof, par, n_tan)
     else:
@@ -523,19 +546,41 @@ def _planar_areal(y, dy, masses, prof, par, n_tan):
 # |A|^2/2) and the barrier: a branch on the profile inside a loop keeps it scalar (19 ns),
 # so each of those has a loop of its own, and any other takes three.
 
+# A reduced state (rb: the mass ratios m0/m2, m1/m2) holds bodies 0 and 1 alone, positions
+# then momenta (8 rows), the centre of mass at rest at 0: body 2 is rebuilt from them where
+# needed, and its rates are not computed. rb is None for the full state (12 rows): numba
+# compiles each loop once per kind, the branches on rb pruned.
+
 @helper
-def _lane_velocities(y, dy, L, k, inv):
+def _lane_positions(Y, L, k, rb):
+    """Lane k's three positions (of the orbit, or of a tangent vector's deviations)."""
+    x0, y0, x1, y1 = Y[k], Y[L + k], Y[2 * L + k], Y[3 * L + k]
+    if rb is None:
+        return x0, y0, x1, y1, Y[4 * L + k], Y[5 * L + k]
+    return x0, y0, x1, y1, -fma(rb[0], x0, rb[1] * x1), -fma(rb[0], y0, rb[1] * y1)
+
+
+@helper
+def _forces_row(rb):
+    """The first momentum row: 6 in a full state, 4 in a reduced one."""
+    return 6 if rb is None else 4
+
+
+@helper
+def _lane_velocities(y, dy, L, k, inv, rb):
     """dq/dt = p/m of lane k's block (the orbit's or a tangent vector's; inv: 1/m)."""
-    dy[k] = y[6 * L + k] * inv[0]
-    dy[L + k] = y[7 * L + k] * inv[0]
-    dy[2 * L + k] = y[8 * L + k] * inv[1]
-    dy[3 * L + k] = y[9 * L + k] * inv[1]
-    dy[4 * L + k] = y[10 * L + k] * inv[2]
-    dy[5 * L + k] = y[11 * L + k] * inv[2]
+    P = _forces_row(rb)
+    dy[k] = y[P * L + k] * inv[0]
+    dy[L + k] = y[(P + 1) * L + k] * inv[0]
+    dy[2 * L + k] = y[(P + 2) * L + k] * inv[1]
+    dy[3 * L + k] = y[(P + 3) * L + k] * inv[1]
+    if rb is None:
+        dy[4 * L + k] = y[10 * L + k] * inv[2]
+        dy[5 * L + k] = y[11 * L + k] * inv[2]
 
 
 @lanes
-def _perimetric_orbits(Y, dY, L, W, prof, par, inv):
+def _perimetric_orbits(Y, dY, L, W, prof, par, inv, rb):
     """forces.perimetric_forces of bodies (0, 1, 2) in the plane and the velocities, lane by
     lane, the leading `0.0 +` of each force keeping the general path's zero signs (it adds
     into zeros). W rows: e1x e1y e2x e2y e3x e3y L1 L2 L3 P U' U'' U'/L1 U'/L2 U'/L3 (the
@@ -543,17 +588,17 @@ def _perimetric_orbits(Y, dY, L, W, prof, par, inv):
     by the general profile's loops only)."""
     if prof == POWER and par[1] == 2.0:
         for k in range(L):
-            e, s = _triangle_sides(Y, L, W, k)
+            e, s = _triangle_sides(Y, L, W, k, rb)
             _, U1, U2 = power_2(par[0], s[0] + s[1] + s[2])
-            _perimetric_lane(Y, dY, L, W, k, inv, e, s, U1, U2)
+            _perimetric_lane(Y, dY, L, W, k, inv, e, s, U1, U2, rb)
     elif prof == BARRIER:
         for k in range(L):
-            e, s = _triangle_sides(Y, L, W, k)
+            e, s = _triangle_sides(Y, L, W, k, rb)
             _, U1, U2 = barrier(par[0], par[1], s[0] + s[1] + s[2])
-            _perimetric_lane(Y, dY, L, W, k, inv, e, s, U1, U2)
+            _perimetric_lane(Y, dY, L, W, k, inv, e, s, U1, U2, rb)
     else:
         for k in range(L):
-            _, s = _triangle_sides(Y, L, W, k)
+            _, s = _triangle_sides(Y, L, W, k, rb)
             W[6 * L + k], W[7 * L + k], W[8 * L + k] = s
             W[9 * L + k] = s[0] + s[1] + s[2]
         for k in range(L):
@@ -561,18 +606,19 @@ def _perimetric_orbits(Y, dY, L, W, prof, par, inv):
         for k in range(L):
             e = (W[k], W[L + k], W[2 * L + k], W[3 * L + k], W[4 * L + k], W[5 * L + k])
             s = (W[6 * L + k], W[7 * L + k], W[8 * L + k])
-            _perimetric_lane(Y, dY, L, W, k, inv, e, s, W[10 * L + k], W[11 * L + k])
+            _perimetric_lane(Y, dY, L, W, k, inv, e, s, W[10 * L + k], W[11 * L + k], rb)
 
 
 @helper
-def _triangle_sides(Y, L, W, k):
+def _triangle_sides(Y, L, W, k, rb):
     """Lane k's side unit vectors into W (rows 0-5), and returned with its side lengths.
     (A loop that reads back what it wrote to other rows of W runs scalar -- the compiler
     cannot tell the rows apart, L being a run-time value --, and so does the loop of the
     paper's profile with the lengths stored too: the general profile's loops store them.)"""
-    ax, ay = Y[2 * L + k] - Y[k], Y[3 * L + k] - Y[L + k]       # v - u
-    bx, by = Y[4 * L + k] - Y[2 * L + k], Y[5 * L + k] - Y[3 * L + k]   # w - v
-    cx, cy = Y[k] - Y[4 * L + k], Y[L + k] - Y[5 * L + k]       # u - w
+    ux, uy, vx, vy, wx, wy = _lane_positions(Y, L, k, rb)
+    ax, ay = vx - ux, vy - uy           # v - u
+    bx, by = wx - vx, wy - vy           # w - v
+    cx, cy = ux - wx, uy - wy           # u - w
     L1 = math.sqrt(ax * ax + ay * ay)
     L2 = math.sqrt(bx * bx + by * by)
     L3 = math.sqrt(cx * cx + cy * cy)
@@ -583,32 +629,36 @@ def _triangle_sides(Y, L, W, k):
 
 
 @helper
-def _perimetric_lane(Y, dY, L, W, k, inv, e, s, U1, U2):
+def _perimetric_lane(Y, dY, L, W, k, inv, e, s, U1, U2, rb):
     """Lane k's velocities and forces from its side unit vectors e and lengths s (U1, U2:
     U', U'' at its perimeter), and U'', U'/L_i into W for its tangent vectors."""
     W[11 * L + k] = U2
     W[12 * L + k], W[13 * L + k], W[14 * L + k] = U1 / s[0], U1 / s[1], U1 / s[2]
-    _lane_velocities(Y, dY, L, k, inv)
+    _lane_velocities(Y, dY, L, k, inv, rb)
     e1x, e1y, e2x, e2y, e3x, e3y = e
-    dY[6 * L + k] = 0.0 + U1 * (e1x - e3x)
-    dY[7 * L + k] = 0.0 + U1 * (e1y - e3y)
-    dY[8 * L + k] = 0.0 + U1 * (e2x - e1x)
-    dY[9 * L + k] = 0.0 + U1 * (e2y - e1y)
-    dY[10 * L + k] = 0.0 + U1 * (e3x - e2x)
-    dY[11 * L + k] = 0.0 + U1 * (e3y - e2y)
+    P = _forces_row(rb)
+    dY[P * L + k] = 0.0 + U1 * (e1x - e3x)
+    dY[(P + 1) * L + k] = 0.0 + U1 * (e1y - e3y)
+    dY[(P + 2) * L + k] = 0.0 + U1 * (e2x - e1x)
+    dY[(P + 3) * L + k] = 0.0 + U1 * (e2y - e1y)
+    if rb is None:
+        dY[10 * L + k] = 0.0 + U1 * (e3x - e2x)
+        dY[11 * L + k] = 0.0 + U1 * (e3y - e2y)
 
 
 @lanes
-def _perimetric_tangent(y, dy, L, W, inv):
+def _perimetric_tangent(y, dy, L, W, inv, rb):
     """One tangent vector's block (y, dy start at it): velocities and tangent forces."""
+    P = _forces_row(rb)
     for k in range(L):
-        _lane_velocities(y, dy, L, k, inv)
+        _lane_velocities(y, dy, L, k, inv, rb)
         e1x, e1y, e2x, e2y = W[k], W[L + k], W[2 * L + k], W[3 * L + k]
         e3x, e3y, U2 = W[4 * L + k], W[5 * L + k], W[11 * L + k]
         s1, s2, s3 = W[12 * L + k], W[13 * L + k], W[14 * L + k]
-        p1x, p1y = y[2 * L + k] - y[k], y[3 * L + k] - y[L + k]
-        p2x, p2y = y[4 * L + k] - y[2 * L + k], y[5 * L + k] - y[3 * L + k]
-        p3x, p3y = y[k] - y[4 * L + k], y[L + k] - y[5 * L + k]
+        dux, duy, dvx, dvy, dwx, dwy = _lane_positions(y, L, k, rb)
+        p1x, p1y = dvx - dux, dvy - duy
+        p2x, p2y = dwx - dvx, dwy - dvy
+        p3x, p3y = dux - dwx, duy - dwy
         d1 = e1x * p1x + e1y * p1y
         d2 = e2x * p2x + e2y * p2y
         d3 = e3x * p3x + e3y * p3y
@@ -617,43 +667,45 @@ def _perimetric_tangent(y, dy, L, W, inv):
         g1x, g1y = c1 * e1x + s1 * p1x, c1 * e1y + s1 * p1y
         g2x, g2y = c2 * e2x + s2 * p2x, c2 * e2y + s2 * p2y
         g3x, g3y = c3 * e3x + s3 * p3x, c3 * e3y + s3 * p3y
-        dy[6 * L + k] = 0.0 + (g1x - g3x)
-        dy[7 * L + k] = 0.0 + (g1y - g3y)
-        dy[8 * L + k] = 0.0 + (g2x - g1x)
-        dy[9 * L + k] = 0.0 + (g2y - g1y)
-        dy[10 * L + k] = 0.0 + (g3x - g2x)
-        dy[11 * L + k] = 0.0 + (g3y - g2y)
+        dy[P * L + k] = 0.0 + (g1x - g3x)
+        dy[(P + 1) * L + k] = 0.0 + (g1y - g3y)
+        dy[(P + 2) * L + k] = 0.0 + (g2x - g1x)
+        dy[(P + 3) * L + k] = 0.0 + (g2y - g1y)
+        if rb is None:
+            dy[10 * L + k] = 0.0 + (g3x - g2x)
+            dy[11 * L + k] = 0.0 + (g3y - g2y)
 
 
 @lanes
-def _areal_orbits(Y, dY, L, W, prof, par, inv):
+def _areal_orbits(Y, dY, L, W, prof, par, inv, rb):
     """forces.areal_forces of bodies (0, 1, 2) in the plane and the velocities, lane by
     lane (see _perimetric_orbits): there the area vector and its unit vector have z
     components only. W rows: Ahat_z, 1/|A|, |A|, U', U''."""
     if prof == POWER and par[1] == 2.0:
         for k in range(L):
-            hz, absA = _triangle_area(Y, L, W, k)
+            hz, absA = _triangle_area(Y, L, W, k, rb)
             _, U1, U2 = power_2(par[0], absA)
-            _areal_lane(Y, dY, L, W, k, inv, hz, U1, U2)
+            _areal_lane(Y, dY, L, W, k, inv, hz, U1, U2, rb)
     elif prof == BARRIER:
         for k in range(L):
-            hz, absA = _triangle_area(Y, L, W, k)
+            hz, absA = _triangle_area(Y, L, W, k, rb)
             _, U1, U2 = barrier(par[0], par[1], absA)
-            _areal_lane(Y, dY, L, W, k, inv, hz, U1, U2)
+            _areal_lane(Y, dY, L, W, k, inv, hz, U1, U2, rb)
     else:
         for k in range(L):
-            _triangle_area(Y, L, W, k)
+            _triangle_area(Y, L, W, k, rb)
         for k in range(L):
             _, W[3 * L + k], W[4 * L + k] = profile(prof, par, W[2 * L + k])
         for k in range(L):
-            _areal_lane(Y, dY, L, W, k, inv, W[k], W[3 * L + k], W[4 * L + k])
+            _areal_lane(Y, dY, L, W, k, inv, W[k], W[3 * L + k], W[4 * L + k], rb)
 
 
 @helper
-def _triangle_area(Y, L, W, k):
+def _triangle_area(Y, L, W, k, rb):
     """Lane k's Ahat_z, 1/|A| and |A| into W (rows 0-2); returns Ahat_z and |A|."""
-    ax, ay = Y[2 * L + k] - Y[k], Y[3 * L + k] - Y[L + k]        # v - u
-    bx, by = Y[4 * L + k] - Y[k], Y[5 * L + k] - Y[L + k]        # w - u
+    ux, uy, vx, vy, wx, wy = _lane_positions(Y, L, k, rb)
+    ax, ay = vx - ux, vy - uy           # v - u
+    bx, by = wx - ux, wy - uy           # w - u
     Az = 0.5 * (ax * by - ay * bx)
     absA = math.sqrt(Az * Az)
     inv = 1.0 / absA if absA > 0.0 else 0.0
@@ -663,49 +715,57 @@ def _triangle_area(Y, L, W, k):
 
 
 @helper
-def _areal_lane(Y, dY, L, W, k, inv, hz, U1, U2):
+def _areal_lane(Y, dY, L, W, k, inv, hz, U1, U2, rb):
     """Lane k's velocities and forces from its area's unit vector hz (U1, U2: U', U'' at
     |A|), and U', U'' into W for its tangent vectors."""
     W[3 * L + k], W[4 * L + k] = U1, U2
-    _lane_velocities(Y, dY, L, k, inv)
+    _lane_velocities(Y, dY, L, k, inv, rb)
     f = -0.5 * U1
-    svx, svy = Y[2 * L + k] - Y[4 * L + k], Y[3 * L + k] - Y[5 * L + k]   # v - w
-    swx, swy = Y[4 * L + k] - Y[k], Y[5 * L + k] - Y[L + k]               # w - u
-    sux, suy = Y[k] - Y[2 * L + k], Y[L + k] - Y[3 * L + k]               # u - v
+    sv, sw, su = _areal_sides(Y, L, k, rb)
     # (v - w) x Ahat: twice grad_u |A|, and cyclic
-    dY[6 * L + k] = 0.0 + f * (svy * hz)
-    dY[7 * L + k] = 0.0 + f * -(svx * hz)
-    dY[8 * L + k] = 0.0 + f * (swy * hz)
-    dY[9 * L + k] = 0.0 + f * -(swx * hz)
-    dY[10 * L + k] = 0.0 + f * (suy * hz)
-    dY[11 * L + k] = 0.0 + f * -(sux * hz)
+    P = _forces_row(rb)
+    dY[P * L + k] = 0.0 + f * (sv[1] * hz)
+    dY[(P + 1) * L + k] = 0.0 + f * -(sv[0] * hz)
+    dY[(P + 2) * L + k] = 0.0 + f * (sw[1] * hz)
+    dY[(P + 3) * L + k] = 0.0 + f * -(sw[0] * hz)
+    if rb is None:
+        dY[10 * L + k] = 0.0 + f * (su[1] * hz)
+        dY[11 * L + k] = 0.0 + f * -(su[0] * hz)
+
+
+@helper
+def _areal_sides(Y, L, k, rb):
+    """Lane k's v - w, w - u, u - v."""
+    ux, uy, vx, vy, wx, wy = _lane_positions(Y, L, k, rb)
+    return (vx - wx, vy - wy), (wx - ux, wy - uy), (ux - vx, uy - vy)
 
 
 @lanes
-def _areal_tangent(Y, y, dy, L, W, inv):
+def _areal_tangent(Y, y, dy, L, W, inv, rb):
     """One tangent vector's block (y, dy start at it; Y is the orbit): velocities and
     tangent forces."""
+    P = _forces_row(rb)
     for k in range(L):
-        _lane_velocities(y, dy, L, k, inv)
+        _lane_velocities(y, dy, L, k, inv, rb)
         hz, inv_a = W[k], W[L + k]
         f, g = -0.5 * W[3 * L + k], -0.5 * W[4 * L + k]
-        svx, svy = Y[2 * L + k] - Y[4 * L + k], Y[3 * L + k] - Y[5 * L + k]
-        swx, swy = Y[4 * L + k] - Y[k], Y[5 * L + k] - Y[L + k]
-        sux, suy = Y[k] - Y[2 * L + k], Y[L + k] - Y[3 * L + k]
-        dux, duy = y[k], y[L + k]
-        dvx, dvy = y[2 * L + k], y[3 * L + k]
-        dwx, dwy = y[4 * L + k], y[5 * L + k]
+        (svx, svy), (swx, swy), (sux, suy) = _areal_sides(Y, L, k, rb)
+        dux, duy, dvx, dvy, dwx, dwy = _lane_positions(y, L, k, rb)
         dAz = 0.5 * ((dux * svy - duy * svx) + (dvx * swy - dvy * swx)
                      + (dwx * suy - dwy * sux))
         dabs = hz * dAz
         dhz = (-dabs * inv_a) * hz + dAz * inv_a
         a = g * dabs
-        dy[6 * L + k] = (0.0 + a * (svy * hz)) + f * ((dvy - dwy) * hz + svy * dhz)
-        dy[7 * L + k] = (0.0 + a * -(svx * hz)) + f * (-((dvx - dwx) * hz) + -(svx * dhz))
-        dy[8 * L + k] = (0.0 + a * (swy * hz)) + f * ((dwy - duy) * hz + swy * dhz)
-        dy[9 * L + k] = (0.0 + a * -(swx * hz)) + f * (-((dwx - dux) * hz) + -(swx * dhz))
-        dy[10 * L + k] = (0.0 + a * (suy * hz)) + f * ((duy - dvy) * hz + suy * dhz)
-        dy[11 * L + k] = (0.0 + a * -(sux * hz)) + f * (-((dux - dvx) * hz) + -(sux * dhz))
+        dy[P * L + k] = (0.0 + a * (svy * hz)) + f * ((dvy - dwy) * hz + svy * dhz)
+        dy[(P + 1) * L + k] = (0.0 + a * -(svx * hz)) + f * (-((dvx - dwx) * hz)
+                                                             + -(svx * dhz))
+        dy[(P + 2) * L + k] = (0.0 + a * (swy * hz)) + f * ((dwy - duy) * hz + swy * dhz)
+        dy[(P + 3) * L + k] = (0.0 + a * -(swx * hz)) + f * (-((dwx - dux) * hz)
+                                                             + -(swx * dhz))
+        if rb is None:
+            dy[10 * L + k] = (0.0 + a * (suy * hz)) + f * ((duy - dvy) * hz + suy * dhz)
+            dy[11 * L + k] = (0.0 + a * -(sux * hz)) + f * (-((dux - dvx) * hz)
+                                                            + -(sux * dhz))
 
 
 @leaf

@@ -1,0 +1,99 @@
+"""Batches of three bodies in the plane under one perimetric or areal term integrate the
+relative motion alone (integrate._Frame: bodies 0 and 1 in each orbit's centre-of-mass
+frame, the third rebuilt): checked against the full integration of the same orbits (the
+general path of sums of terms, which integrates all 12 components; its bits are the full
+planar path's, tests/physics/test_system.py) on starts whose centre of mass is off the
+origin and moving, with unequal masses -- states, samples, growth of the tangent vectors,
+MEGNO -- and the cases that must run full."""
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from survey.numerics.indicators import deviation_vectors
+from survey.numerics.integrate import _Frame, integrate_batch
+from survey.numerics.sections import section_event
+from survey.physics.families import initial_state
+from survey.physics.system import System
+from survey.physics.terms import make_potential
+
+
+@dataclass(frozen=True, eq=False)
+class Full(System):
+    """The same system on the general path (a 2-D `par`): never reduced."""
+
+    @property
+    def kernel_args(self):
+        m, d, measure, prof, par = super().kernel_args
+        return m, d, measure, prof, np.concatenate([par, [0.0] * 3]).reshape(1, 5)
+
+
+def moving(system, starts):
+    """The starts with their centre of mass moved off the origin and set moving."""
+    out = starts.copy()
+    m = system.masses
+    out[:, 0:6:2] += 0.7
+    out[:, 1:6:2] -= 0.3
+    out[:, 6:12:2] += m * 0.05
+    out[:, 7:12:2] -= m * 0.02
+    return out
+
+
+@pytest.mark.parametrize("potential, masses, family", [
+    ("perimetric_power", (1.0, 1.0, 1.0), "equilateral"),
+    ("perimetric_power", (1.0, 1.3, 0.8), "sides"),
+    ("areal_power", (1.0, 1.0, 1.0), "equilateral")])
+def test_the_relative_motion_gives_the_full_integrations_orbits(potential, masses, family):
+    system = System(np.array(masses), 2, (make_potential(potential),))
+    full = Full(system.masses, system.dim, system.terms)
+    params = {"delta": [0.5, 2.0, 3.0]} if family == "equilateral" else {}
+    if family == "equilateral":
+        starts = np.array([initial_state(system, family, delta=d) for d in params["delta"]])
+    else:
+        starts = np.array([initial_state(system, family)])
+    starts = moving(system, starts)
+    w = np.array([deviation_vectors(system, y, 1, seed=3)[0] for y in starts])
+    assert _Frame.of(system, starts, w[:, None], ()) is not None
+    assert _Frame.of(full, starts, w[:, None], ()) is None
+    T = 30.0
+    kw = dict(tangents=w[:, None], megno=True, t_eval=np.linspace(0.0, T, 7),
+              sample_tangents=True, t_fine=np.linspace(0.05, T - 0.05, 40))
+    got, want = integrate_batch(system, starts, T, **kw), integrate_batch(full, starts, T, **kw)
+    for a, b in zip(got, want):
+        assert a.ok and b.ok
+        scale = np.abs(b.y).max()          # (the chaotic "sides" orbit: 1e-9 of it)
+        assert np.abs(a.y - b.y).max() <= 1e-8 * scale
+        assert np.abs(a.fine - b.fine).max() <= 1e-8 * scale
+        orbit = slice(0, 12)
+        assert np.abs(a.samples[:, orbit] - b.samples[:, orbit]).max() <= 1e-8 * scale
+        assert np.allclose(a.log_growth, b.log_growth, rtol=1e-7, atol=1e-9)
+        assert np.allclose(a.sample_log_growth, b.sample_log_growth, rtol=1e-7, atol=1e-9)
+        # MEGNO's integrals are trapezoid sums over the step ends, which differ
+        assert np.allclose(a.megno_sums, b.megno_sums, rtol=1e-3)
+        # the tangent vectors are renormalised at other step ends: the same directions
+        u, v = a.tangents[0], b.tangents[0]
+        assert abs(u @ v / np.linalg.norm(u) / np.linalg.norm(v) - 1.0) < 1e-9
+        # and the third body is rebuilt with no centre-of-mass part in the deviations
+        dq = u[:6].reshape(3, 2)
+        assert np.abs(system.masses @ dq).max() <= 1e-13 * np.abs(dq).max()
+
+
+def test_what_the_relative_motion_cannot_hold_runs_full():
+    """A tangent vector with a centre-of-mass part (its motion is not integrated), a batch
+    with events (not re-encoded for the reduced state), other systems: the full path, bit
+    for bit the general path's."""
+    system = System.create()
+    full = Full(system.masses, system.dim, system.terms)
+    y0 = initial_state(system, "equilateral", delta=1.0)
+    drift = np.zeros(12)
+    drift[0] = drift[2] = drift[4] = 1.0              # every body moved the same way
+    events = (section_event(system),)
+    assert _Frame.of(system, y0[None], drift[None, None], ()) is None
+    assert _Frame.of(system, y0[None], np.zeros((1, 0, 12)), events) is None
+    four = System.create(masses=(1.0,) * 4)
+    y4 = np.zeros((1, 16))
+    assert _Frame.of(four, y4, np.zeros((1, 0, 16)), ()) is None
+    for kw in (dict(tangents=drift[None, None]), dict(events=events)):
+        a = integrate_batch(system, y0[None], 20.0, **kw)[0]
+        b = integrate_batch(full, y0[None], 20.0, **kw)[0]
+        assert np.array_equal(a.y, b.y) and a.n_steps == b.n_steps
