@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -226,20 +227,22 @@ def indicator_overhead(t_final=2000.0, repeats=7, deviations=2, out=print):
     return rows
 
 
+@dataclass(frozen=True, eq=False)
+class GeneralPath(System):
+    """The same system on the general path of sums of terms (a 2-D `par`): all 12
+    components integrated, never reduced."""
+
+    @property
+    def kernel_args(self):
+        m, d, measure, prof, par = super().kernel_args
+        return m, d, measure, prof, np.concatenate([par, [0.0] * 3]).reshape(1, 5)
+
+
 def interaction_terms(t_final=2000.0, repeats=5, out=print):
     """The paper's one-term systems have a compiled path of their own (a 1-D `par`, in which
     further terms do not exist; the relative motion alone integrated); sums of terms take
     the general one (a 2-D `par`). Here the same paper orbit runs both ways, interleaved,
     best of `repeats`: general / own, the orbits compared over t = 10."""
-    from dataclasses import dataclass
-
-    @dataclass(frozen=True, eq=False)
-    class GeneralPath(System):
-        @property
-        def kernel_args(self):
-            m, d, measure, prof, par = super().kernel_args
-            return m, d, measure, prof, np.concatenate([par, [0.0] * 3]).reshape(1, 5)
-
     own = System.create()
     general = GeneralPath(own.masses, own.dim, own.terms)
     y0 = initial_state(own, "sides")

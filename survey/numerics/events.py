@@ -5,7 +5,7 @@ Python objects that describe them (`Event`, `Linear`, `Quadratic`, `Sides`, `Sid
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import NamedTuple, Sequence
 
 import numpy as np
@@ -206,10 +206,14 @@ class Linear(EventFunction):
     coefficients: Sequence[float]
     offset: float = 0.0
 
-    def encode(self, system):
+    def vector(self, n):
         c = np.asarray(self.coefficients, dtype=np.float64).ravel()
-        if c.size != system.n:
-            raise ValueError(f"Linear event needs {system.n} coefficients, got {c.size}")
+        if c.size != n:
+            raise ValueError(f"Linear event needs {n} coefficients, got {c.size}")
+        return c
+
+    def encode(self, system):
+        c = self.vector(system.n)
         i = np.flatnonzero(c)
         return EV_LINEAR, (0, 0, 0), np.concatenate([[self.offset, i.size],
                                                      np.stack([i, c[i]], 1).ravel()])
@@ -223,20 +227,67 @@ class Quadratic(EventFunction):
     linear: Sequence[float] | None = None
     offset: float = 0.0
 
-    def encode(self, system):
-        n = system.n
+    def matrices(self, n):
+        """Q (n, n) and the linear part (n)."""
         Q = np.asarray(self.matrix, dtype=np.float64)
         if Q.shape == (n // 2, n // 2):
             Q = np.pad(Q, ((0, n // 2), (0, n // 2)))
         if Q.shape != (n, n):
             raise ValueError(f"Quadratic event needs a ({n}, {n}) matrix, got {Q.shape}")
-        c = np.zeros(n) if self.linear is None else np.asarray(self.linear, float).ravel()
-        lin = np.flatnonzero(c)
-        upper = np.triu(Q + Q.T) - np.diag(np.diag(Q))   # y^T Q y = sum_{i<=j} upper_ij y_i y_j
-        i, j = np.nonzero(upper)
-        return EV_QUADRATIC, (0, 0, 0), np.concatenate([
-            [self.offset, lin.size], np.stack([lin, c[lin]], 1).ravel(),
-            [i.size], np.stack([i, j, upper[i, j]], 1).ravel()])
+        return Q, np.zeros(n) if self.linear is None else np.asarray(self.linear, float).ravel()
+
+    def encode(self, system):
+        return _quadratic_record(*self.matrices(system.n), self.offset)
+
+
+def _quadratic_record(Q, c, offset):
+    lin = np.flatnonzero(c)
+    upper = np.triu(Q + Q.T) - np.diag(np.diag(Q))   # y^T Q y = sum_{i<=j} upper_ij y_i y_j
+    i, j = np.nonzero(upper)
+    return EV_QUADRATIC, (0, 0, 0), np.concatenate([
+        [offset, lin.size], np.stack([lin, c[lin]], 1).ravel(),
+        [i.size], np.stack([i, j, upper[i, j]], 1).ravel()])
+
+
+@dataclass(frozen=True, eq=False)
+class _Relative(EventFunction):
+    """A form of the full state y = R x + c as one of a reduced state x (`relative_events`)."""
+
+    matrix: np.ndarray
+    linear: np.ndarray
+    offset: float
+
+    def encode(self, system):
+        return _quadratic_record(self.matrix, self.linear, self.offset)
+
+
+def relative_events(events: Sequence[Event], system: System, R, C):
+    """The events as functions of a reduced state x whose full state is R x + c, c in the
+    span of C's columns (the centre of mass's place and motion; integrate._Frame): possible
+    when every function and guard is a linear or quadratic form that c leaves alone (the
+    Jacobi surfaces phi, sigma, eta, p_sigma, p_eta; forms of relative coordinates), to
+    roundoff -- else None."""
+    def relative(f):
+        if isinstance(f, Linear):
+            Q, c = np.zeros((system.n, system.n)), f.vector(system.n)
+        elif isinstance(f, Quadratic):
+            Q, c = f.matrices(system.n)
+        else:
+            return None
+        Q = 0.5 * (Q + Q.T)
+        scale = max(np.abs(Q).max(), np.abs(c).max()) * np.abs(C).max()
+        if max(np.abs(Q @ C).max(), np.abs(c @ C).max()) > 1e-12 * scale:
+            return None
+        return _Relative(R.T @ Q @ R, R.T @ c, float(f.offset))
+
+    out = []
+    for ev in events:
+        g = relative(ev.function)
+        guard = None if ev.guard is None else relative(ev.guard)
+        if g is None or (ev.guard is not None and guard is None):
+            return None
+        out.append(replace(ev, function=g, guard=guard))
+    return out
 
 
 @dataclass(frozen=True)

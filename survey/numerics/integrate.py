@@ -60,6 +60,7 @@ from .events import (
     event_slope,
     event_value,
     may_cross,
+    relative_events,
     scan_events,
 )
 
@@ -1159,7 +1160,8 @@ def integrate_batch(system: System, starts, t_span, *, tangents=None, record=Non
                              common) if M > common["L"] > 1 else np.arange(M)
     # (rows[:, order] alone would be Fortran-ordered: a second compilation of the kernel)
     res = dop853(y0s=y0s[order], rows=np.ascontiguousarray(rows[:, order]), t1=t1,
-                 n_tan=n_tan, megno=megno, n_err=n_err, events=encode_events(events, system),
+                 n_tan=n_tan, megno=megno, n_err=n_err,
+                 events=encode_events(frame.events if frame else events, system),
                  max_events=int(max_events), n_sub=int(event_substeps), t_eval=t_eval,
                  n_eval=n_eval, time_limit=float(time_limit), t_fine=t_fine, **common)
     at = np.empty(M, dtype=np.int64)
@@ -1177,26 +1179,40 @@ class _Frame(NamedTuple):
     and bodies 0 and 1 integrated (the centre of mass rides along in 12 components -- a
     third of the stage combinations, error norms and dense output -- though the forces
     never move it: the scan's task 19% faster). Tangent vectors must have no centre-of-mass
-    part (to roundoff), whose motion is not integrated; events are not yet re-encoded for
-    the reduced state, so a batch with events runs full."""
+    part (to roundoff), whose motion is not integrated; events must be linear or quadratic
+    forms the centre of mass leaves alone (the Jacobi surfaces: events.relative_events),
+    written anew for the reduced state; other batches run full."""
 
     masses: np.ndarray
     Q0: np.ndarray            # (M, 2) each orbit's centre of mass at t0
     V: np.ndarray             # (M, 2) and its velocity
+    events: list              # the events as functions of the reduced state
 
     @staticmethod
     def of(system, starts, tan, events):
         masses, d, measure, prof, par = system.kernel_args
-        if events or masses.size != 3 or d != 2 or par.ndim != 1 or \
-                measure not in (PERIMETER, AREA):
+        if masses.size != 3 or d != 2 or par.ndim != 1 or measure not in (PERIMETER, AREA):
             return None
         m = masses[None, :, None]
         w = tan.reshape(tan.shape[0], tan.shape[1], 2, 3, 2)
         moments = np.concatenate([(m[:, None] * w[:, :, 0]).sum(2), w[:, :, 1].sum(2)], -1)
         if np.any(np.abs(moments) > 1e-12 * np.abs(w).max(initial=0.0)):
             return None
+        # full state = R x + C (place, velocity of the centre of mass) for reduced states x
+        R, C = np.zeros((12, 8)), np.zeros((12, 4))
+        for k in range(2):
+            for b in range(2):                        # bodies 0, 1: q at 2b, p at 6 + 2b
+                R[2 * b + k, 2 * b + k] = R[6 + 2 * b + k, 4 + 2 * b + k] = 1.0
+                R[4 + k, 2 * b + k] = -masses[b] / masses[2]
+                R[10 + k, 4 + 2 * b + k] = -1.0
+            C[k:6:2, k] = 1.0
+            C[6 + k::2, 2 + k] = masses
+        relative = relative_events(events, system, R, C)
+        if relative is None:
+            return None
         q, p = starts[:, :6].reshape(-1, 3, 2), starts[:, 6:].reshape(-1, 3, 2)
-        return _Frame(masses, (m * q).sum(1) / masses.sum(), p.sum(1) / masses.sum())
+        return _Frame(masses, (m * q).sum(1) / masses.sum(), p.sum(1) / masses.sum(),
+                      relative)
 
     def reduce(self, y0s, n_tan):
         """Each job's orbit in its centre-of-mass frame, then bodies 0 and 1 of it and of
@@ -1243,7 +1259,12 @@ class _Frame(NamedTuple):
         if fine.shape[-1]:
             fined = owner[2, :fine.shape[0]]
             fine = self.full(fine, fined, np.broadcast_to(t_fine, fine.shape[:2]), t0, True)
-        return res._replace(y=whole(res.y, order, res.t), samples=samples, fine=fine)
+        ev_y = res.ev_y
+        if ev_y.size:   # (beyond each job's count: uninitialised, and never read)
+            with np.errstate(all="ignore"):
+                ev_y = self.full(ev_y, owner[0, :ev_y.shape[0]], res.ev_t, t0, True)
+        return res._replace(y=whole(res.y, order, res.t), samples=samples, fine=fine,
+                            ev_y=ev_y)
 
 
 PILOT = 1.0 / 400.0     # of the span: the step counts that order a batch's jobs

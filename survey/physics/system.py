@@ -405,27 +405,11 @@ def rhs_lanes(t, Y, dY, L, masses, d, measure, prof, par, n_tan, W):
     (tests/physics/test_system.py). Otherwise `rhs` runs lane by lane."""
     N = masses.size
     if measure >= REDUCED:          # at any L: no scalar path of its own
-        inv = (1.0 / masses[0], 1.0 / masses[1], 1.0 / masses[2])
-        rb = (masses[0] / masses[2], masses[1] / masses[2])
-        if measure == REDUCED + PERIMETER:
-            _perimetric_orbits(Y, dY, L, W, prof, lead_params(par), inv, rb)
-            for t in range(1, 1 + n_tan):
-                _perimetric_tangent(Y[8 * L * t:], dY[8 * L * t:], L, W, inv, rb)
-        else:
-            _areal_orbits(Y, dY, L, W, prof, lead_params(par), inv, rb)
-            for t in range(1, 1 + n_tan):
-                _areal_tangent(Y, Y[8 * L * t:], dY[8 * L * t:], L, W, inv, rb)
+        _planar_lanes(Y, dY, L, W, masses, measure - REDUCED, prof, par, n_tan,
+                      (masses[0] / masses[2], masses[1] / masses[2]))
     elif L >= SIMD_MIN and N == 3 and d == 2 and par.ndim == 1 and (measure == PERIMETER
                                                                     or measure == AREA):
-        inv = (1.0 / masses[0], 1.0 / masses[1], 1.0 / masses[2])
-        if measure == PERIMETER:
-            _perimetric_orbits(Y, dY, L, W, prof, lead_params(par), inv, None)
-            for t in range(1, 1 + n_tan):
-                _perimetric_tangent(Y[12 * L * t:], dY[12 * L * t:], L, W, inv, None)
-        else:
-            _areal_orbits(Y, dY, L, W, prof, lead_params(par), inv, None)
-            for t in range(1, 1 + n_tan):
-                _areal_tangent(Y, Y[12 * L * t:], dY[12 * L * t:], L, W, inv, None)
+        _planar_lanes(Y, dY, L, W, masses, measure, prof, par, n_tan, None)
     elif L == 1:
         rhs(t, Y, dY, masses, d, measure, prof, par, n_tan)
     else:
@@ -437,6 +421,24 @@ def rhs_lanes(t, Y, dY, L, masses, d, measure, prof, par, n_tan, W):
             rhs(t, y, dy, masses, d, measure, prof, par, n_tan)
             for i in range(nf):
                 dY[i * L + k] = dy[i]
+
+
+@leaf
+def _planar_lanes(Y, dY, L, W, masses, measure, prof, par, n_tan, rb):
+    """`rhs_lanes` of three bodies in the plane under one perimetric or areal term: full
+    states (rb None) or reduced ones (rb: the mass ratios that rebuild the third body)."""
+    inv = (1.0 / masses[0], 1.0 / masses[1], 1.0 / masses[2])
+    nb = 12                                         # a block's components
+    if rb is not None:
+        nb = 8
+    if measure == PERIMETER:
+        _perimetric_orbits(Y, dY, L, W, prof, lead_params(par), inv, rb)
+        for t in range(1, 1 + n_tan):
+            _perimetric_tangent(Y[nb * L * t:], dY[nb * L * t:], L, W, inv, rb)
+    else:
+        _areal_orbits(Y, dY, L, W, prof, lead_params(par), inv, rb)
+        for t in range(1, 1 + n_tan):
+            _areal_tangent(Y, Y[nb * L * t:], dY[nb * L * t:], L, W, inv, rb)
 
 
 @helper

@@ -3,29 +3,19 @@ relative motion alone (integrate._Frame: bodies 0 and 1 in each orbit's centre-o
 frame, the third rebuilt): checked against the full integration of the same orbits (the
 general path of sums of terms, which integrates all 12 components; its bits are the full
 planar path's, tests/physics/test_system.py) on starts whose centre of mass is off the
-origin and moving, with unequal masses -- states, samples, growth of the tangent vectors,
-MEGNO -- and the cases that must run full."""
-from dataclasses import dataclass
-
+origin and moving, with unequal masses -- states, samples, section crossings, growth of
+the tangent vectors, MEGNO -- and the cases that must run full."""
 import numpy as np
 import pytest
 
+from survey.bench import GeneralPath as Full
+from survey.numerics.events import Event, Linear
 from survey.numerics.indicators import deviation_vectors
 from survey.numerics.integrate import _Frame, integrate_batch
 from survey.numerics.sections import section_event
 from survey.physics.families import initial_state
 from survey.physics.system import System
 from survey.physics.terms import make_potential
-
-
-@dataclass(frozen=True, eq=False)
-class Full(System):
-    """The same system on the general path (a 2-D `par`): never reduced."""
-
-    @property
-    def kernel_args(self):
-        m, d, measure, prof, par = super().kernel_args
-        return m, d, measure, prof, np.concatenate([par, [0.0] * 3]).reshape(1, 5)
 
 
 def moving(system, starts):
@@ -53,14 +43,21 @@ def test_the_relative_motion_gives_the_full_integrations_orbits(potential, masse
         starts = np.array([initial_state(system, family)])
     starts = moving(system, starts)
     w = np.array([deviation_vectors(system, y, 1, seed=3)[0] for y in starts])
-    assert _Frame.of(system, starts, w[:, None], ()) is not None
+    # the Jacobi surfaces, moved with the centre of mass: written anew for the reduced state
+    events = (section_event(system), section_event(system, "sigma", 1.0, 0),
+              section_event(system, "p_eta", 0.0, -1))
+    assert _Frame.of(system, starts, w[:, None], events) is not None
     assert _Frame.of(full, starts, w[:, None], ()) is None
     T = 30.0
     kw = dict(tangents=w[:, None], megno=True, t_eval=np.linspace(0.0, T, 7),
-              sample_tangents=True, t_fine=np.linspace(0.05, T - 0.05, 40))
+              sample_tangents=True, t_fine=np.linspace(0.05, T - 0.05, 40), events=events)
     got, want = integrate_batch(system, starts, T, **kw), integrate_batch(full, starts, T, **kw)
     for a, b in zip(got, want):
         assert a.ok and b.ok
+        assert a.n_crossings == b.n_crossings > 0
+        assert np.array_equal(a.crossings.index, b.crossings.index)
+        assert np.allclose(a.crossings.t, b.crossings.t, rtol=0, atol=1e-8)
+        assert np.abs(a.crossings.y - b.crossings.y).max() <= 1e-8 * np.abs(b.y).max()
         scale = np.abs(b.y).max()          # (the chaotic "sides" orbit: 1e-9 of it)
         assert np.abs(a.y - b.y).max() <= 1e-8 * scale
         assert np.abs(a.fine - b.fine).max() <= 1e-8 * scale
@@ -79,9 +76,10 @@ def test_the_relative_motion_gives_the_full_integrations_orbits(potential, masse
 
 
 def test_what_the_relative_motion_cannot_hold_runs_full():
-    """A tangent vector with a centre-of-mass part (its motion is not integrated), a batch
-    with events (not re-encoded for the reduced state), other systems: the full path, bit
-    for bit the general path's."""
+    """A tangent vector with a centre-of-mass part (its motion is not integrated), events
+    that are not forms the centre of mass leaves alone (a side combination, a hyperplane
+    through body 0's place), other systems: the full path, bit for bit the general
+    path's."""
     system = System.create()
     full = Full(system.masses, system.dim, system.terms)
     y0 = initial_state(system, "equilateral", delta=1.0)
@@ -89,11 +87,17 @@ def test_what_the_relative_motion_cannot_hold_runs_full():
     drift[0] = drift[2] = drift[4] = 1.0              # every body moved the same way
     events = (section_event(system),)
     assert _Frame.of(system, y0[None], drift[None, None], ()) is None
-    assert _Frame.of(system, y0[None], np.zeros((1, 0, 12)), events) is None
+    none = np.zeros((1, 0, 12))
+    assert _Frame.of(system, y0[None], none, events) is not None
+    sides = (section_event(system, "perimeter", 3.0),)
+    absolute = (section_event(system, "linear", 0.0, coefficients=np.eye(12)[0]),)
+    guarded = (Event(Linear(np.eye(12)[0] - np.eye(12)[2]), guard=sides[0].function),)
+    for events in (sides, absolute, guarded):
+        assert _Frame.of(system, y0[None], none, events) is None
     four = System.create(masses=(1.0,) * 4)
     y4 = np.zeros((1, 16))
     assert _Frame.of(four, y4, np.zeros((1, 0, 16)), ()) is None
-    for kw in (dict(tangents=drift[None, None]), dict(events=events)):
+    for kw in (dict(tangents=drift[None, None]), dict(events=sides), dict(events=absolute)):
         a = integrate_batch(system, y0[None], 20.0, **kw)[0]
         b = integrate_batch(full, y0[None], 20.0, **kw)[0]
         assert np.array_equal(a.y, b.y) and a.n_steps == b.n_steps
