@@ -63,6 +63,13 @@ def _client(config: Config, workers, address):
         from dask.distributed import Client, LocalCluster
         if address:
             with Client(address, timeout=f"{config.tables['dask']['connect_timeout']}s") as client:
+                try:
+                    client.wait_for_workers(1, timeout=config.tables["dask"]["connect_timeout"])
+                except TimeoutError:
+                    raise SurveyError(
+                        f"the dask scheduler at {address} has no workers after "
+                        f"{config.tables['dask']['connect_timeout']:g} s: start some "
+                        f"(`dask worker {address}`) or raise [dask] connect_timeout") from None
                 yield client
             return
         # One numba thread per worker process, and none of the monitoring meant for interactive
@@ -96,6 +103,10 @@ def _client(config: Config, workers, address):
                           preload=[__name__], silence_logs=logging.ERROR) as cluster:
             dask.config.set({"distributed.worker.multiprocessing-method": "spawn"})
             with Client(cluster) as client:
+                # the cluster returns once its worker processes run, not once each has
+                # registered with the scheduler: asked then, the scheduler knew none (a
+                # refinement's chunk size divided by zero, once in `reproduce`)
+                client.wait_for_workers(len(cluster.workers), timeout=120)
                 yield client
 
 
@@ -467,7 +478,7 @@ def chunk_size(cells: int, workers: int, per_cell: int) -> int:
     orbit ends takes another, where the grid allows every worker a task, else what gives
     every worker one; on large grids about 64 tasks per worker (a finer spread of cheap
     and costly cells), at most 256 cells."""
-    lanes = -(-64 // per_cell)
+    lanes, workers = -(-64 // per_cell), max(1, workers)   # (all may be restarting)
     return max(1, min(256, max(lanes, -(-cells // (64 * workers))), -(-cells // workers)))
 
 
@@ -476,7 +487,7 @@ def refined_chunk_size(cells: int, workers: int, per_cell: int) -> int:
     children are submitted as soon as its task returns, so smaller tasks keep the workers
     busy across levels -- but not fewer orbits than one round of SIMD lanes (16) where the
     batch has them, and at least one task per worker."""
-    lanes = -(-16 // per_cell)
+    lanes, workers = -(-16 // per_cell), max(1, workers)
     return max(1, min(chunk_size(cells, workers, per_cell),
                       max(lanes, -(-cells // (4 * workers))), -(-cells // workers)))
 

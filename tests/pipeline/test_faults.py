@@ -259,6 +259,17 @@ def test_an_unreachable_scheduler_is_one_line(tmp_path):
     assert err.startswith("error: [dask].scheduler:") and "Traceback" not in err
 
 
+def test_a_scheduler_without_workers_is_one_line_in_bounded_time(tmp_path):
+    from dask.distributed import LocalCluster
+    cfg = grid(tmp_path, delta="[1.0]", dask="connect_timeout = 1.0")
+    with LocalCluster(n_workers=0, processes=False, dashboard_address=None,
+                      scheduler_kwargs={"protocol": "tcp", "host": "127.0.0.1"}) as cluster:
+        code, _, err = run_cli(cfg, "--scheduler", cluster.scheduler_address,
+                               "--no-progress")
+    assert code != 0 and err.count("\n") == 1 and "Traceback" not in err
+    assert "has no workers after 1 s" in err and "dask worker" in err
+
+
 # ---------------------------------------------------------------- verify
 
 @pytest.fixture(scope="module")

@@ -172,6 +172,14 @@ def test_refinement_batches_keep_every_worker_fed(cells, workers, per_cell):
         assert size * per_cell >= 16
 
 
+def test_a_moment_without_workers_still_chunks():
+    """Every worker restarting at once (the scheduler then lists none) is not a division by
+    zero: the batch goes out as for one worker."""
+    from survey.pipeline.sweep import chunk_size, refined_chunk_size
+    assert refined_chunk_size(40, 0, 1) == refined_chunk_size(40, 1, 1)
+    assert chunk_size(40, 0, 1) == chunk_size(40, 1, 1)
+
+
 def test_a_refined_map_is_written_verified_drawn_and_reported(tmp_path):
     """Two axes: the squares whose corners disagree are split; the archive holds the cells
     along `cell` with both parameters, verify passes, the regime map is drawn (painted by
