@@ -265,8 +265,10 @@ def _start(k, j, ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_ta
     r = rows[1, j]
     if r >= 0:
         while ln.i_eval[k] < t_eval.size and t_eval[ln.i_eval[k]] == t0:
-            for i in range(n_eval):
-                out.samples[r, ln.i_eval[k], i] = y[i]
+            if measure >= REDUCED:
+                _put_sample(out.samples[r, ln.i_eval[k]], y, n_eval, _ratios(masses))
+            else:
+                _put_sample(out.samples[r, ln.i_eval[k]], y, n_eval, None)
             for tt in range(n_tan):
                 out.sample_log[r, ln.i_eval[k], tt] = out.log_growth[j, tt]
             ln.i_eval[k] += 1
@@ -380,19 +382,16 @@ def _record(k, ln, out, rows, t0, t1, masses, d, n, rb, megno, events, max_event
     megno_sums = out.megno_sums[j]
     while rs >= 0 and i_eval < t_eval.size and direction * (t_eval[i_eval] - t_stop) <= 0.0:
         y, ynew, F = _lane(ln, k)
-        sample = out.samples[rs, i_eval]
-        if t_eval[i_eval] == t_new:
-            for i in range(n_eval):
-                sample[i] = ynew[i]
-        else:
+        src = ynew
+        if t_eval[i_eval] != t_new:
             dense_eval(F, y, (t_eval[i_eval] - t) / h, n_eval, yd)
-            for i in range(n_eval):
-                sample[i] = yd[i]
+            src = yd
+        _put_sample(out.samples[rs, i_eval], src, n_eval, rb)
         for tt in range(log_growth.size):
             out.sample_log[rs, i_eval, tt] = log_growth[tt]
         if megno and n_eval >= 2 * n:
             part = t_eval[i_eval] - t
-            L_at = log_growth[0] + portable.log(tangent_norm(sample, n, n, rb))
+            L_at = log_growth[0] + portable.log(tangent_norm(src, n, n, rb))
             elapsed = t_eval[i_eval] - t0
             int_at = int_L + 0.5 * part * (L_prev + L_at)
             Y_at = 2.0 * (elapsed * L_at - int_at) / elapsed if elapsed != 0.0 else 0.0
@@ -800,6 +799,25 @@ def _ratios(masses):
 
 
 @helper
+def _put_sample(sample, src, n_eval, rb):
+    """A sample of the state src (n_eval components): as it is, or a reduced one (rb: the
+    mass ratios) in full blocks of 12, the third body rebuilt as `_Frame.full` rebuilds it
+    (the centre of mass's motion is added afterwards, `_com_added`): rebuilt in a second
+    array, the samples' fresh memory cost a sampled scan task 0.5 s."""
+    if rb is None:
+        for i in range(n_eval):
+            sample[i] = src[i]
+    else:
+        a, b = rb
+        for k in range(n_eval // 8):
+            i, o = 8 * k, 12 * k
+            for c in range(2):
+                q0, q1, p0, p1 = src[i + c], src[i + 2 + c], src[i + 4 + c], src[i + 6 + c]
+                sample[o + c], sample[o + 2 + c], sample[o + 4 + c] = q0, q1, -(a * q0 + b * q1)
+                sample[o + 6 + c], sample[o + 8 + c], sample[o + 10 + c] = p0, p1, -(p0 + p1)
+
+
+@helper
 def tangent_norm(y, off, n, rb):
     """|w| of the tangent vector at y[off:off + n]; of a reduced one (rb: the mass ratios)
     with the third body's rebuilt deviations, in the full vector's order: the norm FTLE,
@@ -1002,6 +1020,7 @@ def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol,
     """
     M, nf = y0s.shape
     n = state_size(masses, d, measure)
+    nfull = 2 * masses.size * d         # samples are written in full (`_put_sample`)
     m = events[0].size - 1
     Me, Ms, Mf = rows[0].max() + 1, rows[1].max() + 1, rows[2].max() + 1
     T, Tf = t_eval.size, t_fine.size
@@ -1010,7 +1029,7 @@ def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol,
         np.zeros((M, 4), dtype=np.int64), np.zeros((M, 2)),
         # crossings are read only up to the count recorded: no need to touch the rest
         np.empty((Me, max_events), dtype=np.int64), np.empty((Me, max_events)),
-        np.empty((Me, max_events, n)), np.full((Ms, T, n_eval), np.nan),
+        np.empty((Me, max_events, n)), np.full((Ms, T, n_eval // n * nfull), np.nan),
         np.full((Ms, T, n_tan), np.nan), np.zeros((M, n_tan)), np.zeros((M, n_tan)),
         np.full((Mf, Tf, n), np.nan), np.zeros((M, 2)), np.zeros((M, 2)),
         np.full((Ms, T, 2), np.nan))
@@ -1230,11 +1249,18 @@ class _Frame(NamedTuple):
         its time (broadcast to z's rows)."""
         lead = z.shape[:-1]
         rows = np.ascontiguousarray(z.reshape(-1, z.shape[-1]))
-        job = np.repeat(np.asarray(at, dtype=np.int64), rows.shape[0] // max(len(at), 1))
-        times = np.ascontiguousarray(np.broadcast_to(t, lead), dtype=np.float64).ravel()
         out = np.empty((rows.shape[0], rows.shape[1] // 8 * 12))
-        _rebuilt(rows, out, self.masses, self.Q0, self.V, job, times, float(t0))
+        _rebuilt(rows, out, self.masses)
+        _com_added(out, self.masses, self.Q0, self.V, *self._rows(z, at, t), float(t0))
         return out.reshape(*lead, out.shape[1])
+
+    @staticmethod
+    def _rows(z, at, t):
+        """Each row's job and time, z's rows flattened (at along its first axis)."""
+        lead = z.shape[:-1]
+        rows = int(np.prod(lead))
+        job = np.repeat(np.asarray(at, dtype=np.int64), rows // max(len(at), 1))
+        return job, np.ascontiguousarray(np.broadcast_to(t, lead), dtype=np.float64).ravel()
 
     def restore(self, res, order, rows, t0, t_eval, t_fine):
         """The kernel's outcome with full states."""
@@ -1242,8 +1268,10 @@ class _Frame(NamedTuple):
         for k in range(3):
             owner[k, rows[k][rows[k] >= 0]] = np.flatnonzero(rows[k] >= 0)
         samples, fine, ev_y = res.samples, res.fine, res.ev_y
-        if samples.size:
-            samples = self.full(samples, owner[1, :samples.shape[0]], t_eval[None, :], t0)
+        if samples.size:        # written in full by the kernel, but for the centre of mass
+            _com_added(samples.reshape(-1, samples.shape[-1]), self.masses, self.Q0, self.V,
+                       *self._rows(samples, owner[1, :samples.shape[0]], t_eval[None, :]),
+                       float(t0))
         if fine.shape[-1]:
             fine = self.full(fine, owner[2, :fine.shape[0]], t_fine[None, :], t0)
         if ev_y.size:   # (beyond each job's count: uninitialised, and never read)
@@ -1253,28 +1281,25 @@ class _Frame(NamedTuple):
 
 
 @leaf
-def _rebuilt(z, out, masses, Q0, V, job, t, t0):
-    """`_Frame.full` on rows: in each block of 8 (bodies 0 and 1) the third body rebuilt as
-    the kernel does, and in the first (the orbit) the centre of mass of the row's job at
-    its time added back -- numpy's operations in numpy's order, the same bits."""
-    a, b = masses[0] / masses[2], masses[1] / masses[2]
+def _rebuilt(z, out, masses):
+    """Reduced rows z (R, 8 B) to full ones out (R, 12 B), the third body rebuilt in each
+    block of 8 (bodies 0 and 1) with numpy's operations in numpy's order (`_put_sample`)."""
+    rb = (masses[0] / masses[2], masses[1] / masses[2])
     for r in range(z.shape[0]):
+        _put_sample(out[r], z[r], z.shape[1], rb)
+
+
+@leaf
+def _com_added(y, masses, Q0, V, job, t, t0):
+    """To the orbit (the first 12 components) of each full row of y, in place: the centre
+    of mass of its job at its time."""
+    for r in range(y.shape[0]):
         j = job[r]
-        for k in range(z.shape[1] // 8):
-            i, o = 8 * k, 12 * k
-            for c in range(2):
-                q0, q1 = z[r, i + c], z[r, i + 2 + c]
-                p0, p1 = z[r, i + 4 + c], z[r, i + 6 + c]
-                q2 = -(a * q0 + b * q1)
-                p2 = -(p0 + p1)
-                if k == 0:
-                    s = Q0[j, c] + V[j, c] * (t[r] - t0)
-                    q0, q1, q2 = q0 + s, q1 + s, q2 + s
-                    p0 += masses[0] * V[j, c]
-                    p1 += masses[1] * V[j, c]
-                    p2 += masses[2] * V[j, c]
-                out[r, o + c], out[r, o + 2 + c], out[r, o + 4 + c] = q0, q1, q2
-                out[r, o + 6 + c], out[r, o + 8 + c], out[r, o + 10 + c] = p0, p1, p2
+        for c in range(2):
+            s = Q0[j, c] + V[j, c] * (t[r] - t0)
+            for b in range(3):
+                y[r, 2 * b + c] += s
+                y[r, 6 + 2 * b + c] += masses[b] * V[j, c]
 
 
 PILOT = 1.0 / 400.0     # of the span: the step counts that order a batch's jobs
