@@ -1244,9 +1244,9 @@ class _Frame(NamedTuple):
 
     def full(self, z, at, t, t0):
         """Reduced rows z (..., 8 B: an orbit, then B - 1 tangent vectors) back to full ones
-        (..., 12 B), in one compiled pass (`_rebuilt`; numpy's temporaries cost a sampled
-        scan's task a quarter of its time): at, each row's job (along z's first axis), t
-        its time (broadcast to z's rows)."""
+        (..., 12 B), compiled (`_rebuilt`, `_com_added`; numpy's temporaries were dear on
+        large arrays): at, each row's job (along z's first axis), t its time (broadcast to
+        z's rows). Samples need no rebuild: the kernel writes them in full."""
         lead = z.shape[:-1]
         rows = np.ascontiguousarray(z.reshape(-1, z.shape[-1]))
         out = np.empty((rows.shape[0], rows.shape[1] // 8 * 12))
@@ -1284,7 +1284,7 @@ class _Frame(NamedTuple):
 def _rebuilt(z, out, masses):
     """Reduced rows z (R, 8 B) to full ones out (R, 12 B), the third body rebuilt in each
     block of 8 (bodies 0 and 1) with numpy's operations in numpy's order (`_put_sample`)."""
-    rb = (masses[0] / masses[2], masses[1] / masses[2])
+    rb = _ratios(masses)
     for r in range(z.shape[0]):
         _put_sample(out[r], z[r], z.shape[1], rb)
 
