@@ -824,7 +824,7 @@ def _rhs_loop(Y, reps, L, masses, d, measure, prof, par, n_tan):
             if L == 1:
                 rhs(0.0, Y, K[s], masses, d, measure, prof, par, n_tan)
             else:
-                rhs_lanes(0.0, Y, K[s], L, masses, d, measure, prof, par, n_tan, W)
+                rhs_lanes(0.0, Y, K[s], L, masses, d, measure, prof, par, n_tan, W, None)
     return K[11, 0]
 
 
@@ -839,10 +839,10 @@ def _stage_loop(Y, reps, h, L, masses, d, measure, prof, par, n_tan):
     if L == 1:
         rhs(0.0, Y, K[0], masses, d, measure, prof, par, n_tan)
     else:
-        rhs_lanes(0.0, Y, K[0], L, masses, d, measure, prof, par, n_tan, W)
+        rhs_lanes(0.0, Y, K[0], L, masses, d, measure, prof, par, n_tan, W, None)
     acc = 0.0
     for _ in range(reps):
-        stages(masses, d, measure, prof, par, n_tan, L, Y, HH, K, YT, YN, W)
+        stages(masses, d, measure, prof, par, n_tan, L, Y, HH, K, YT, YN, W, None)
         error_norms(Y, YN, K, L, 2 * masses.size * d, 1e-12, 1e-12, H, err, S)
         acc += err[0]
     return acc

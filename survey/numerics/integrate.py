@@ -39,7 +39,7 @@ from ..physics import portable
 from ..physics.jit import helper, kernel, lanes, leaf
 from ..physics.terms import AREA, PERIMETER
 from ..physics.system import (
-    REDUCED, SIMD_LANES, SIMD_MIN, System, rhs, rhs_lanes, state_size, workspace_size,
+    SIMD_LANES, SIMD_MIN, System, rhs, rhs_lanes, state_size, workspace_size,
 )
 from .dop853 import (
     BETA_ROOTS,
@@ -183,7 +183,7 @@ def _finite(x):
 
 @helper
 def _initial_step(masses, d, measure, prof, par, n_tan, nf, n_err, t, y, K, yt, direction,
-                  h_max, rtol, atol, W):
+                  h_max, rtol, atol, W, rb):
     """Hairer's hinit: a first step from the sizes of y, f(y) (in K[0]) and an estimate
     of the second derivative (one evaluation, into K[1]), at most h_max."""
     dnf = 0.0
@@ -196,7 +196,7 @@ def _initial_step(masses, d, measure, prof, par, n_tan, nf, n_err, t, y, K, yt, 
     h = min(h, h_max)
     for a in range(nf):
         yt[a] = y[a] + direction * h * K[0, a]
-    _rhs_one(t + direction * h, yt, K[1], masses, d, measure, prof, par, n_tan, W)
+    _rhs_one(t + direction * h, yt, K[1], masses, d, measure, prof, par, n_tan, W, rb)
     der2 = 0.0
     for a in range(n_err):
         sk = atol + rtol * abs(y[a])
@@ -223,12 +223,12 @@ def _finish(k, ln, out, status, rows):
 
 @helper
 def _start(k, j, ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, n_err,
-           rtol, atol, h0, h_max, events, t_eval, n_eval, t_fine, renorm_dt, now):
+           rtol, atol, h0, h_max, events, t_eval, n_eval, t_fine, renorm_dt, now, rb):
     """Job j into lane k: its start, first evaluation, samples at t0, events' first values
     and first step. Returns False if the job ended at once (nonfinite start, zero span)."""
     L = ln.job.size
     nf = y0s.shape[1]
-    n = state_size(masses, d, measure)
+    n = state_size(masses, d, rb)
     eoff, ep, direc, terminal, guard, watch = events
     y, K = ln.y1, ln.k1
     ln.job[k] = j
@@ -250,12 +250,8 @@ def _start(k, j, ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_ta
         _finish(k, ln, out, NONFINITE_, rows)
         return False
     for tt in range(n_tan):
-        if measure >= REDUCED:
-            w = tangent_norm(y, n * (1 + tt), n, _ratios(masses))
-        else:
-            w = tangent_norm(y, n * (1 + tt), n, None)
-        out.log_growth[j, tt] = -portable.log(w)
-    _rhs_one(t0, y, K[0], masses, d, measure, prof, par, n_tan, ln.W)
+        out.log_growth[j, tt] = -portable.log(tangent_norm(y, n * (1 + tt), n, rb))
+    _rhs_one(t0, y, K[0], masses, d, measure, prof, par, n_tan, ln.W, rb)
     out.counts[j, 2] += 1
     for i in range(nf):
         ln.K[0, i * L + k] = K[0, i]
@@ -265,10 +261,7 @@ def _start(k, j, ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_ta
     r = rows[1, j]
     if r >= 0:
         while ln.i_eval[k] < t_eval.size and t_eval[ln.i_eval[k]] == t0:
-            if measure >= REDUCED:
-                _put_sample(out.samples[r, ln.i_eval[k]], y, n_eval, _ratios(masses))
-            else:
-                _put_sample(out.samples[r, ln.i_eval[k]], y, n_eval, None)
+            _put_sample(out.samples[r, ln.i_eval[k]], y, n_eval, rb)
             for tt in range(n_tan):
                 out.sample_log[r, ln.i_eval[k], tt] = out.log_growth[j, tt]
             ln.i_eval[k] += 1
@@ -294,7 +287,7 @@ def _start(k, j, ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_ta
         h = min(h0, ln.h_max[k])
     else:
         h = _initial_step(masses, d, measure, prof, par, n_tan, nf, n_err, t0, y, K, ln.YT,
-                          direction, ln.h_max[k], rtol, atol, ln.W)
+                          direction, ln.h_max[k], rtol, atol, ln.W, rb)
         out.counts[j, 2] += 1
     ln.h[k] = h * direction
     return True
@@ -316,7 +309,7 @@ def _record(k, ln, out, rows, t0, t1, masses, d, n, rb, megno, events, max_event
     (its dense output prepared if it needs one now): counters, event crossings, samples;
     with `later`, its samples at t_fine wait in ln.wait. Returns EVENT_ at a terminal event
     (the state and time then the event's), else RUNNING. n: the orbit's components in the
-    state; rb: see tangent_norm."""
+    state; rb: None, or the mass ratios of reduced states."""
     j = ln.job[k]
     yd = ln.yd
     t, h = ln.t[k], ln.h[k]
@@ -466,7 +459,7 @@ def _defer(ln, k, row, first, end, t, h, t_new, n):
 
 
 @leaf
-def _flush(ln, out, masses, d, measure, prof, par, t_fine):
+def _flush(ln, out, masses, d, measure, prof, par, t_fine, rb):
     """The waiting steps' dense output, all P slots in SIMD loops (slots past the count
     hold stale values, computed and ignored), and their samples at t_fine: each slot's
     first (most steps hold one) in a SIMD loop too, any others one by one."""
@@ -477,7 +470,8 @@ def _flush(ln, out, masses, d, measure, prof, par, t_fine):
         return
     n = w.Y.size // P
     _spread(w.h, w.HH, P, n)
-    dense_prepare(masses, d, measure, prof, par, P, n, w.Y, w.YN, w.HH, w.K, w.YT, w.F, w.W)
+    dense_prepare(masses, d, measure, prof, par, P, n, w.Y, w.YN, w.HH, w.K, w.YT, w.F, w.W,
+                  rb)
     for p in range(P):
         w.x[p] = (t_fine[w.first[p]] - w.t[p]) / w.h[p] if p < c else 0.0
     _spread(w.x, w.XX, P, n)
@@ -551,10 +545,12 @@ def _advance(k, ln, out, t0, t1, n, n_tan, megno, renorm_dt, NW):
 @leaf
 def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol,
          n_err, max_steps, h0, h_max, h_min, events, max_events, n_sub, t_eval, n_eval,
-         renorm_dt, time_limit, t_fine, next_job, iterations, now):
+         renorm_dt, time_limit, t_fine, next_job, iterations, now, rb):
     """At most `iterations` steps of every lane (the kernel checks the clock between
     calls); returns the next job to start, DONE when every job has ended, or HANDOFF
-    when every job has started and at most half the lanes run one."""
+    when every job has started and at most half the lanes run one. rb: None for full
+    states, the mass ratios for reduced ones (physics.system.state_size): two
+    compilations, each of the code its kind runs."""
     L = ln.job.size
     nf = y0s.shape[1]
     M = y0s.shape[0]
@@ -567,7 +563,7 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
                 next_job += 1
                 _start(k, next_job - 1, ln, out, y0s, rows, t0, t1, masses, d, measure,
                        prof, par, n_tan, n_err, rtol, atol, h0, h_max, events, t_eval,
-                       n_eval, t_fine, renorm_dt, now)
+                       n_eval, t_fine, renorm_dt, now, rb)
             j = ln.job[k]
             if j < 0:
                 ln.h[k] = 0.0
@@ -589,19 +585,19 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
                 ln.h[k] = t1 - ln.t[k]
         if active == 0:
             if next_job >= M:
-                _flush(ln, out, masses, d, measure, prof, par, t_fine)
+                _flush(ln, out, masses, d, measure, prof, par, t_fine, rb)
                 return DONE
             continue
         _spread(ln.h, ln.HH, L, nf)
         # ---- one attempt of every lane's step
         stages(masses, d, measure, prof, par, n_tan, L, ln.Y, ln.HH, ln.K, ln.YT, ln.YN,
-               ln.W)
+               ln.W, rb)
         error_norms(ln.Y, ln.YN, ln.K, L, n_err, rtol, atol, ln.h, ln.err, ln.S)
         _step_factors(ln.err, ln.err_old, L, ln.grow, ln.err_next, ln.cut)
-        rhs_lanes(0.0, ln.YN, ln.K[12], L, masses, d, measure, prof, par, n_tan, ln.W)
+        rhs_lanes(0.0, ln.YN, ln.K[12], L, masses, d, measure, prof, par, n_tan, ln.W, rb)
         _finite_lanes(ln.YN, ln.K[12], L, nf, ln.NW)
         dense = later = 0
-        n = state_size(masses, d, measure)
+        n = state_size(masses, d, rb)
         for k in range(L):
             j = ln.job[k]
             ln.flags[k, 3] = 0
@@ -633,29 +629,21 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
             dense = max(dense, need)
         if dense >= DENSE_ORBIT:    # the orbits' interpolant where no lane needs more
             dense_prepare(masses, d, measure, prof, par, L, nf if dense == DENSE_ALL else n,
-                          ln.Y, ln.YN, ln.HH, ln.K, ln.YT, ln.F, ln.W)
+                          ln.Y, ln.YN, ln.HH, ln.K, ln.YT, ln.F, ln.W, rb)
         elif dense == DENSE_LATER and ln.wait.count[0] + later > ln.wait.t.size:
-            _flush(ln, out, masses, d, measure, prof, par, t_fine)   # room for the steps
+            _flush(ln, out, masses, d, measure, prof, par, t_fine, rb)   # room for the steps
         for k in range(L):
             if ln.flags[k, 3]:
-                if measure >= REDUCED:
-                    ended = _record(k, ln, out, rows, t0, t1, masses, d, n, _ratios(masses),
-                                    megno, events, max_events, n_sub, t_eval, n_eval,
-                                    t_fine, dense == DENSE_LATER)
-                else:
-                    ended = _record(k, ln, out, rows, t0, t1, masses, d, n, None, megno,
-                                    events, max_events, n_sub, t_eval, n_eval, t_fine,
-                                    dense == DENSE_LATER)
+                ended = _record(k, ln, out, rows, t0, t1, masses, d, n, rb, megno, events,
+                                max_events, n_sub, t_eval, n_eval, t_fine,
+                                dense == DENSE_LATER)
                 if ended == EVENT_:
                     _finish(k, ln, out, EVENT_, rows)
                     ln.flags[k, 3] = 0
             ln.taken[k] = -ln.flags[k, 3]
         # ---- accepted lanes take their new states, then their tangent vectors' norms
         _take(ln.Y, ln.YN, ln.K[0], ln.K[12], ln.taken, L, nf)
-        if measure >= REDUCED:
-            _tangent_norms(ln.Y, L, n, n_tan, ln.NW, _ratios(masses))
-        else:
-            _tangent_norms(ln.Y, L, n, n_tan, ln.NW, None)
+        _tangent_norms(ln.Y, L, n, n_tan, ln.NW, rb)
         if n_tan > 0:
             _growth_terms(ln.NW, ln.t, ln.h, ln.flags, t0, t1, L, n_tan)
         for k in range(L):
@@ -676,9 +664,9 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
             for k in range(L):
                 running += ln.job[k] >= 0
             if 0 < running and 2 * running <= L:
-                _flush(ln, out, masses, d, measure, prof, par, t_fine)
+                _flush(ln, out, masses, d, measure, prof, par, t_fine, rb)
                 return HANDOFF
-    _flush(ln, out, masses, d, measure, prof, par, t_fine)
+    _flush(ln, out, masses, d, measure, prof, par, t_fine, rb)
     return next_job
 
 
@@ -793,12 +781,6 @@ def _rebuilt_squares(Y, L, i0, c, nw):
 
 
 @helper
-def _ratios(masses):
-    """m0/m2, m1/m2: a reduced state's third body (physics.system._lane_positions)."""
-    return masses[0] / masses[2], masses[1] / masses[2]
-
-
-@helper
 def _put_sample(sample, src, n_eval, rb):
     """A sample of the state src (n_eval components): as it is, or a reduced one (rb: the
     mass ratios) in full blocks of 12, the third body rebuilt as `_Frame.full` rebuilds it
@@ -837,13 +819,13 @@ def tangent_norm(y, off, n, rb):
 
 
 @helper
-def _rhs_one(t, y, dy, masses, d, measure, prof, par, n_tan, W):
+def _rhs_one(t, y, dy, masses, d, measure, prof, par, n_tan, W, rb):
     """The right-hand side at one state: `rhs`, or for a reduced state its lane loops at
     L = 1 (W: their workspace)."""
-    if measure >= REDUCED:
-        rhs_lanes(t, y, dy, 1, masses, d, measure, prof, par, n_tan, W)
-    else:
+    if rb is None:
         rhs(t, y, dy, masses, d, measure, prof, par, n_tan)
+    else:
+        rhs_lanes(t, y, dy, 1, masses, d, measure, prof, par, n_tan, W, rb)
 
 
 @lanes
@@ -990,7 +972,7 @@ def compile_handoff():
 
 def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol,
            n_err, max_steps, h0, h_max, h_min, events, max_events, n_sub, t_eval, n_eval,
-           renorm_dt, time_limit, t_fine, L):
+           renorm_dt, time_limit, t_fine, L, rb):
     """Integrate M orbits (+ n_tan tangent vectors each; starts y0s, shape (M, nf)) from t0
     to t1 in L lanes.
 
@@ -1003,7 +985,8 @@ def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol,
     output for the first n_eval components. t_fine: a second grid of output times for the
     orbit alone: the time series the torus analysis reads. Tangent vectors are rescaled to
     unit norm every renorm_dt (<= 0: every step), their logs accumulated in log_growth,
-    which starts at -ln|w(t0)|. time_limit: wall-clock seconds per job (0: none).
+    which starts at -ln|w(t0)|. time_limit: wall-clock seconds per job (0: none). rb: None
+    for full states, or the mass ratios m0/m2, m1/m2 of reduced ones (`_Frame`).
 
     MEGNO (if megno, for the first tangent vector; Cincotta & Simo 2000): with
     L(t) = ln(|w(t)|/|w0|) and s = t - t0, Y(s) = (2/s) int_0^s u dL(u) and <Y> =
@@ -1019,7 +1002,7 @@ def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol,
     loop that turns once, or once per 256 rounds with a time limit.
     """
     M, nf = y0s.shape
-    n = state_size(masses, d, measure)
+    n = state_size(masses, d, rb)
     nfull = 2 * masses.size * d         # samples are written in full (`_put_sample`)
     m = events[0].size - 1
     Me, Ms, Mf = rows[0].max() + 1, rows[1].max() + 1, rows[2].max() + 1
@@ -1042,7 +1025,7 @@ def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol,
             next_job = _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par,
                             n_tan, megno, rtol, atol, n_err, max_steps, h0, h_max, h_min,
                             events, max_events, n_sub, t_eval, n_eval, renorm_dt,
-                            time_limit, t_fine, next_job, rounds, now)
+                            time_limit, t_fine, next_job, rounds, now, rb)
         return next_job
 
     # The SIMD loops cost all L lanes whether they run a job or not: once every job has
@@ -1163,8 +1146,9 @@ def integrate_batch(system: System, starts, t_span, *, tangents=None, record=Non
         rows[r, which] = np.arange(which.sum())
     masses, d, measure, prof, par = system.kernel_args
     frame = _Frame.of(system, starts, tan, events)
+    rb = None
     if frame is not None:               # bodies 0 and 1 in the centre-of-mass frame
-        y0s, measure = frame.reduce(y0s, n_tan), measure + REDUCED
+        y0s, rb = frame.reduce(y0s, n_tan), frame.ratios
     r = y0s.shape[1] // (1 + n_tan)     # the kernel's block: n, or 8 reduced
     n_eval = y0s.shape[1] if sample_tangents else r
     n_err = r * (1 + n_tan) if control_tangents else r
@@ -1173,7 +1157,7 @@ def integrate_batch(system: System, starts, t_span, *, tangents=None, record=Non
     common = dict(t0=t0, masses=masses, d=d, measure=measure, prof=prof, par=par,
                   rtol=float(rtol), atol=float(atol), max_steps=int(max_steps),
                   h0=float(first_step), h_max=float(max_step), h_min=float(min_step),
-                  renorm_dt=float(renorm_interval), L=int(lanes or lanes_for(M)))
+                  renorm_dt=float(renorm_interval), L=int(lanes or lanes_for(M)), rb=rb)
     # (one lane runs its jobs one after another: their order changes nothing)
     order = _costliest_first(np.ascontiguousarray(y0s[:, :r]), t1, float(time_limit),
                              common) if M > common["L"] > 1 else np.arange(M)
@@ -1193,7 +1177,7 @@ def integrate_batch(system: System, starts, t_span, *, tangents=None, record=Non
 
 
 class _Frame(NamedTuple):
-    """A batch integrated as reduced states (physics.system.REDUCED): three bodies in the
+    """A batch integrated as reduced states (physics.system.state_size): three bodies in the
     plane under one perimetric or areal term, every orbit moved to its centre-of-mass frame
     and bodies 0 and 1 integrated (the centre of mass rides along in 12 components -- a
     third of the stage combinations, error norms and dense output -- though the forces
@@ -1233,6 +1217,12 @@ class _Frame(NamedTuple):
         return _Frame(masses, (m * q).sum(1) / masses.sum(), p.sum(1) / masses.sum(),
                       relative)
 
+    @property
+    def ratios(self) -> tuple[float, float]:
+        """m0/m2, m1/m2, which rebuild the third body (physics.system._lane_positions): the
+        kernels' rb."""
+        return float(self.masses[0] / self.masses[2]), float(self.masses[1] / self.masses[2])
+
     def reduce(self, y0s, n_tan):
         """Each job's orbit in its centre-of-mass frame, then bodies 0 and 1 of it and of
         its tangent vectors: (M, 8 (1 + n_tan))."""
@@ -1250,7 +1240,7 @@ class _Frame(NamedTuple):
         lead = z.shape[:-1]
         rows = np.ascontiguousarray(z.reshape(-1, z.shape[-1]))
         out = np.empty((rows.shape[0], rows.shape[1] // 8 * 12))
-        _rebuilt(rows, out, self.masses)
+        _rebuilt(rows, out, self.ratios)
         _com_added(out, self.masses, self.Q0, self.V, *self._rows(z, at, t), float(t0))
         return out.reshape(*lead, out.shape[1])
 
@@ -1281,10 +1271,10 @@ class _Frame(NamedTuple):
 
 
 @leaf
-def _rebuilt(z, out, masses):
+def _rebuilt(z, out, rb):
     """Reduced rows z (R, 8 B) to full ones out (R, 12 B), the third body rebuilt in each
-    block of 8 (bodies 0 and 1) with numpy's operations in numpy's order (`_put_sample`)."""
-    rb = _ratios(masses)
+    block of 8 (bodies 0 and 1) with numpy's operations in numpy's order (`_put_sample`;
+    rb: the mass ratios)."""
     for r in range(z.shape[0]):
         _put_sample(out[r], z[r], z.shape[1], rb)
 

@@ -126,7 +126,7 @@ def test_a_batch_gives_its_lanes_the_costliest_orbits_first():
     masses, d, measure, prof, par = system.kernel_args
     common = dict(t0=0.0, masses=masses, d=d, measure=measure, prof=prof, par=par,
                   rtol=1e-12, atol=1e-12, max_steps=10**6, h0=0.0, h_max=0.0, h_min=0.0,
-                  renorm_dt=1.0, L=4)
+                  renorm_dt=1.0, L=4, rb=None)
     order = _costliest_first(starts, 2000.0, 0.0, common)
     assert sorted(order[:3]) == [1, 3, 5], order
     full = integrate_batch(system, starts, 2000.0, lanes=1)
@@ -134,8 +134,9 @@ def test_a_batch_gives_its_lanes_the_costliest_orbits_first():
 
 
 def test_the_driver_compiles_once_for_every_batch():
-    """One compiled driver for every batch of a system (a second specialisation, e.g. from
-    a Fortran-ordered argument, would double a new machine's first run): batches of more
+    """One compiled driver for every batch of a system's kind of state (here the relative
+    motion; a second specialisation, e.g. from a Fortran-ordered argument, would double a
+    new machine's first run): batches of more
     orbits than lanes (ordered by a pilot run), fewer, one, with and without tangent
     vectors, events and samples, backwards, all run the driver the first one compiled."""
     from survey.numerics.integrate import _adopt, _run

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from survey.physics.system import (
-    REDUCED, System, _leading_forces, rhs, rhs_lanes, workspace_size,
+    System, _leading_forces, rhs, rhs_lanes, workspace_size,
 )
 from survey.physics.terms import TERMS, make_potential
 
@@ -39,7 +39,7 @@ def check(system, rng, trials=60):
         Y = np.ascontiguousarray(y.T).ravel()
         dY = np.full(Y.size, np.nan)
         rhs_lanes(0.0, Y, dY, L, masses, d, measure, prof, par, n_tan,
-                  np.zeros(workspace_size(L, nf)))
+                  np.zeros(workspace_size(L, nf)), None)
         for k in range(L):
             one = np.full(nf, np.nan)
             rhs(0.0, y[k], one, masses, d, measure, prof, par, n_tan)
@@ -104,11 +104,12 @@ def test_a_reduced_state_has_the_full_states_rates_to_roundoff(term, shift):
         part = np.concatenate([q[:, :2].reshape(L, 4), p[:, :2].reshape(L, 4),
                                w[:, :, :, :2].reshape(L, -1)], 1)
         rates = []
-        for y, code in ((full, measure), (part, measure + REDUCED)):
+        ratios = (masses[0] / masses[2], masses[1] / masses[2])
+        for y, rb in ((full, None), (part, ratios)):
             Y = np.ascontiguousarray(y.T).ravel()
             dY = np.full(Y.size, np.nan)
-            rhs_lanes(0.0, Y, dY, L, masses, d, code, prof, par, n_tan,
-                      np.zeros(workspace_size(L, full.shape[1])))
+            rhs_lanes(0.0, Y, dY, L, masses, d, measure, prof, par, n_tan,
+                      np.zeros(workspace_size(L, full.shape[1])), rb)
             rates.append(dY.reshape(-1, L).T)
         kept = np.concatenate([12 * b + np.r_[0:4, 6:10] for b in range(1 + n_tan)])
         scale = np.abs(rates[0]).max()
