@@ -12,8 +12,9 @@ with the arithmetic of one orbit, so a lane gives the bits one orbit alone gives
 whatever the lane count and whatever the other lanes hold (tests/numerics/test_lanes.py).
 A lane whose orbit ends takes the next start of the batch: no lane waits for the slowest.
 Once every start is taken and at most half the lanes still run, those orbits move to half
-as many lanes, down to SIMD_MIN, then go on one after another in one lane (`_adopt`): idle
-lanes cost the SIMD loops as much as busy ones.
+as many lanes, down to SIMD_MIN, where the last orbit goes on in one lane (`_adopt`): idle
+lanes cost the SIMD loops as much as busy ones, and SIMD_MIN lanes with two orbits less
+than those two one after the other.
 
 The kernel is one compiled function for every system, potential and event set (all chosen
 by integer codes and parameter arrays), so it is cached on disk. Nothing raises inside it:
@@ -268,8 +269,7 @@ def _start(k, j, ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_ta
     r = rows[2, j]
     if r >= 0:
         while ln.i_fine[k] < t_fine.size and t_fine[ln.i_fine[k]] == t0:
-            for i in range(n):
-                out.fine[r, ln.i_fine[k], i] = y[i]
+            _put_sample(out.fine[r, ln.i_fine[k]], y, n, rb)
             ln.i_fine[k] += 1
     if rows[0, j] >= 0:
         for e in range(eoff.size - 1):
@@ -400,7 +400,8 @@ def _record(k, ln, out, rows, t0, t1, masses, d, n, rb, megno, events, max_event
             _defer(ln, k, rf, first, i_fine, t, h, t_new, n)
     while rf >= 0 and i_fine < t_fine.size and direction * (t_fine[i_fine] - t_stop) <= 0.0:
         y, ynew, F = _lane(ln, k)
-        _fine_sample(out.fine[rf, i_fine], t_fine[i_fine], F, y, ynew, t, h, t_new, n, yd)
+        _fine_sample(out.fine[rf, i_fine], t_fine[i_fine], F, y, ynew, t, h, t_new, n, yd,
+                     rb)
         i_fine += 1
     ln.i_eval[k], ln.i_fine[k] = i_eval, i_fine
     if terminal_hit:
@@ -415,16 +416,14 @@ def _record(k, ln, out, rows, t0, t1, masses, d, n, rb, megno, events, max_event
 
 
 @helper
-def _fine_sample(sample, at, F, y, ynew, t, h, t_new, n, yd):
+def _fine_sample(sample, at, F, y, ynew, t, h, t_new, n, yd, rb):
     """The orbit's state at time `at` of the step [t, t_new] (t + h but for the last) from
-    its dense output (F, y), into `sample`."""
+    its dense output (F, y), into `sample` (in full: `_put_sample`)."""
     if at == t_new:
-        for i in range(n):
-            sample[i] = ynew[i]
+        _put_sample(sample, ynew, n, rb)
     else:
         dense_eval(F, y, (at - t) / h, n, yd)
-        for i in range(n):
-            sample[i] = yd[i]
+        _put_sample(sample, yd, n, rb)
 
 
 @helper
@@ -480,16 +479,13 @@ def _flush(ln, out, masses, d, measure, prof, par, t_fine, rb):
         F, y, ynew = w.F[:, p::P], w.Y[p::P], w.YN[p::P]
         fine = out.fine[w.row[p]]
         first = w.first[p]
-        sample, at = fine[first], t_fine[first]
-        if at == w.t_new[p]:
-            for i in range(n):
-                sample[i] = ynew[i]
+        if t_fine[first] == w.t_new[p]:
+            _put_sample(fine[first], ynew, n, rb)
         else:
-            for i in range(n):
-                sample[i] = w.S[i * P + p]
+            _put_sample(fine[first], w.S[p::P], n, rb)
         for i in range(first + 1, w.end[p]):
             _fine_sample(fine[i], t_fine[i], F, y, ynew, w.t[p], w.h[p], w.t_new[p], n,
-                         ln.yd)
+                         ln.yd, rb)
     w.count[0] = 0
 
 
@@ -663,7 +659,8 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
             running = 0
             for k in range(L):
                 running += ln.job[k] >= 0
-            if 0 < running and 2 * running <= L:
+            # (SIMD_MIN lanes cost less than two orbits one after another in one lane)
+            if 0 < running and (2 * running <= L if L > SIMD_MIN else running == 1):
                 _flush(ln, out, masses, d, measure, prof, par, t_fine, rb)
                 return HANDOFF
     _flush(ln, out, masses, d, measure, prof, par, t_fine, rb)
@@ -1003,7 +1000,7 @@ def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol,
     """
     M, nf = y0s.shape
     n = state_size(masses, d, rb)
-    nfull = 2 * masses.size * d         # samples are written in full (`_put_sample`)
+    nfull = 2 * masses.size * d     # samples, fine ones too, are written in full (`_put_sample`)
     m = events[0].size - 1
     Me, Ms, Mf = rows[0].max() + 1, rows[1].max() + 1, rows[2].max() + 1
     T, Tf = t_eval.size, t_fine.size
@@ -1014,7 +1011,7 @@ def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol,
         np.empty((Me, max_events), dtype=np.int64), np.empty((Me, max_events)),
         np.empty((Me, max_events, n)), np.full((Ms, T, n_eval // n * nfull), np.nan),
         np.full((Ms, T, n_tan), np.nan), np.zeros((M, n_tan)), np.zeros((M, n_tan)),
-        np.full((Mf, Tf, n), np.nan), np.zeros((M, 2)), np.zeros((M, 2)),
+        np.full((Mf, Tf, nfull), np.nan), np.zeros((M, 2)), np.zeros((M, 2)),
         np.full((Ms, T, 2), np.nan))
 
     def drive(ln, next_job):
@@ -1030,7 +1027,7 @@ def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol,
 
     # The SIMD loops cost all L lanes whether they run a job or not: once every job has
     # started and at most half the lanes run one (their lengths differ 2x and more), those
-    # go on in half as many lanes, and below SIMD_MIN one after another in one lane.
+    # go on in half as many lanes, down to SIMD_MIN, where the last one goes on alone.
     ln, next_job = _lanes(L, n, nf, n_tan, m, n_sub), 0
     while drive(ln, next_job) == HANDOFF:
         next_job, running = M, np.flatnonzero(ln.job >= 0)
@@ -1090,13 +1087,14 @@ class Outcome(NamedTuple):
 
 def lanes_for(jobs: int) -> int:
     """The lane count for a batch of jobs: SIMD_LANES, or for fewer jobs the largest power
-    of two they fill, from SIMD_MIN (the fewest with which the compiler's SIMD loops run);
-    fewer still run one after another in one lane, where one state's values stay in
-    registers."""
+    of two they fill, from SIMD_MIN (the fewest with which the compiler's SIMD loops run),
+    which also takes 2 to SIMD_MIN - 1 jobs (per orbit-step with a tangent, `bench --only
+    step`: 4 lanes of 256 bits 302 ns a lane, one lane 744; 8 lanes of 512 bits 165, one 713);
+    one job runs in one lane, where its state's values stay in registers."""
     L = SIMD_LANES
     while L > jobs and L > SIMD_MIN:
         L //= 2
-    return L if jobs >= L else 1
+    return L if jobs >= min(L, 2) else 1
 
 
 def integrate_batch(system: System, starts, t_span, *, tangents=None, record=None,
@@ -1257,17 +1255,15 @@ class _Frame(NamedTuple):
         owner = np.empty((3, rows.shape[1]), dtype=np.int64)
         for k in range(3):
             owner[k, rows[k][rows[k] >= 0]] = np.flatnonzero(rows[k] >= 0)
-        samples, fine, ev_y = res.samples, res.fine, res.ev_y
-        if samples.size:        # written in full by the kernel, but for the centre of mass
-            _com_added(samples.reshape(-1, samples.shape[-1]), self.masses, self.Q0, self.V,
-                       *self._rows(samples, owner[1, :samples.shape[0]], t_eval[None, :]),
-                       float(t0))
-        if fine.shape[-1]:
-            fine = self.full(fine, owner[2, :fine.shape[0]], t_fine[None, :], t0)
+        # samples are written in full by the kernel, but for the centre of mass's motion
+        for z, owners, t in ((res.samples, owner[1], t_eval), (res.fine, owner[2], t_fine)):
+            if z.size:
+                _com_added(z.reshape(-1, z.shape[-1]), self.masses, self.Q0, self.V,
+                           *self._rows(z, owners[:z.shape[0]], t[None, :]), float(t0))
+        ev_y = res.ev_y
         if ev_y.size:   # (beyond each job's count: uninitialised, and never read)
             ev_y = self.full(ev_y, owner[0, :ev_y.shape[0]], res.ev_t, t0)
-        return res._replace(y=self.full(res.y, order, res.t, t0), samples=samples,
-                            fine=fine, ev_y=ev_y)
+        return res._replace(y=self.full(res.y, order, res.t, t0), ev_y=ev_y)
 
 
 @leaf

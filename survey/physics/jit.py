@@ -78,15 +78,25 @@ def kernels_cached(package: Path = PACKAGE) -> bool:
 refresh_kernel_cache()
 
 
-def prefer_256_bit_vectors():
-    """Have LLVM vectorise with 256-bit vectors on AVX-512 machines, as it does by itself on
-    Intel's (their `prefer-256-bit` tuning) but not on AMD's Zen 4 and 5. With 512 bits the
-    loop vectoriser puts 8 doubles in a vector, so a loop over SIMD lanes runs as SIMD only
-    from 8 lanes and entirely scalar at the 4 a batch shrinks to (`bench --only step`, an
-    orbit with its tangent: 4 lanes 780 -> 521-531 ns a step, 8 lanes 409-436 -> 399-403,
-    16 lanes within noise, one 861-907 -> 845-850). Zen 4 runs a 512-bit operation as two
-    256-bit halves, so nothing is lost at 16 lanes. Which instructions run changes, never the
-    arithmetic (IEEE operations lane by lane): the same bits.
+# AVX-512 cores by how they run a 512-bit operation: Zen 4 as two 256-bit halves, Zen 5 (its
+# server parts) in full. LLVM's own tuning keeps Intel's cores at 256 bits.
+SPLIT_512 = ("znver4",)
+FULL_512 = ("znver5",)
+
+
+def vector_width():
+    """Have LLVM vectorise for the machine's real vector width, and return it in doubles (4
+    or 8): the fewest lanes whose loops run as SIMD instructions (physics.system.SIMD_MIN).
+
+    With 512 bits the loop vectoriser puts 8 doubles in a vector, so a loop over SIMD lanes
+    runs as SIMD only from 8 lanes and entirely scalar at 4. On Zen 4, which splits a
+    512-bit operation, LLVM is told to prefer 256 bits, as its tuning does by itself on
+    Intel's cores (`bench --only step`, an orbit with its tangent: 4 lanes 780 -> 521-531 ns
+    a step, 8 lanes 409-436 -> 399-403, 16 lanes within noise, one 861-907 -> 845-850). On
+    Zen 5 the full width pays (per orbit-step with a tangent, 256 -> 512 bits: 16 lanes
+    179 -> 136 ns, 8 lanes 220 -> 165, 4 lanes 302 -> 448, scalar; the scan's compute phase
+    1.03 -> 0.87 s). Which instructions run changes, never the arithmetic (IEEE operations
+    lane by lane): the same bits.
 
     numba reads the target's features once, when it makes its code generator (at the first
     function decorated), so this must run before that and makes it at once (numba reloads
@@ -95,14 +105,17 @@ def prefer_256_bit_vectors():
     survey's import is vectorised this way too; a NUMBA_CPU_NAME or NUMBA_CPU_FEATURES set
     by the user wins."""
     if config.CPU_NAME is not None or config.CPU_FEATURES is not None:
-        return
-    features = llvm.get_host_cpu_features()
-    if features.get("avx512f"):
+        return 8 if config.CPU_NAME in FULL_512 else 4
+    name, features = llvm.get_host_cpu_name(), llvm.get_host_cpu_features()
+    if not features.get("avx512f"):
+        return 4
+    if name in SPLIT_512:
         config.CPU_FEATURES = features.flatten() + ",+prefer-256-bit"
         cpu_target.target_context.codegen()
+    return 8 if name in FULL_512 else 4
 
 
-prefer_256_bit_vectors()
+VECTOR_DOUBLES = vector_width()
 
 # Every compiled function: cached on disk, and IEEE arithmetic (inf/nan, never a Python
 # exception such as ZeroDivisionError from inside a kernel; the integrator turns

@@ -29,7 +29,7 @@ from .forces import (
 )
 from .geometry import cross
 from .portable import fma, power, vnorm
-from .jit import helper, kernel, lanes, leaf
+from .jit import VECTOR_DOUBLES, helper, kernel, lanes, leaf
 from .terms import (
     AREA,
     BARRIER,
@@ -369,11 +369,12 @@ def rhs(t, y, dy, masses, d, measure, prof, par, n_tan):
 
 # A batch's lanes: 16 (32 cost ~10% more per orbit-step, `bench --only step`, and a lane
 # that finishes idles unless the batch has a job left). The compiler's loops over
-# the lanes run as SIMD instructions from SIMD_MIN lanes on (4 doubles a vector, also on
-# AVX-512: jit.prefer_256_bit_vectors); with fewer, rhs_lanes runs `rhs` lane by lane, which
-# keeps one state's values in registers (the specialised loops at one lane: 5% slower).
+# the lanes run as SIMD instructions from SIMD_MIN lanes on (the doubles of a vector: 4, or
+# 8 where 512-bit vectors run in full, jit.vector_width); with fewer, rhs_lanes runs `rhs`
+# lane by lane, which keeps one state's values in registers (the specialised loops at one
+# lane: 5% slower).
 SIMD_LANES = 16
-SIMD_MIN = 4
+SIMD_MIN = VECTOR_DOUBLES
 
 
 # A reduced state (three bodies in the plane under one perimetric or areal term,

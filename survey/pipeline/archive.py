@@ -134,11 +134,14 @@ def machine() -> str:
                           if line.startswith("model name")), "")
     except OSError:
         pass
+    from ..physics.jit import VECTOR_DOUBLES
     # what numba's code generator was made with (its configuration may since have been
     # reloaded from an environment without survey.physics.jit's 256-bit setting)
     _, target, features = cpu_target.target_context.codegen().magic_tuple()
     if features.endswith("+prefer-256-bit"):
         target += " in 256-bit vectors"
+    elif VECTOR_DOUBLES == 8:
+        target += " in 512-bit vectors"
     dispatched = [k for k in umath.__cpu_dispatch__ if umath.__cpu_features__.get(k)]
     libc = " ".join(platform.libc_ver()).strip()
     overrides = [f"{k}={os.environ[k]}" for k in MACHINE_OVERRIDES if os.environ.get(k)]
