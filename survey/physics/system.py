@@ -367,14 +367,15 @@ def rhs(t, y, dy, masses, d, measure, prof, par, n_tan):
     velocities_and_forces(y, dy, masses, d, measure, prof, par, n_tan)
 
 
-# A batch's lanes: 16 (32 cost ~10% more per orbit-step, `bench --only step`, and a lane
-# that finishes idles unless the batch has a job left). The compiler's loops over
-# the lanes run as SIMD instructions from SIMD_MIN lanes on (the doubles of a vector: 4, or
-# 8 where 512-bit vectors run in full, jit.vector_width); with fewer, rhs_lanes runs `rhs`
-# lane by lane, which keeps one state's values in registers (the specialised loops at one
-# lane: 5% slower).
-SIMD_LANES = 16
+# A batch's lanes: four vectors' worth, 16 in 256-bit vectors (32 cost ~10% more per
+# orbit-step there, `bench --only step`, and a lane that finishes idles unless the batch
+# has a job left), 32 in 512-bit ones (a 51-orbit task to t = 1000 on Zen 5: 0.33-0.34 s
+# in 16 lanes, 0.30 in 32). The compiler's loops over the lanes run as SIMD instructions
+# from SIMD_MIN lanes on (the doubles of a vector: 4, or 8 where 512-bit vectors run in
+# full, jit.vector_width); with fewer, rhs_lanes runs `rhs` lane by lane, which keeps one
+# state's values in registers (the specialised loops at one lane: 5% slower).
 SIMD_MIN = VECTOR_DOUBLES
+SIMD_LANES = 4 * SIMD_MIN
 
 
 # A reduced state (three bodies in the plane under one perimetric or areal term,
