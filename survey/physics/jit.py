@@ -78,9 +78,8 @@ def kernels_cached(package: Path = PACKAGE) -> bool:
 refresh_kernel_cache()
 
 
-# AVX-512 cores by how they run a 512-bit operation: Zen 4 as two 256-bit halves, Zen 5 (its
-# server parts) in full. LLVM's own tuning keeps Intel's cores at 256 bits.
-SPLIT_512 = ("znver4",)
+# The AVX-512 cores known to run a 512-bit operation in full (Zen 5's server parts); Zen 4
+# runs it as two 256-bit halves, and LLVM's own tuning keeps Intel's cores at 256 bits.
 FULL_512 = ("znver5",)
 
 
@@ -89,9 +88,9 @@ def vector_width():
     or 8): the fewest lanes whose loops run as SIMD instructions (physics.system.SIMD_MIN).
 
     With 512 bits the loop vectoriser puts 8 doubles in a vector, so a loop over SIMD lanes
-    runs as SIMD only from 8 lanes and entirely scalar at 4. On Zen 4, which splits a
-    512-bit operation, LLVM is told to prefer 256 bits, as its tuning does by itself on
-    Intel's cores (`bench --only step`, an orbit with its tangent: 4 lanes 780 -> 521-531 ns
+    runs as SIMD only from 8 lanes and entirely scalar at 4. On AVX-512 cores other than
+    FULL_512 (Zen 4, which splits a 512-bit operation; Intel's, where LLVM's tuning does it
+    by itself) LLVM is told to prefer 256 bits (`bench --only step`, an orbit with its tangent: 4 lanes 780 -> 521-531 ns
     a step, 8 lanes 409-436 -> 399-403, 16 lanes within noise, one 861-907 -> 845-850). On
     Zen 5 the full width pays (per orbit-step with a tangent, 256 -> 512 bits: 16 lanes
     179 -> 136 ns, 8 lanes 220 -> 165, 4 lanes 302 -> 448, scalar; the scan's compute phase
@@ -109,10 +108,11 @@ def vector_width():
     name, features = llvm.get_host_cpu_name(), llvm.get_host_cpu_features()
     if not features.get("avx512f"):
         return 4
-    if name in SPLIT_512:
-        config.CPU_FEATURES = features.flatten() + ",+prefer-256-bit"
-        cpu_target.target_context.codegen()
-    return 8 if name in FULL_512 else 4
+    if name in FULL_512:
+        return 8
+    config.CPU_FEATURES = features.flatten() + ",+prefer-256-bit"
+    cpu_target.target_context.codegen()
+    return 4
 
 
 VECTOR_DOUBLES = vector_width()
