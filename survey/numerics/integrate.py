@@ -659,8 +659,10 @@ def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno
             running = 0
             for k in range(L):
                 running += ln.job[k] >= 0
-            # (SIMD_MIN lanes cost less than two orbits one after another in one lane)
-            if 0 < running and (2 * running <= L if L > SIMD_MIN else running == 1):
+            # half as many lanes while they are at least SIMD_MIN (`dop853`); below, one lane
+            # for the last orbit alone (SIMD_MIN lanes cost less than two orbits one after
+            # the other in one lane)
+            if 0 < running and (2 * running <= L if L // 2 >= SIMD_MIN else running == 1):
                 _flush(ln, out, masses, d, measure, prof, par, t_fine, rb)
                 return HANDOFF
     _flush(ln, out, masses, d, measure, prof, par, t_fine, rb)

@@ -90,11 +90,11 @@ def vector_width():
     With 512 bits the loop vectoriser puts 8 doubles in a vector, so a loop over SIMD lanes
     runs as SIMD only from 8 lanes and entirely scalar at 4. On AVX-512 cores other than
     FULL_512 (Zen 4, which splits a 512-bit operation; Intel's, where LLVM's tuning does it
-    by itself) LLVM is told to prefer 256 bits (`bench --only step`, an orbit with its tangent: 4 lanes 780 -> 521-531 ns
-    a step, 8 lanes 409-436 -> 399-403, 16 lanes within noise, one 861-907 -> 845-850). On
-    Zen 5 the full width pays (per orbit-step with a tangent, 256 -> 512 bits: 16 lanes
-    179 -> 136 ns, 8 lanes 220 -> 165, 4 lanes 302 -> 448, scalar; the scan's compute phase
-    1.03 -> 0.87 s). Which instructions run changes, never the arithmetic (IEEE operations
+    by itself) LLVM is told to prefer 256 bits (Zen 4, `bench --only step`, an orbit with
+    its tangent: 4 lanes 780 -> 521-531 ns a step, 8 lanes 409-436 -> 399-403, 16 lanes
+    within noise, one 861-907 -> 845-850). On Zen 5 the full width pays (per orbit-step
+    with a tangent, 256 -> 512 bits: 16 lanes 179 -> 136 ns, 8 lanes 220 -> 165, 4 lanes
+    302 -> 448, scalar; the scan's compute phase 1.03 -> 0.87 s). Which instructions run changes, never the arithmetic (IEEE operations
     lane by lane): the same bits.
 
     numba reads the target's features once, when it makes its code generator (at the first
