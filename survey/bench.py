@@ -524,6 +524,15 @@ print(json.dumps(dict(start=start, imported=imported, end=time.time(), code=code
 """
 
 
+def user_env(**extra) -> dict:
+    """The environment of a timed command: this one, but Python writing bytecode as it does
+    by default (a development environment may set PYTHONDONTWRITEBYTECODE; survey's own
+    modules, compiled from source on every start, then cost a command 0.05-0.1 s)."""
+    import os
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    return {**env, **extra}
+
+
 def command_phases(argv) -> dict:
     """Seconds of a `python -m survey` command by phase: the interpreter's start, survey's
     imports, run_survey's phases (prepare -- the kernels loaded --, cluster, compute,
@@ -534,7 +543,7 @@ def command_phases(argv) -> dict:
     import sys
     launched = time.time()
     done = subprocess.run([sys.executable, "-c", _CLI_PHASES, *argv], check=True,
-                          capture_output=True, text=True)
+                          capture_output=True, text=True, env=user_env())
     r = json.loads(done.stdout.strip().splitlines()[-1])
     phases = {"interpreter": r["start"] - launched, "imports": r["imported"] - r["start"]}
     phases.update({k: r[k] for k in ("prepare", "cluster", "compute", "shutdown", "archive")})
@@ -610,7 +619,7 @@ def scan_vs_heyoka(cells=101, t_final=2000.0, tol=1e-12, repeats=2, folder="resu
         for key, toml in files.items():
             t = time.perf_counter()
             subprocess.run([sys.executable, "-m", "survey", "run", str(toml), "--no-report",
-                            "--no-progress"], check=True, capture_output=True)
+                            "--no-progress"], check=True, capture_output=True, env=user_env())
             best[key] = min(best[key], time.perf_counter() - t)
         by_phase = command_phases(["run", str(files["same", False]), "--no-report",
                                    "--no-progress"])
@@ -630,7 +639,7 @@ def scan_vs_heyoka(cells=101, t_final=2000.0, tol=1e-12, repeats=2, folder="resu
         out(f"  {label:24s}{best['same', key]:20.2f}{best['default', key]:10.2f}")
     out("  (same work as heyoka: every orbit to t_final once, [tori] extend = 0; default: "
         "the cells whose verdict is in doubt run again to 4 t_final; command line: "
-        "interpreter start to archive)")
+        "interpreter start to archive, Python writing bytecode as it does by default)")
     for name in cfgs:
         out(f"  in process, by phase ({name}): " + ", ".join(
             f"{k} {v:.2f}" for k, v in phases[name].items() if k != "tasks"))
@@ -962,14 +971,13 @@ def fixed_costs(folder="results/bench", repeats=3, out=print, cold=True):
     command = math.inf
     for _ in range(repeats):
         t = time.perf_counter()
-        subprocess.run(run, check=True, capture_output=True)
+        subprocess.run(run, check=True, capture_output=True, env=user_env())
         command = min(command, time.perf_counter() - t)
     first = compiling = math.nan
     if cold:
-        import os
         import tempfile
         with tempfile.TemporaryDirectory() as cache:
-            first, compiling = _timed_command(run, {**os.environ, "NUMBA_CACHE_DIR": cache})
+            first, compiling = _timed_command(run, user_env(NUMBA_CACHE_DIR=cache))
     out("")
     out(f"Fixed costs: a 1-cell survey ('sides', t = 10, warm cache, best of {repeats}), "
         "seconds")
