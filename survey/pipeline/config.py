@@ -212,10 +212,12 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "connect_timeout": Key("float", 30.0, "seconds to wait for that scheduler to answer",
                                "s", above=0, high=3600),
         "chunk_size": Key("int", 0, "cells per task, whose orbits run as SIMD lanes; 0 "
-                                    "picks 64 orbits, or about 64 tasks per worker "
-                                    "on large grids (at most 256 cells each), and at least "
-                                    "one task per worker; chunks interleave the grid so that "
-                                    "every task mixes cheap and costly cells", low=0),
+                                    "picks four rounds of lanes (64 orbits, 128 where "
+                                    "512-bit vectors run in full), or about 64 tasks per "
+                                    "worker on large grids (at most 256 cells each), at "
+                                    "least one task per worker, and a multiple of the "
+                                    "workers of tasks where they are few; chunks interleave "
+                                    "the grid so that every task mixes cheap and costly cells", low=0),
         "retries": Key("int", 2, "retries of a task whose worker raised", low=0, high=100,
                        hint="a task that fails 100 times will fail again"),
     },

@@ -27,6 +27,7 @@ from ..catalog.variables import BY_NAME, V
 from . import archive
 from ..analysis.refine import known_from, plan
 from ..physics.jit import kernels_cached
+from ..physics.system import SIMD_LANES
 from .cells import (
     CellTask,
     build_starts,
@@ -474,20 +475,27 @@ def _head_start(warm, *args):
 
 
 def chunk_size(cells: int, workers: int, per_cell: int) -> int:
-    """Cells per task: orbits for four rounds of SIMD lanes (64), so that a lane whose
-    orbit ends takes another, where the grid allows every worker a task, else what gives
-    every worker one; on large grids about 64 tasks per worker (a finer spread of cheap
-    and costly cells), at most 256 cells."""
-    lanes, workers = -(-64 // per_cell), max(1, workers)   # (all may be restarting)
-    return max(1, min(256, max(lanes, -(-cells // (64 * workers))), -(-cells // workers)))
+    """Cells per task: orbits for four rounds of SIMD lanes (4 SIMD_LANES: 64 in 256-bit
+    vectors, 128 in 512-bit ones, where 64 cost a 401-orbit scan 15% more), so that a lane
+    whose orbit ends takes another, where the grid allows every worker a task, else what
+    gives every worker one; on large grids about 64 tasks per worker (a finer spread of
+    cheap and costly cells), at most 256 cells. Fewer than 8 tasks a worker come in a
+    multiple of the workers, alike in size: a last wave of fewer tasks than workers leaves
+    the others idle (300 cells of one orbit in 128-orbit tasks: 3 on 2 workers)."""
+    lanes, workers = -(-4 * SIMD_LANES // per_cell), max(1, workers)  # (all may be restarting)
+    size = max(1, min(256, max(lanes, -(-cells // (64 * workers))), -(-cells // workers)))
+    tasks = -(-cells // size)
+    if tasks < 8 * workers:
+        size = -(-cells // (-(-tasks // workers) * workers))
+    return size
 
 
 def refined_chunk_size(cells: int, workers: int, per_cell: int) -> int:
     """Cells per task of a refinement's batch: about four tasks a worker -- a cell's
     children are submitted as soon as its task returns, so smaller tasks keep the workers
-    busy across levels -- but not fewer orbits than one round of SIMD lanes (16) where the
-    batch has them, and at least one task per worker."""
-    lanes, workers = -(-16 // per_cell), max(1, workers)
+    busy across levels -- but not fewer orbits than one round of SIMD lanes (SIMD_LANES)
+    where the batch has them, and at least one task per worker."""
+    lanes, workers = -(-SIMD_LANES // per_cell), max(1, workers)
     return max(1, min(chunk_size(cells, workers, per_cell),
                       max(lanes, -(-cells // (4 * workers))), -(-cells // workers)))
 

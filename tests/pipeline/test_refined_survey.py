@@ -163,13 +163,32 @@ def test_seeded_starts_are_not_refined(tmp_path):
 def test_refinement_batches_keep_every_worker_fed(cells, workers, per_cell):
     """A batch of new cells goes out in at least one task per worker (where it has as many
     cells), each holding a round of SIMD lanes of orbits where the batch has them."""
+    from survey.physics.system import SIMD_LANES
     from survey.pipeline.sweep import _chunks, refined_chunk_size
     size = refined_chunk_size(cells, workers, per_cell)
     tasks = _chunks(np.arange(cells), size)
     assert len(tasks) >= min(cells, workers)
     assert sum(t.size for t in tasks) == cells
-    if cells * per_cell >= 16 * workers:
-        assert size * per_cell >= 16
+    if cells * per_cell >= SIMD_LANES * workers:
+        assert size * per_cell >= SIMD_LANES
+
+
+@pytest.mark.parametrize("cells, workers, per_cell", [(300, 2, 1), (401, 2, 1), (1001, 2, 1),
+                                                       (9, 2, 18), (20, 3, 18), (5000, 2, 3)])
+def test_a_grid_goes_out_in_full_waves_of_tasks(cells, workers, per_cell):
+    """A grid of a few tasks a worker goes out in a multiple of the workers, tasks alike in
+    size (no last wave where some workers idle), each of at least two rounds of SIMD lanes
+    of orbits where the grid has four for every worker."""
+    from survey.physics.system import SIMD_LANES
+    from survey.pipeline.sweep import _chunks, chunk_size
+    size = chunk_size(cells, workers, per_cell)
+    tasks = _chunks(np.arange(cells), size)
+    assert sum(t.size for t in tasks) == cells
+    assert max(t.size for t in tasks) - min(t.size for t in tasks) <= 1
+    if len(tasks) < 8 * workers:
+        assert len(tasks) % workers == 0
+    if cells * per_cell >= 4 * SIMD_LANES * workers:     # at least two rounds a task
+        assert size * per_cell >= 2 * SIMD_LANES
 
 
 def test_a_moment_without_workers_still_chunks():
