@@ -26,7 +26,8 @@ from .numerics.indicators import deviation_vectors
 from .numerics.integrate import _Frame, integrate, integrate_batch
 from .physics.families import initial_state
 from .physics.jit import kernel
-from .physics.system import System, rhs, rhs_lanes, workspace_size
+from .physics.system import SIMD_LANES, System, rhs, rhs_lanes, workspace_size
+from .physics.terms import make_potential
 
 CASES = [("chaotic 'sides'", "sides", {}),
          ("regular equilateral d=3", "equilateral", {"delta": 3.0})]
@@ -246,7 +247,7 @@ def interaction_terms(t_final=2000.0, repeats=5, out=print):
     ways, interleaved, best of `repeats`: the own path as a survey runs it, the own path on
     all 12 components (the reduction switched off: what the specialised right-hand side
     alone buys, which the target is about) and the general path; the orbits compared over
-    t = 10."""
+    t = 10. Then a sum of terms in SIMD lanes (`_ljat_lanes`)."""
     from unittest import mock
     own = System.create()
     general = GeneralPath(own.masses, own.dim, own.terms)
@@ -280,7 +281,41 @@ def interaction_terms(t_final=2000.0, repeats=5, out=print):
         out(f"{r['case']:26s} {r['own']:8.3f} {r['own12']:9.3f} {r['general']:10.3f} "
             f"{r['general'] / r['own12']:14.2f}x {r['general'] / r['own']:11.2f}x "
             f"{'yes' if r['same'] else 'NO'}")
+    lanes = _ljat_lanes(repeats)
+    out(f"A sum of terms in lanes: the LJAT trimer (Lennard-Jones pairs + Axilrod-Teller, "
+        f"{lanes['orbits']} orbits near its equilateral equilibrium, t = {lanes['t']:g}, one "
+        f"tangent + MEGNO), ns per orbit-step: alone {lanes['alone']:.0f}, in "
+        f"{SIMD_LANES} lanes {lanes['lanes']:.0f} ({lanes['alone'] / lanes['lanes']:.1f}x); "
+        f"the paper's 'sides' orbit in {SIMD_LANES} lanes {lanes['paper']:.0f}")
     return rows
+
+
+def _ljat_lanes(repeats, orbits=64, t_final=100.0) -> dict:
+    """ns per attempted orbit-step of LJAT trimer orbits (seeded momenta near the
+    equilateral equilibrium) alone and in SIMD_LANES lanes, and of the paper's 'sides'
+    orbit in as many lanes, best of `repeats`."""
+    rng = np.random.default_rng(3)
+    ljat = System(np.ones(3), 2, (make_potential("lennard_jones", {}, "pair"),
+                                  make_potential("axilrod_teller", {"strength": 0.3})))
+    at = np.array([[0.0, 0.0], [1.12, 0.0], [0.56, 0.97]])
+    starts = np.array([ljat.state(at + 0.02 * rng.normal(size=(3, 2)),
+                                  (p := 0.3 * rng.normal(size=(3, 2))) - p.mean(0))
+                       for _ in range(orbits)])
+    paper = System.create()
+    sides = np.repeat(initial_state(paper, "sides")[None], orbits, 0)
+
+    def per_step(system, y0s, lanes, t):
+        w = np.array([deviation_vectors(system, y, 1, seed=0) for y in y0s])
+        integrate_batch(system, y0s, 1.0, tangents=w, megno=True, lanes=lanes)
+        best = math.inf
+        for _ in range(repeats):
+            start = time.perf_counter()
+            done = integrate_batch(system, y0s, t, tangents=w, megno=True, lanes=lanes)
+            best = min(best, time.perf_counter() - start)
+        return 1e9 * best / sum(o.n_steps + o.n_rejected for o in done)
+    return dict(orbits=orbits, t=t_final, alone=per_step(ljat, starts[:4], 1, t_final),
+                lanes=per_step(ljat, starts, SIMD_LANES, t_final),
+                paper=per_step(paper, sides, SIMD_LANES, t_final))
 
 
 def torus_overhead(t_final=2000.0, repeats=6, out=print):
@@ -997,7 +1032,6 @@ def newton_step(repeats=5, out=print):
     step is that integration plus the linear algebra; the target is about 1x."""
     from .numerics import periodic
     from .physics.families import initial_state
-    from .physics.terms import make_potential
     gravity = System(np.ones(3), 2, make_potential("gravity", {"G": 1.0}, "pair"))
     x1, v3 = np.array([0.97000436, -0.24308753]), np.array([-0.93240737, -0.86473146])
     areal = System.create(potential="areal_barrier")

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 
 from . import portable
-from .jit import helper, leaf
+from .jit import helper, lanes, leaf
 from .terms import BARRIER, LENNARD_JONES, PERIMETER, POWER
 
 
@@ -239,8 +239,21 @@ def atm_forces(y, dy, i, j, k, d, n, n_tan, par):
     dU/ds1 = Z Q^(-5/2) ((15 D - 3 Q) s1 / |s1|^2 - 3 (s2.s3) ((s3.s1) s2 + (s1.s2) s3))
     (cyclic), and the force on u is dU/ds1 - dU/ds3 (s1 = v - u, s3 = u - w)."""
     nq = n // 2
-    Z = par[0]
-    u, v, w = vec(y, i * d, d), vec(y, j * d, d), vec(y, k * d, d)
+    parts = _atm_parts(vec(y, i * d, d), vec(y, j * d, d), vec(y, k * d, d), par[0])
+    W, H1, H2, H3 = parts[10], parts[14], parts[15], parts[16]
+    _add_cyclic(dy, nq, i, j, k, d, W, H1, H2, H3)
+    for t in range(n_tan):
+        base = n * (1 + t)
+        dW, dH1, dH2, dH3 = _atm_tangent(parts, vec(y, base + i * d, d),
+                                         vec(y, base + j * d, d), vec(y, base + k * d, d))
+        _add_cyclic(dy, base + nq, i, j, k, d, dW, H1, H2, H3)
+        _add_cyclic(dy, base + nq, i, j, k, d, W, dH1, dH2, dH3)
+
+
+@helper
+def _atm_parts(u, v, w, Z):
+    """What atm_forces computes of the triangle (u, v, w) before its forces: the sides,
+    their dot products, Q, W = Z Q^(-5/2), the c's and the H's."""
     s1, s2, s3 = sub(v, u), sub(w, v), sub(u, w)
     l1, l2, l3 = dot(s1, s1), dot(s2, s2), dot(s3, s3)
     a12, a23, a31 = dot(s1, s2), dot(s2, s3), dot(s3, s1)
@@ -252,27 +265,30 @@ def atm_forces(y, dy, i, j, k, d, n, n_tan, par):
     H1 = _atm_h(c1, s1, a23, a31, s2, a12, s3)
     H2 = _atm_h(c2, s2, a31, a12, s3, a23, s1)
     H3 = _atm_h(c3, s3, a12, a23, s1, a31, s2)
-    _add_cyclic(dy, nq, i, j, k, d, W, H1, H2, H3)
-    for t in range(n_tan):
-        base = n * (1 + t)
-        du, dv, dw = vec(y, base + i * d, d), vec(y, base + j * d, d), vec(y, base + k * d, d)
-        r1, r2, r3 = sub(dv, du), sub(dw, dv), sub(du, dw)
-        dl1, dl2, dl3 = 2.0 * dot(s1, r1), 2.0 * dot(s2, r2), 2.0 * dot(s3, r3)
-        da12 = dot(s1, r2) + dot(r1, s2)
-        da23 = dot(s2, r3) + dot(r2, s3)
-        da31 = dot(s3, r1) + dot(r3, s1)
-        dQ = dl1 * l2 * l3 + l1 * dl2 * l3 + l1 * l2 * dl3
-        dD = da12 * a23 * a31 + a12 * da23 * a31 + a12 * a23 * da31
-        dW = -2.5 * W * dQ / Q
-        dcc = 15.0 * dD - 3.0 * dQ
-        dH1 = _atm_dh(c1, (dcc - c1 * dl1) / l1, s1, r1, a23, da23, a31, da31, s2, r2,
-                      a12, da12, s3, r3)
-        dH2 = _atm_dh(c2, (dcc - c2 * dl2) / l2, s2, r2, a31, da31, a12, da12, s3, r3,
-                      a23, da23, s1, r1)
-        dH3 = _atm_dh(c3, (dcc - c3 * dl3) / l3, s3, r3, a12, da12, a23, da23, s1, r1,
-                      a31, da31, s2, r2)
-        _add_cyclic(dy, base + nq, i, j, k, d, dW, H1, H2, H3)
-        _add_cyclic(dy, base + nq, i, j, k, d, W, dH1, dH2, dH3)
+    return s1, s2, s3, l1, l2, l3, a12, a23, a31, Q, W, c1, c2, c3, H1, H2, H3
+
+
+@helper
+def _atm_tangent(parts, du, dv, dw):
+    """The variations dW, dH1, dH2, dH3 of the triangle's W and H's (_atm_parts) along the
+    deviations du, dv, dw of its bodies."""
+    s1, s2, s3, l1, l2, l3, a12, a23, a31, Q, W, c1, c2, c3, _, _, _ = parts
+    r1, r2, r3 = sub(dv, du), sub(dw, dv), sub(du, dw)
+    dl1, dl2, dl3 = 2.0 * dot(s1, r1), 2.0 * dot(s2, r2), 2.0 * dot(s3, r3)
+    da12 = dot(s1, r2) + dot(r1, s2)
+    da23 = dot(s2, r3) + dot(r2, s3)
+    da31 = dot(s3, r1) + dot(r3, s1)
+    dQ = dl1 * l2 * l3 + l1 * dl2 * l3 + l1 * l2 * dl3
+    dD = da12 * a23 * a31 + a12 * da23 * a31 + a12 * a23 * da31
+    dW = -2.5 * W * dQ / Q
+    dcc = 15.0 * dD - 3.0 * dQ
+    dH1 = _atm_dh(c1, (dcc - c1 * dl1) / l1, s1, r1, a23, da23, a31, da31, s2, r2,
+                  a12, da12, s3, r3)
+    dH2 = _atm_dh(c2, (dcc - c2 * dl2) / l2, s2, r2, a31, da31, a12, da12, s3, r3,
+                  a23, da23, s1, r1)
+    dH3 = _atm_dh(c3, (dcc - c3 * dl3) / l3, s3, r3, a12, da12, a23, da23, s1, r1,
+                  a31, da31, s2, r2)
+    return dW, dH1, dH2, dH3
 
 
 @helper
@@ -291,3 +307,90 @@ def pair_forces(y, dy, i, j, d, n, n_tan, prof, par, w):
         g = _pair_tangent(e, L, r, dot(e, r), U1, U2)
         add_to(dy, base + nq + i * d, d, w, g)
         add_to(dy, base + nq + j * d, d, -w, g)
+
+
+# The same pair and ATM forces for L orbits at once (sums of terms, `system._general_lanes`):
+# each pair's or triangle's coordinates are first gathered into rows of G (G[r * L + k]:
+# row r of lane k, z rows zero in the plane), then one loop over the lanes computes what
+# the functions above compute, with their helpers in their order, into rows of another
+# array, which system._general_lanes adds to the rates as add_to does. Reading and writing
+# separate arrays (declared disjoint, jit.lanes) lets the compiler turn the loops into SIMD
+# instructions; the values are those of one orbit's, bit for bit.
+
+@helper
+def _row3(G, r, L, k):
+    """Rows r, r + 1, r + 2 of lane k as a 3-tuple."""
+    return (G[r * L + k], G[(r + 1) * L + k], G[(r + 2) * L + k])
+
+
+@helper
+def _put3(O, r, L, k, v):
+    O[r * L + k], O[(r + 1) * L + k], O[(r + 2) * L + k] = v
+
+
+@lanes
+def pair_geometry_lanes(G, P, L):
+    """Unit vector from body i (G rows 0-2) to body j (rows 3-5) and their distance, into P
+    rows 0-2 and 3, as pair_forces takes them."""
+    for k in range(L):
+        e, r = _unit(sub(_row3(G, 3, L, k), _row3(G, 0, L, k)))
+        _put3(P, 0, L, k, e)
+        P[3 * L + k] = r
+
+
+@lanes
+def profile_lanes(code, par, X, U, L):
+    """U' and U'' (U rows 0, 1) of a profile at X, with its code chosen outside the loop
+    over the lanes (inside, the call of the transcendental ones keeps the algebraic ones
+    from running as SIMD instructions)."""
+    if code == LENNARD_JONES:
+        for k in range(L):
+            _, U[k], U[L + k] = lennard_jones(par[0], par[1], X[k])
+    elif code == BARRIER:
+        for k in range(L):
+            _, U[k], U[L + k] = barrier(par[0], par[1], X[k])
+    elif code == POWER and par[1] == 2.0:
+        for k in range(L):
+            _, U[k], U[L + k] = power_2(par[0], X[k])
+    else:
+        for k in range(L):
+            _, U[k], U[L + k] = profile(code, par, X[k])
+
+
+@lanes
+def pair_tangent_lanes(G, P, U, O, L):
+    """pair_forces' tangent force g of one tangent vector (its bodies i, j in G rows 0-2,
+    3-5; the pair's unit vector and distance in P, U', U'' in U) into O rows 0-2."""
+    for k in range(L):
+        e, r = _row3(P, 0, L, k), P[3 * L + k]
+        dr = sub(_row3(G, 3, L, k), _row3(G, 0, L, k))
+        _put3(O, 0, L, k, _pair_tangent(e, r, dr, dot(e, dr), U[k], U[L + k]))
+
+
+@lanes
+def atm_lanes(G, O, L, Z):
+    """atm_forces' forces of one triangle (bodies u, v, w in G rows 0-8): W into O row 0
+    and the cyclic differences H1 - H3, H2 - H1, H3 - H2 into rows 1-9."""
+    for k in range(L):
+        parts = _atm_parts(_row3(G, 0, L, k), _row3(G, 3, L, k), _row3(G, 6, L, k), Z)
+        W, H1, H2, H3 = parts[10], parts[14], parts[15], parts[16]
+        O[k] = W
+        _put3(O, 1, L, k, sub(H1, H3))
+        _put3(O, 4, L, k, sub(H2, H1))
+        _put3(O, 7, L, k, sub(H3, H2))
+
+
+@lanes
+def atm_tangent_lanes(G, O, L, Z):
+    """atm_forces' tangent terms of one tangent vector (bodies in G rows 0-8, their
+    deviations in rows 9-17): dW into O row 0 and the differences dH1 - dH3, dH2 - dH1,
+    dH3 - dH2 into rows 1-9 (W and the H's differences are atm_lanes'). (With W and the
+    H's differences written here too, 20 rows, the compiler left the loop scalar.)"""
+    for k in range(L):
+        parts = _atm_parts(_row3(G, 0, L, k), _row3(G, 3, L, k), _row3(G, 6, L, k), Z)
+        dW, dH1, dH2, dH3 = _atm_tangent(parts, _row3(G, 9, L, k), _row3(G, 12, L, k),
+                                         _row3(G, 15, L, k))
+        O[k] = dW
+        _put3(O, 1, L, k, sub(dH1, dH3))
+        _put3(O, 4, L, k, sub(dH2, dH1))
+        _put3(O, 7, L, k, sub(dH3, dH2))

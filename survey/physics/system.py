@@ -17,12 +17,17 @@ from .forces import (
     areal_forces,
     atm_energy,
     atm_forces,
+    atm_lanes,
+    atm_tangent_lanes,
     barrier,
     norm,
     pair_forces,
+    pair_geometry_lanes,
+    pair_tangent_lanes,
     perimetric_forces,
     power_2,
     profile,
+    profile_lanes,
     sub,
     triplet_measure,
     vec,
@@ -398,7 +403,7 @@ def state_size(masses, d, rb):
 @helper
 def workspace_size(L, nf):
     """Floats of the workspace `rhs_lanes` needs for L lanes of nf components."""
-    return max(15 * L, 2 * nf)
+    return max(GENERAL_ROWS * L, 2 * nf)
 
 
 @leaf
@@ -425,7 +430,7 @@ def _full_lanes(t, Y, dY, L, masses, d, measure, prof, par, n_tan, W):
         _planar_lanes(Y, dY, L, W, masses, measure, prof, par, n_tan, None)
     elif L == 1:
         rhs(t, Y, dY, masses, d, measure, prof, par, n_tan)
-    else:
+    elif not (L >= SIMD_MIN and general_lanes(Y, dY, L, W, masses, d, measure, par, n_tan)):
         nf = Y.size // L
         y, dy = W[:nf], W[nf:2 * nf]
         for k in range(L):
@@ -434,6 +439,137 @@ def _full_lanes(t, Y, dY, L, masses, d, measure, prof, par, n_tan, W):
             rhs(t, y, dy, masses, d, measure, prof, par, n_tan)
             for i in range(nf):
                 dY[i * L + k] = dy[i]
+
+
+# Sums of pair and ATM terms (no perimetric or areal term: the LJAT clusters, gravity) in
+# loops over the lanes: a LJAT trimer's orbit-step with a tangent vector cost 1.67 us in 32
+# lanes run lane by lane through `rhs`, 2.23 alone. The workspace's rows: G the gathered
+# coordinates (18), P a pair's unit vector and distance (4), U its U' and U'' (2), O what
+# is added to the rates (20).
+GENERAL_ROWS = 44
+
+
+def general_lanes(Y, dY, L, W, masses, d, measure, par, n_tan):
+    """`_general_lanes` for a 2-D par whose terms it takes; returns whether it ran."""
+
+
+@overload(general_lanes, jit_options=dict(error_model="numpy"), inline="always")
+def _general_lanes_overload(Y, dY, L, W, masses, d, measure, par, n_tan):
+    if par.ndim == 1:
+        return lambda Y, dY, L, W, masses, d, measure, par, n_tan: False
+
+    def run(Y, dY, L, W, masses, d, measure, par, n_tan):
+        if measure != NONE:
+            return False
+        for row in range(1, par.shape[0]):
+            if par[row, 0] != DISTANCE and par[row, 0] != TRIANGLE:
+                return False
+        _general_lanes(Y, dY, L, W[:18 * L], W[18 * L:22 * L], W[22 * L:24 * L],
+                       W[24 * L:GENERAL_ROWS * L], masses, d, par, n_tan)
+        return True
+    return run
+
+
+@lanes
+def _general_lanes(Y, dY, L, G, P, U, O, masses, d, par, n_tan):
+    """`rhs` of L full states under pair and ATM terms alone (par's rows 1, ...): the
+    velocities and each term's forces as `_leading_forces` and `_rows_forces` give them,
+    term by term and pair by pair in their order, each in loops over the lanes (forces.py's
+    lane kernels), so every lane gets the bits `rhs` gives."""
+    N = masses.size
+    nq = N * d
+    n = 2 * nq
+    # a body's d rows are one run of d L values: one loop each (tiny loops cost their setup)
+    for b in range(N):
+        x = 1.0 / masses[b]
+        for t_ in range(1 + n_tan):
+            rate, p = dY[(n * t_ + b * d) * L:], Y[(n * t_ + nq + b * d) * L:]
+            for k in range(d * L):
+                rate[k] = p[k] * x
+    for t_ in range(1 + n_tan):
+        force = dY[(n * t_ + nq) * L:(n * t_ + n) * L]
+        for k in range(nq * L):
+            force[k] = 0.0
+    for row in range(1, par.shape[0]):
+        code, weighted, p = int(par[row, 1]), par[row, 2], par[row, 3:]
+        if par[row, 0] == DISTANCE:
+            for i in range(N - 1):
+                for j in range(i + 1, N):
+                    w = masses[i] * masses[j] if weighted != 0.0 else 1.0
+                    _gather(G, 0, Y, (i * d, j * d), d, L)
+                    pair_geometry_lanes(G, P, L)
+                    profile_lanes(code, p, P[3 * L:], U, L)
+                    for k in range(L):
+                        O[k] = w * U[k]
+                    for c in range(d):
+                        _add(dY, nq + i * d + c, O, 0, 1.0, P, c, L)
+                        _add(dY, nq + j * d + c, O, 0, -1.0, P, c, L)
+                    for t_ in range(n_tan):
+                        base = n * (1 + t_)
+                        _gather(G, 0, Y, (base + i * d, base + j * d), d, L)
+                        pair_tangent_lanes(G, P, U, O, L)
+                        for c in range(d):
+                            _add_scaled(dY, base + nq + i * d + c, w, O, c, L)
+                            _add_scaled(dY, base + nq + j * d + c, -w, O, c, L)
+        else:
+            for i in range(N - 2):
+                for j in range(i + 1, N - 1):
+                    for k3 in range(j + 1, N):
+                        bodies = (i * d, j * d, k3 * d)
+                        _gather(G, 0, Y, bodies, d, L)
+                        atm_lanes(G, O, L, p[0])
+                        _add_cyclic_lanes(dY, nq, (i, j, k3), d, O, 0, 1, L)
+                        for t_ in range(n_tan):
+                            base = n * (1 + t_)
+                            _gather(G, 9, Y, (base + i * d, base + j * d, base + k3 * d),
+                                    d, L)
+                            atm_tangent_lanes(G, O[10 * L:], L, p[0])
+                            # dW times the H's differences, then W times the dH's
+                            _add_cyclic_lanes(dY, base + nq, (i, j, k3), d, O, 10, 1, L)
+                            _add_cyclic_lanes(dY, base + nq, (i, j, k3), d, O, 0, 11, L)
+
+
+@helper
+def _gather(G, r0, Y, offsets, d, L):
+    """Coordinates offsets[b] .. + d of each body b into G's rows r0 + 3 b .. + 2, the z
+    row zero in the plane (as forces.vec reads them)."""
+    for b in range(len(offsets)):
+        g, y = G[(r0 + 3 * b) * L:], Y[offsets[b] * L:]
+        for k in range(d * L):
+            g[k] = y[k]
+        if d == 2:
+            for k in range(2 * L, 3 * L):
+                g[k] = 0.0
+
+
+@helper
+def _add(dY, row, S, s_row, sign, V, v_row, L):
+    """dY's row += (sign S[s_row]) V[v_row], lane by lane: forces.add_to with a scale s of
+    each lane (sign 1 or -1: -s exactly)."""
+    rate, s, v = dY[row * L:], S[s_row * L:], V[v_row * L:]
+    if sign > 0.0:
+        for k in range(L):
+            rate[k] += s[k] * v[k]
+    else:
+        for k in range(L):
+            rate[k] += -s[k] * v[k]
+
+
+@helper
+def _add_scaled(dY, row, w, V, v_row, L):
+    """dY's row += w V[v_row]: forces.add_to with one scale w for every lane."""
+    rate, v = dY[row * L:], V[v_row * L:]
+    for k in range(L):
+        rate[k] += w * v[k]
+
+
+@helper
+def _add_cyclic_lanes(dY, off, bodies, d, O, s_row, v_row, L):
+    """forces._add_cyclic of every lane: the scale in O's row s_row, the three bodies'
+    differences from its row v_row on: body b's d components in rows v_row + 3 b ..."""
+    for b in range(3):
+        for c in range(d):
+            _add(dY, off + bodies[b] * d + c, O, s_row, 1.0, O, v_row + 3 * b + c, L)
 
 
 @leaf

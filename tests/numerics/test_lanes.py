@@ -80,20 +80,36 @@ def test_the_areal_system_in_lanes():
           events=[section_event(system)])
 
 
-@pytest.mark.parametrize("case", ["four bodies", "pair and triplet terms"])
+@pytest.mark.parametrize("case", ["four bodies", "pair and triplet terms",
+                                  "3-D pairs and triangles", "planar pairs of every profile"])
 def test_other_systems_in_lanes(case):
+    """Systems beyond the paper's: run lane by lane through `rhs` (a perimetric term on four
+    bodies) or in the SIMD loops of pair and ATM terms (system._general_lanes: LJAT, in 3-D
+    with unequal masses and mass-weighted gravity, and pair profiles algebraic and
+    transcendental), with one or two tangent vectors."""
     rng = np.random.default_rng(3)
+    d, n_tan = 2, 1
     if case == "four bodies":
         system = System(np.array([1.0, 1.2, 0.8, 1.1]), 2, make_potential("perimetric_power"))
-    else:
+    elif case == "pair and triplet terms":
         system = System(np.ones(3), 2, (make_potential("lennard_jones", {}, "pair"),
                                         make_potential("axilrod_teller", {"strength": 0.3})))
+    elif case == "3-D pairs and triangles":
+        d, n_tan = 3, 2
+        system = System(np.array([1.0, 1.3, 0.7, 1.1]), 3, (
+            make_potential("lennard_jones", {}, "pair"),
+            make_potential("gravity", {"G": 0.5}, "pair"),
+            make_potential("axilrod_teller", {"strength": 0.4})))
+    else:
+        system = System(np.array([1.0, 0.9, 1.2]), 2, (
+            make_potential("yukawa", {}, "pair"), make_potential("power", {}, "pair"),
+            make_potential("lennard_jones", {}, "pair")))
     N = system.n_bodies
-    base = np.array([[np.cos(a), np.sin(a)] for a in np.linspace(0, 2 * np.pi, N,
-                                                                 endpoint=False)]) * 1.2
-    starts = np.array([system.state(base + 0.05 * rng.normal(size=(N, 2)),
-                                    0.2 * rng.normal(size=(N, 2))) for _ in range(17)])
-    tangents = np.array([deviation_vectors(system, y, 1, 2) for y in starts])
+    base = np.array([[np.cos(a), np.sin(a), 0.3 * np.sin(2 * a)][:d]
+                     for a in np.linspace(0, 2 * np.pi, N, endpoint=False)]) * 1.2
+    starts = np.array([system.state(base + 0.05 * rng.normal(size=(N, d)),
+                                    0.2 * rng.normal(size=(N, d))) for _ in range(17)])
+    tangents = np.array([deviation_vectors(system, y, n_tan, 2) for y in starts])
     check(system, starts, tangents, np.zeros(17, dtype=np.int64), 5.0, (1, 17), megno=True)
 
 
