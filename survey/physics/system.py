@@ -490,6 +490,11 @@ def _general_lanes(Y, dY, L, G, P, U, O, masses, d, par, n_tan):
         force = dY[(n * t_ + nq) * L:(n * t_ + n) * L]
         for k in range(nq * L):
             force[k] = 0.0
+    if d == 2:          # the z rows the gathers leave alone (forces.vec's 0.0)
+        for r in range(2, 18, 3):
+            z = G[r * L:(r + 1) * L]
+            for k in range(L):
+                z[k] = 0.0
     for row in range(1, par.shape[0]):
         code, weighted, p = int(par[row, 1]), par[row, 2], par[row, 3:]
         if par[row, 0] == DISTANCE:
@@ -501,16 +506,13 @@ def _general_lanes(Y, dY, L, G, P, U, O, masses, d, par, n_tan):
                     profile_lanes(code, p, P[3 * L:], U, L)
                     for k in range(L):
                         O[k] = w * U[k]
-                    for c in range(d):
-                        _add(dY, nq + i * d + c, O, 0, 1.0, P, c, L)
-                        _add(dY, nq + j * d + c, O, 0, -1.0, P, c, L)
+                    _pair_sums(dY[(nq + i * d) * L:], dY[(nq + j * d) * L:], O, P, L, d)
                     for t_ in range(n_tan):
                         base = n * (1 + t_)
                         _gather(G, 0, Y, (base + i * d, base + j * d), d, L)
                         pair_tangent_lanes(G, P, U, O, L)
-                        for c in range(d):
-                            _add_scaled(dY, base + nq + i * d + c, w, O, c, L)
-                            _add_scaled(dY, base + nq + j * d + c, -w, O, c, L)
+                        _pair_tangent_sums(dY[(base + nq + i * d) * L:],
+                                           dY[(base + nq + j * d) * L:], w, O, L, d)
         else:
             for i in range(N - 2):
                 for j in range(i + 1, N - 1):
@@ -531,36 +533,34 @@ def _general_lanes(Y, dY, L, G, P, U, O, masses, d, par, n_tan):
 
 @helper
 def _gather(G, r0, Y, offsets, d, L):
-    """Coordinates offsets[b] .. + d of each body b into G's rows r0 + 3 b .. + 2, the z
-    row zero in the plane (as forces.vec reads them)."""
+    """Coordinates offsets[b] .. + d of each body b into G's rows r0 + 3 b .. (in the plane
+    the z rows stay zero, as forces.vec reads them: _general_lanes zeroes them)."""
     for b in range(len(offsets)):
         g, y = G[(r0 + 3 * b) * L:], Y[offsets[b] * L:]
         for k in range(d * L):
             g[k] = y[k]
-        if d == 2:
-            for k in range(2 * L, 3 * L):
-                g[k] = 0.0
 
 
-@helper
-def _add(dY, row, S, s_row, sign, V, v_row, L):
-    """dY's row += (sign S[s_row]) V[v_row], lane by lane: forces.add_to with a scale s of
-    each lane (sign 1 or -1: -s exactly)."""
-    rate, s, v = dY[row * L:], S[s_row * L:], V[v_row * L:]
-    if sign > 0.0:
+@lanes
+def _pair_sums(fi, fj, S, V, L, d):
+    """forces.add_to of a pair's forces to its bodies' d rows from fi and fj: fi += S V,
+    fj += (-S) V, each lane with its scale S (two bodies' rows in one loop: as views of one
+    array the compiler could not tell them apart)."""
+    for c in range(d):
+        a, b, v = fi[c * L:], fj[c * L:], V[c * L:]
         for k in range(L):
-            rate[k] += s[k] * v[k]
-    else:
+            a[k] += S[k] * v[k]
+            b[k] += -S[k] * v[k]
+
+
+@lanes
+def _pair_tangent_sums(fi, fj, w, V, L, d):
+    """As _pair_sums with one scale w for every lane (add_to's w, then -w)."""
+    for c in range(d):
+        a, b, v = fi[c * L:], fj[c * L:], V[c * L:]
         for k in range(L):
-            rate[k] += -s[k] * v[k]
-
-
-@helper
-def _add_scaled(dY, row, w, V, v_row, L):
-    """dY's row += w V[v_row]: forces.add_to with one scale w for every lane."""
-    rate, v = dY[row * L:], V[v_row * L:]
-    for k in range(L):
-        rate[k] += w * v[k]
+            a[k] += w * v[k]
+            b[k] += -w * v[k]
 
 
 @helper
@@ -569,7 +569,10 @@ def _add_cyclic_lanes(dY, off, bodies, d, O, s_row, v_row, L):
     differences from its row v_row on: body b's d components in rows v_row + 3 b ..."""
     for b in range(3):
         for c in range(d):
-            _add(dY, off + bodies[b] * d + c, O, s_row, 1.0, O, v_row + 3 * b + c, L)
+            rate, s, v = dY[(off + bodies[b] * d + c) * L:], O[s_row * L:], \
+                O[(v_row + 3 * b + c) * L:]
+            for k in range(L):
+                rate[k] += s[k] * v[k]
 
 
 @leaf
