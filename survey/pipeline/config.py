@@ -217,7 +217,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
                                     "worker on large grids (at most 256 cells each), at "
                                     "least one task per worker, and a multiple of the "
                                     "workers of tasks where they are few; chunks interleave "
-                                    "the grid so that every task mixes cheap and costly cells", low=0),
+                                    "the grid so that every task mixes cheap and costly cells",
+                          low=0),
         "retries": Key("int", 2, "retries of a task whose worker raised", low=0, high=100,
                        hint="a task that fails 100 times will fail again"),
     },
