@@ -256,8 +256,9 @@ def _run(task: CellTask, system, events, starts, factor: int) -> list[CellResult
     run = dict(rtol=integ["rtol"], atol=integ["atol"], max_steps=integ["max_steps"],
                time_limit=integ["cell_time_limit"], events=events)
     dt = tor["sample_interval"]
-    if tor["analyse"]:    # midpoints of equal intervals: the Birkhoff sums' quadrature
-        run["t_fine"] = (np.arange(int(t_final / dt)) + 0.5) * dt
+    if tor["analyse"]:    # midpoints of equal intervals: the Birkhoff sums' quadrature;
+        # each batch's samples are analysed before this thread's next batch reuses them
+        run.update(t_fine=(np.arange(int(t_final / dt)) + 0.5) * dt, reuse_samples=True)
     if task.section:
         run["max_events"] = task.section["max_crossings"]
     if ind["which"]:

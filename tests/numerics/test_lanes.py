@@ -167,3 +167,22 @@ def test_the_driver_compiles_once_for_every_batch():
                     t_eval=np.linspace(0.0, -2.0, 5), t_fine=-np.arange(20) * 0.1)
     integrate_batch(system, starts[:1], 2.0, tangents=tangents[:1], lanes=1)
     assert set(_run.signatures) | set(_adopt.signatures) == compiled
+
+
+def test_samples_in_a_reused_buffer_are_those_of_a_fresh_array():
+    """Batches that write their orbit samples into this thread's reused buffer
+    (reuse_samples, as a worker's cells do) get the bits and the NaNs past an orbit's end
+    that a fresh array holds, whatever the buffer held before: a shorter batch's samples,
+    then a longer one's under orbits cut short by their step budget."""
+    system = System.create()
+    starts = np.array([initial_state(system, "equilateral", delta=x) for x in (0.0, 3.0, 7.0)])
+    for t_final, max_steps in ((20.0, 10**6), (60.0, 10**6), (30.0, 300)):
+        grid = (np.arange(int(t_final / 0.1)) + 0.5) * 0.1
+        fresh = integrate_batch(system, starts, t_final, t_fine=grid, max_steps=max_steps)
+        reused = integrate_batch(system, starts, t_final, t_fine=grid, max_steps=max_steps,
+                                 reuse_samples=True)
+        for a, b in zip(fresh, reused):
+            assert b.fine.shape == (grid.size, system.n)
+            assert a.fine.tobytes() == b.fine.tobytes()
+        cut = [np.isnan(b.fine[:, 0]).sum() for b in reused]
+        assert (min(cut) > 0) == (max_steps == 300), cut
