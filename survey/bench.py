@@ -247,7 +247,7 @@ def interaction_terms(t_final=2000.0, repeats=5, out=print):
     ways, interleaved, best of `repeats`: the own path as a survey runs it, the own path on
     all 12 components (the reduction switched off: what the specialised right-hand side
     alone buys, which the target is about) and the general path; the orbits compared over
-    t = 10. Then a sum of terms in SIMD lanes (`_ljat_lanes`)."""
+    t = 10. Then sums of terms in SIMD lanes (`_sums_in_lanes`)."""
     from unittest import mock
     own = System.create()
     general = GeneralPath(own.masses, own.dim, own.terms)
@@ -281,26 +281,32 @@ def interaction_terms(t_final=2000.0, repeats=5, out=print):
         out(f"{r['case']:26s} {r['own']:8.3f} {r['own12']:9.3f} {r['general']:10.3f} "
             f"{r['general'] / r['own12']:14.2f}x {r['general'] / r['own']:11.2f}x "
             f"{'yes' if r['same'] else 'NO'}")
-    lanes = _ljat_lanes(repeats)
-    out(f"A sum of terms in lanes: the LJAT trimer (Lennard-Jones pairs + Axilrod-Teller, "
-        f"{lanes['orbits']} orbits near its equilateral equilibrium, t = {lanes['t']:g}, one "
-        f"tangent + MEGNO), ns per orbit-step: alone {lanes['alone']:.0f}, in "
-        f"{SIMD_LANES} lanes {lanes['lanes']:.0f} ({lanes['alone'] / lanes['lanes']:.1f}x); "
-        f"the paper's 'sides' orbit in {SIMD_LANES} lanes {lanes['paper']:.0f}")
+    lanes = _sums_in_lanes(repeats)
+    for name, label in (("ljat", "the LJAT trimer (Lennard-Jones pairs + Axilrod-Teller)"),
+                        ("mixed", "the paper's P^2/2 + Lennard-Jones pairs")):
+        alone, many = lanes[name]
+        out(f"A sum of terms in lanes: {label}, {lanes['orbits']} orbits near an equilateral "
+            f"triangle, t = {lanes['t']:g}, one tangent + MEGNO; ns per orbit-step: alone "
+            f"{alone:.0f}, in {SIMD_LANES} lanes {many:.0f} ({alone / many:.1f}x)")
+    out(f"  the paper's 'sides' orbit in {SIMD_LANES} lanes: {lanes['paper']:.0f} ns")
     return rows
 
 
-def _ljat_lanes(repeats, orbits=64, t_final=100.0) -> dict:
-    """ns per attempted orbit-step of LJAT trimer orbits (seeded momenta near the
-    equilateral equilibrium) alone and in SIMD_LANES lanes, and of the paper's 'sides'
-    orbit in as many lanes, best of `repeats`."""
+def _sums_in_lanes(repeats, orbits=64, t_final=100.0) -> dict:
+    """ns per attempted orbit-step, alone and in SIMD_LANES lanes, of orbits near the
+    equilateral triangle (seeded momenta) of two sums of terms -- the LJAT trimer, and the
+    paper's P^2/2 beside Lennard-Jones pairs -- and of the paper's 'sides' orbit in as many
+    lanes, best of `repeats`."""
     rng = np.random.default_rng(3)
-    ljat = System(np.ones(3), 2, (make_potential("lennard_jones", {}, "pair"),
-                                  make_potential("axilrod_teller", {"strength": 0.3})))
+    systems = {"ljat": System(np.ones(3), 2, (
+        make_potential("lennard_jones", {}, "pair"),
+        make_potential("axilrod_teller", {"strength": 0.3}))),
+        "mixed": System(np.ones(3), 2, (make_potential("perimetric_power"),
+                                        make_potential("lennard_jones", {}, "pair")))}
     at = np.array([[0.0, 0.0], [1.12, 0.0], [0.56, 0.97]])
-    starts = np.array([ljat.state(at + 0.02 * rng.normal(size=(3, 2)),
-                                  (p := 0.3 * rng.normal(size=(3, 2))) - p.mean(0))
-                       for _ in range(orbits)])
+    starts = np.array([at + 0.02 * rng.normal(size=(3, 2)) for _ in range(orbits)])
+    momenta = 0.3 * rng.normal(size=(orbits, 3, 2))
+    momenta -= momenta.mean(1, keepdims=True)
     paper = System.create()
     sides = np.repeat(initial_state(paper, "sides")[None], orbits, 0)
 
@@ -313,9 +319,12 @@ def _ljat_lanes(repeats, orbits=64, t_final=100.0) -> dict:
             done = integrate_batch(system, y0s, t, tangents=w, megno=True, lanes=lanes)
             best = min(best, time.perf_counter() - start)
         return 1e9 * best / sum(o.n_steps + o.n_rejected for o in done)
-    return dict(orbits=orbits, t=t_final, alone=per_step(ljat, starts[:4], 1, t_final),
-                lanes=per_step(ljat, starts, SIMD_LANES, t_final),
-                paper=per_step(paper, sides, SIMD_LANES, t_final))
+    out = dict(orbits=orbits, t=t_final, paper=per_step(paper, sides, SIMD_LANES, t_final))
+    for name, system in systems.items():
+        y0s = np.array([system.state(q, p) for q, p in zip(starts, momenta)])
+        out[name] = (per_step(system, y0s[:4], 1, t_final),
+                     per_step(system, y0s, SIMD_LANES, t_final))
+    return out
 
 
 def torus_overhead(t_final=2000.0, repeats=6, out=print):

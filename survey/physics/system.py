@@ -415,7 +415,9 @@ def rhs_lanes(t, Y, dY, L, masses, d, measure, prof, par, n_tan, W, rb):
     instructions (from SIMD_MIN lanes on, and reduced states at any L): the general path's
     operations on the same values in the same order, without its loops, zero z components
     and accumulations, so every lane gets the bits `rhs` gives
-    (tests/physics/test_system.py). Otherwise `rhs` runs lane by lane."""
+    (tests/physics/test_system.py). So do sums of pair and ATM terms, alone or beside such
+    a term (`general_lanes`). Otherwise (a perimetric or areal term of more bodies, or in
+    3-D, or two of them) `rhs` runs lane by lane."""
     if rb is not None:
         _planar_lanes(Y, dY, L, W, masses, measure, prof, par, n_tan, rb)
     else:
@@ -430,7 +432,8 @@ def _full_lanes(t, Y, dY, L, masses, d, measure, prof, par, n_tan, W):
         _planar_lanes(Y, dY, L, W, masses, measure, prof, par, n_tan, None)
     elif L == 1:
         rhs(t, Y, dY, masses, d, measure, prof, par, n_tan)
-    elif not (L >= SIMD_MIN and general_lanes(Y, dY, L, W, masses, d, measure, par, n_tan)):
+    elif not (L >= SIMD_MIN and general_lanes(Y, dY, L, W, masses, d, measure, prof, par,
+                                              n_tan)):
         nf = Y.size // L
         y, dy = W[:nf], W[nf:2 * nf]
         for k in range(L):
@@ -441,52 +444,57 @@ def _full_lanes(t, Y, dY, L, masses, d, measure, prof, par, n_tan, W):
                 dY[i * L + k] = dy[i]
 
 
-# Sums of pair and ATM terms (no perimetric or areal term: the LJAT clusters, gravity) in
-# loops over the lanes: a LJAT trimer's orbit-step with a tangent vector cost 1.67 us in 32
-# lanes run lane by lane through `rhs`, 2.23 alone. The workspace's rows: G the gathered
-# coordinates (18), P a pair's unit vector and distance (4), U its U' and U'' (2), O what
-# is added to the rates (20).
+# Sums of pair and ATM terms (the LJAT clusters, gravity), alone or beside a perimetric or
+# areal term of three bodies in the plane, in loops over the lanes: a LJAT trimer's
+# orbit-step with a tangent vector cost 1.67 us in 32 lanes run lane by lane through `rhs`,
+# 2.23 alone; P^2/2 + Lennard-Jones + gravity 2.40 us, 3.42 alone. The workspace's rows: G
+# the gathered coordinates (18), P a pair's unit vector and distance (4), U its U' and U''
+# (2), O what is added to the rates (20).
 GENERAL_ROWS = 44
 
 
-def general_lanes(Y, dY, L, W, masses, d, measure, par, n_tan):
+def general_lanes(Y, dY, L, W, masses, d, measure, prof, par, n_tan):
     """`_general_lanes` for a 2-D par whose terms it takes; returns whether it ran."""
 
 
 @overload(general_lanes, jit_options=dict(error_model="numpy"), inline="always")
-def _general_lanes_overload(Y, dY, L, W, masses, d, measure, par, n_tan):
+def _general_lanes_overload(Y, dY, L, W, masses, d, measure, prof, par, n_tan):
     if par.ndim == 1:
-        return lambda Y, dY, L, W, masses, d, measure, par, n_tan: False
+        return lambda Y, dY, L, W, masses, d, measure, prof, par, n_tan: False
 
-    def run(Y, dY, L, W, masses, d, measure, par, n_tan):
-        if measure != NONE:
+    def run(Y, dY, L, W, masses, d, measure, prof, par, n_tan):
+        lead = measure == PERIMETER or measure == AREA
+        if measure != NONE and not (lead and masses.size == 3 and d == 2):
             return False
         for row in range(1, par.shape[0]):
             if par[row, 0] != DISTANCE and par[row, 0] != TRIANGLE:
                 return False
+        if lead:    # the velocities and the leading term's forces, as _leading_forces
+            _planar_lanes(Y, dY, L, W, masses, measure, prof, par, n_tan, None)
         _general_lanes(Y, dY, L, W[:18 * L], W[18 * L:22 * L], W[22 * L:24 * L],
-                       W[24 * L:GENERAL_ROWS * L], masses, d, par, n_tan)
+                       W[24 * L:GENERAL_ROWS * L], masses, d, par, n_tan, lead)
         return True
     return run
 
 
 @lanes
-def _general_lanes(Y, dY, L, G, P, U, O, masses, d, par, n_tan):
-    """`rhs` of L full states under pair and ATM terms alone (par's rows 1, ...): the
-    velocities and each term's forces as `_leading_forces` and `_rows_forces` give them,
-    term by term and pair by pair in their order, each in loops over the lanes (forces.py's
-    lane kernels), so every lane gets the bits `rhs` gives."""
+def _general_lanes(Y, dY, L, G, P, U, O, masses, d, par, n_tan, lead):
+    """`rhs` of L full states under pair and ATM terms (par's rows 1, ...): the velocities
+    (unless `lead`: a leading term's lanes wrote them and its forces) and each term's forces
+    as `_leading_forces` and `_rows_forces` give them, term by term and pair by pair in
+    their order, each in loops over the lanes (forces.py's lane kernels), so every lane
+    gets the bits `rhs` gives."""
     N = masses.size
     nq = N * d
     n = 2 * nq
     # a body's d rows are one run of d L values: one loop each (tiny loops cost their setup)
-    for b in range(N):
+    for b in range(N if not lead else 0):
         x = 1.0 / masses[b]
         for t_ in range(1 + n_tan):
             rate, p = dY[(n * t_ + b * d) * L:], Y[(n * t_ + nq + b * d) * L:]
             for k in range(d * L):
                 rate[k] = p[k] * x
-    for t_ in range(1 + n_tan):
+    for t_ in range(1 + n_tan if not lead else 0):
         force = dY[(n * t_ + nq) * L:(n * t_ + n) * L]
         for k in range(nq * L):
             force[k] = 0.0

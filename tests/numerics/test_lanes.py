@@ -81,12 +81,14 @@ def test_the_areal_system_in_lanes():
 
 
 @pytest.mark.parametrize("case", ["four bodies", "pair and triplet terms",
-                                  "3-D pairs and triangles", "planar pairs of every profile"])
+                                  "3-D pairs and triangles", "planar pairs of every profile",
+                                  "perimetric and pair terms", "areal and triplet terms"])
 def test_other_systems_in_lanes(case):
     """Systems beyond the paper's: run lane by lane through `rhs` (a perimetric term on four
     bodies) or in the SIMD loops of pair and ATM terms (system._general_lanes: LJAT, in 3-D
-    with unequal masses and mass-weighted gravity, and pair profiles algebraic and
-    transcendental), with one or two tangent vectors."""
+    with unequal masses and mass-weighted gravity, pair profiles algebraic and
+    transcendental, and beside the paper's perimetric or areal term), with one or two
+    tangent vectors."""
     rng = np.random.default_rng(3)
     d, n_tan = 2, 1
     if case == "four bodies":
@@ -100,10 +102,19 @@ def test_other_systems_in_lanes(case):
             make_potential("lennard_jones", {}, "pair"),
             make_potential("gravity", {"G": 0.5}, "pair"),
             make_potential("axilrod_teller", {"strength": 0.4})))
-    else:
+    elif case == "planar pairs of every profile":
         system = System(np.array([1.0, 0.9, 1.2]), 2, (
             make_potential("yukawa", {}, "pair"), make_potential("power", {}, "pair"),
             make_potential("lennard_jones", {}, "pair")))
+    elif case == "perimetric and pair terms":
+        system = System(np.array([1.0, 0.9, 1.2]), 2, (
+            make_potential("perimetric_power"), make_potential("lennard_jones", {}, "pair"),
+            make_potential("gravity", {"G": 0.5}, "pair")))
+    else:
+        n_tan = 2
+        system = System(np.array([1.0, 1.1, 0.8]), 2, (
+            make_potential("areal_barrier"), make_potential("axilrod_teller",
+                                                            {"strength": 0.4})))
     N = system.n_bodies
     base = np.array([[np.cos(a), np.sin(a), 0.3 * np.sin(2 * a)][:d]
                      for a in np.linspace(0, 2 * np.pi, N, endpoint=False)]) * 1.2

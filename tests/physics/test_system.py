@@ -1,8 +1,8 @@
 """The right-hand side of many orbits at once (`rhs_lanes`, variable-major lanes) gives every
 lane the bits of the one-state path (`rhs`): three bodies in the plane under every
-perimetric and areal profile (the SIMD paths), and other systems (lane by lane); and the
-one-state code written for three bodies in the plane gives the bits of the general N-body
-path. Random states over twelve decades, unequal masses, up to three tangent vectors, lane
+perimetric and areal profile (the SIMD paths), and other systems (lane by lane, or the
+SIMD loops of sums of terms); and the one-state code written for three bodies in the plane
+gives the bits of the general N-body path. Random states over twelve decades, unequal masses, up to three tangent vectors, lane
 counts on both sides of the vector width, and states with exact zeros (collinear,
 axis-aligned, at rest) where only the signs of zeros could tell the paths apart."""
 import numpy as np
@@ -58,7 +58,9 @@ def test_the_simd_lanes_give_the_general_path_bit_for_bit(term, shift):
 
 
 @pytest.mark.parametrize("case", OTHERS, ids=list(OTHERS))
-def test_other_systems_run_lane_by_lane_with_the_same_bits(case):
+def test_other_systems_in_lanes_give_the_same_bits(case):
+    """A perimetric term of four bodies, an areal one in 3-D: lane by lane through `rhs`;
+    the paper's term beside a pair term: the SIMD loops of both (system.general_lanes)."""
     rng = np.random.default_rng(8)
     N, d, terms = OTHERS[case]
     check(System(rng.uniform(0.5, 2.0, N), d, terms), rng, trials=16)
