@@ -487,17 +487,19 @@ def _general_lanes(Y, dY, L, G, P, U, O, masses, d, par, n_tan, lead):
     N = masses.size
     nq = N * d
     n = 2 * nq
-    # a body's d rows are one run of d L values: one loop each (tiny loops cost their setup)
-    for b in range(N if not lead else 0):
-        x = 1.0 / masses[b]
+    if not lead:
+        # a body's d rows are one run of d L values: one loop each (tiny loops cost their
+        # setup)
+        for b in range(N):
+            x = 1.0 / masses[b]
+            for t_ in range(1 + n_tan):
+                rate, p = dY[(n * t_ + b * d) * L:], Y[(n * t_ + nq + b * d) * L:]
+                for k in range(d * L):
+                    rate[k] = p[k] * x
         for t_ in range(1 + n_tan):
-            rate, p = dY[(n * t_ + b * d) * L:], Y[(n * t_ + nq + b * d) * L:]
-            for k in range(d * L):
-                rate[k] = p[k] * x
-    for t_ in range(1 + n_tan if not lead else 0):
-        force = dY[(n * t_ + nq) * L:(n * t_ + n) * L]
-        for k in range(nq * L):
-            force[k] = 0.0
+            force = dY[(n * t_ + nq) * L:(n * t_ + n) * L]
+            for k in range(nq * L):
+                force[k] = 0.0
     if d == 2:          # the z rows the gathers leave alone (forces.vec's 0.0)
         for r in range(2, 18, 3):
             z = G[r * L:(r + 1) * L]

@@ -2,9 +2,10 @@
 lane the bits of the one-state path (`rhs`): three bodies in the plane under every
 perimetric and areal profile (the SIMD paths), and other systems (lane by lane, or the
 SIMD loops of sums of terms); and the one-state code written for three bodies in the plane
-gives the bits of the general N-body path. Random states over twelve decades, unequal masses, up to three tangent vectors, lane
-counts on both sides of the vector width, and states with exact zeros (collinear,
-axis-aligned, at rest) where only the signs of zeros could tell the paths apart."""
+gives the bits of the general N-body path. Random states over twelve decades, unequal
+masses, up to three tangent vectors, lane counts on both sides of the vector width, and
+states with exact zeros (collinear, axis-aligned, at rest) where only the signs of zeros
+could tell the paths apart."""
 import numpy as np
 import pytest
 
