@@ -247,7 +247,7 @@ def interaction_terms(t_final=2000.0, repeats=5, out=print):
     ways, interleaved, best of `repeats`: the own path as a survey runs it, the own path on
     all 12 components (the reduction switched off: what the specialised right-hand side
     alone buys, which the target is about) and the general path; the orbits compared over
-    t = 10. Then sums of terms in SIMD lanes (`_sums_in_lanes`)."""
+    t = 10. Then other systems in SIMD lanes (`_others_in_lanes`)."""
     from unittest import mock
     own = System.create()
     general = GeneralPath(own.masses, own.dim, own.terms)
@@ -281,32 +281,36 @@ def interaction_terms(t_final=2000.0, repeats=5, out=print):
         out(f"{r['case']:26s} {r['own']:8.3f} {r['own12']:9.3f} {r['general']:10.3f} "
             f"{r['general'] / r['own12']:14.2f}x {r['general'] / r['own']:11.2f}x "
             f"{'yes' if r['same'] else 'NO'}")
-    lanes = _sums_in_lanes(repeats)
+    lanes = _others_in_lanes(repeats)
+    out(f"Other systems in lanes ({lanes['orbits']} orbits, t = {lanes['t']:g}, one tangent + "
+        f"MEGNO; ns per attempted orbit-step, alone and in {SIMD_LANES} lanes):")
     for name, label in (("ljat", "the LJAT trimer (Lennard-Jones pairs + Axilrod-Teller)"),
-                        ("mixed", "the paper's P^2/2 + Lennard-Jones pairs")):
+                        ("mixed", "the paper's P^2/2 + Lennard-Jones pairs"),
+                        ("3-D", "P^2/2 of three bodies in 3-D"),
+                        ("four", "P^2/2 of four bodies in the plane (4 triangles)")):
         alone, many = lanes[name]
-        out(f"A sum of terms in lanes: {label}, {lanes['orbits']} orbits near an equilateral "
-            f"triangle, t = {lanes['t']:g}, one tangent + MEGNO; ns per orbit-step: alone "
-            f"{alone:.0f}, in {SIMD_LANES} lanes {many:.0f} ({alone / many:.1f}x)")
+        out(f"  {label:55s} {alone:6.0f} {many:6.0f}  ({alone / many:.1f}x)")
     out(f"  the paper's 'sides' orbit in {SIMD_LANES} lanes: {lanes['paper']:.0f} ns")
     return rows
 
 
-def _sums_in_lanes(repeats, orbits=64, t_final=100.0) -> dict:
-    """ns per attempted orbit-step, alone and in SIMD_LANES lanes, of orbits near the
-    equilateral triangle (seeded momenta) of two sums of terms -- the LJAT trimer, and the
-    paper's P^2/2 beside Lennard-Jones pairs -- and of the paper's 'sides' orbit in as many
-    lanes, best of `repeats`."""
+def _others_in_lanes(repeats, orbits=64, t_final=100.0) -> dict:
+    """ns per attempted orbit-step, alone and in SIMD_LANES lanes, of systems other than the
+    paper's -- the LJAT trimer and the paper's P^2/2 beside Lennard-Jones pairs (orbits
+    near the equilateral triangle), P^2/2 of three bodies in 3-D (the triangle tilted out
+    of the plane) and of four in the plane (near a square), seeded momenta -- and of the
+    paper's 'sides' orbit in as many lanes, best of `repeats`."""
     rng = np.random.default_rng(3)
-    systems = {"ljat": System(np.ones(3), 2, (
+    triangle = np.array([[0.0, 0.0, 0.0], [1.12, 0.0, 0.0], [0.56, 0.97, 0.0]])
+    square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    P2 = make_potential("perimetric_power")
+    systems = {"ljat": (System(np.ones(3), 2, (
         make_potential("lennard_jones", {}, "pair"),
-        make_potential("axilrod_teller", {"strength": 0.3}))),
-        "mixed": System(np.ones(3), 2, (make_potential("perimetric_power"),
-                                        make_potential("lennard_jones", {}, "pair")))}
-    at = np.array([[0.0, 0.0], [1.12, 0.0], [0.56, 0.97]])
-    starts = np.array([at + 0.02 * rng.normal(size=(3, 2)) for _ in range(orbits)])
-    momenta = 0.3 * rng.normal(size=(orbits, 3, 2))
-    momenta -= momenta.mean(1, keepdims=True)
+        make_potential("axilrod_teller", {"strength": 0.3}))), triangle[:, :2]),
+        "mixed": (System(np.ones(3), 2, (P2, make_potential("lennard_jones", {}, "pair"))),
+                  triangle[:, :2]),
+        "3-D": (System(np.ones(3), 3, (P2,)), triangle),
+        "four": (System(np.ones(4), 2, (P2,)), square)}
     paper = System.create()
     sides = np.repeat(initial_state(paper, "sides")[None], orbits, 0)
 
@@ -320,8 +324,11 @@ def _sums_in_lanes(repeats, orbits=64, t_final=100.0) -> dict:
             best = min(best, time.perf_counter() - start)
         return 1e9 * best / sum(o.n_steps + o.n_rejected for o in done)
     out = dict(orbits=orbits, t=t_final, paper=per_step(paper, sides, SIMD_LANES, t_final))
-    for name, system in systems.items():
-        y0s = np.array([system.state(q, p) for q, p in zip(starts, momenta)])
+    for name, (system, at) in systems.items():
+        q = at + 0.02 * rng.normal(size=(orbits,) + at.shape)
+        p = 0.3 * rng.normal(size=(orbits,) + at.shape)
+        p -= p.mean(1, keepdims=True)
+        y0s = np.array([system.state(*qp) for qp in zip(q, p)])
         out[name] = (per_step(system, y0s[:4], 1, t_final),
                      per_step(system, y0s, SIMD_LANES, t_final))
     return out

@@ -142,66 +142,101 @@ def _add_cyclic(dy, off, i, j, k, d, s, g1, g2, g3):
     add_to(dy, off + k * d, d, s, sub(g3, g2))
 
 
+@helper
+def _perimetric_sides(u, v, w):
+    """Unit vectors along the sides i->j, j->k, k->i of the triangle (u, v, w) and the
+    sides' lengths: the force on a body is U'(P) times the sum of the unit vectors towards
+    its two neighbours, which bisects the interior angle."""
+    e1, L1 = _unit(sub(v, u))
+    e2, L2 = _unit(sub(w, v))
+    e3, L3 = _unit(sub(u, w))
+    return e1, e2, e3, L1, L2, L3
+
+
+@helper
+def _perimetric_tangent(e1, e2, e3, L1, L2, L3, U1, U2, du, dv, dw):
+    """The variations g1, g2, g3 of U'(P) e along the three sides (_add_cyclic's
+    derivatives) for deviations du, dv, dw of the bodies."""
+    r1, r2, r3 = sub(dv, du), sub(dw, dv), sub(du, dw)
+    dP = dot(e1, r1) + dot(e2, r2) + dot(e3, r3)
+    return (_pair_tangent(e1, L1, r1, dP, U1, U2), _pair_tangent(e2, L2, r2, dP, U1, U2),
+            _pair_tangent(e3, L3, r3, dP, U1, U2))
+
+
 @leaf
 def perimetric_forces(y, dy, i, j, k, d, n, n_tan, prof, par):
     """Add the forces of triplet (i, j, k) under U(P) to dy's momentum rates, and for each
     tangent vector t (stored at y[n*(1+t):]) its tangent force -Hess U . dq to dy at the
     same offsets (the paper's one-jet, Appendix E)."""
     nq = n // 2
-    u, v, w = vec(y, i * d, d), vec(y, j * d, d), vec(y, k * d, d)
-    # unit vectors along the sides i->j, j->k, k->i; the force on a body is U'(P) times the
-    # sum of the unit vectors towards its two neighbours: it bisects the interior angle.
-    e1, L1 = _unit(sub(v, u))
-    e2, L2 = _unit(sub(w, v))
-    e3, L3 = _unit(sub(u, w))
+    e1, e2, e3, L1, L2, L3 = _perimetric_sides(vec(y, i * d, d), vec(y, j * d, d),
+                                               vec(y, k * d, d))
     _, U1, U2 = profile(prof, par, L1 + L2 + L3)
     _add_cyclic(dy, nq, i, j, k, d, U1, e1, e2, e3)
     for t in range(n_tan):
         base = n * (1 + t)
-        du, dv, dw = vec(y, base + i * d, d), vec(y, base + j * d, d), vec(y, base + k * d, d)
-        r1, r2, r3 = sub(dv, du), sub(dw, dv), sub(du, dw)
-        dP = dot(e1, r1) + dot(e2, r2) + dot(e3, r3)
-        g1 = _pair_tangent(e1, L1, r1, dP, U1, U2)
-        g2 = _pair_tangent(e2, L2, r2, dP, U1, U2)
-        g3 = _pair_tangent(e3, L3, r3, dP, U1, U2)
+        g1, g2, g3 = _perimetric_tangent(e1, e2, e3, L1, L2, L3, U1, U2,
+                                         vec(y, base + i * d, d), vec(y, base + j * d, d),
+                                         vec(y, base + k * d, d))
         _add_cyclic(dy, base + nq, i, j, k, d, 1.0, g1, g2, g3)
 
 
-@leaf
-def areal_forces(y, dy, i, j, k, d, n, n_tan, prof, par):
-    """As perimetric_forces, for U(|A|)."""
-    nq = n // 2
-    u, v, w = vec(y, i * d, d), vec(y, j * d, d), vec(y, k * d, d)
-    # grad_u |A| = (v - w) x Ahat / 2 (cyclic): the force on a body is parallel to its
-    # altitude. A collinear start (|A| = 0) gets Ahat = 0, the limit of a smooth profile.
+@helper
+def _areal_vector(u, v, w):
+    """The triangle's unit area vector Ahat, |A| and 1/|A|. A collinear triangle (|A| = 0)
+    gets Ahat = 0 and 1/|A| = 0, the limit of a smooth profile."""
     A = cross(sub(v, u), sub(w, u))
     A = (0.5 * A[0], 0.5 * A[1], 0.5 * A[2])
     absA = norm(A)
     inv = 1.0 / absA if absA > 0.0 else 0.0
-    Ah = (A[0] * inv, A[1] * inv, A[2] * inv)
-    _, U1, U2 = profile(prof, par, absA)
+    return (A[0] * inv, A[1] * inv, A[2] * inv), absA, inv
+
+
+@helper
+def _areal_gradients(u, v, w, Ah):
+    """The sides v - w, w - u, u - v opposite each body and (v - w) x Ahat and cyclic, each
+    twice grad |A| of its body: the force on a body is parallel to its altitude."""
     svw, swu, suv = sub(v, w), sub(w, u), sub(u, v)
-    Gu, Gv, Gw = cross(svw, Ah), cross(swu, Ah), cross(suv, Ah)   # each 2 grad |A|
+    return svw, swu, suv, cross(svw, Ah), cross(swu, Ah), cross(suv, Ah)
+
+
+@helper
+def _areal_tangent(svw, swu, suv, Ah, inv, U2, du, dv, dw):
+    """For deviations du, dv, dw of the bodies: the scale -U''(|A|) d|A| / 2 of the
+    gradients, and the gradients' variations (whose scale is -U'(|A|) / 2)."""
+    c1, c2, c3 = cross(du, svw), cross(dv, swu), cross(dw, suv)
+    dA = (0.5 * (c1[0] + c2[0] + c3[0]), 0.5 * (c1[1] + c2[1] + c3[1]),
+          0.5 * (c1[2] + c2[2] + c3[2]))
+    dabs = dot(Ah, dA)
+    dAh = axpy(-dabs * inv, Ah, (dA[0] * inv, dA[1] * inv, dA[2] * inv))
+    return (-0.5 * U2 * dabs, axpy(1.0, cross(sub(dv, dw), Ah), cross(svw, dAh)),
+            axpy(1.0, cross(sub(dw, du), Ah), cross(swu, dAh)),
+            axpy(1.0, cross(sub(du, dv), Ah), cross(suv, dAh)))
+
+
+@leaf
+def areal_forces(y, dy, i, j, k, d, n, n_tan, prof, par):
+    """As perimetric_forces, for U(|A|): grad_u |A| = (v - w) x Ahat / 2 (cyclic)."""
+    nq = n // 2
+    u, v, w = vec(y, i * d, d), vec(y, j * d, d), vec(y, k * d, d)
+    Ah, absA, inv = _areal_vector(u, v, w)
+    _, U1, U2 = profile(prof, par, absA)
+    svw, swu, suv, Gu, Gv, Gw = _areal_gradients(u, v, w, Ah)
     add_to(dy, nq + i * d, d, -0.5 * U1, Gu)
     add_to(dy, nq + j * d, d, -0.5 * U1, Gv)
     add_to(dy, nq + k * d, d, -0.5 * U1, Gw)
     for t in range(n_tan):
         base = n * (1 + t)
-        du, dv, dw = vec(y, base + i * d, d), vec(y, base + j * d, d), vec(y, base + k * d, d)
-        c1, c2, c3 = cross(du, svw), cross(dv, swu), cross(dw, suv)
-        dA = (0.5 * (c1[0] + c2[0] + c3[0]), 0.5 * (c1[1] + c2[1] + c3[1]),
-              0.5 * (c1[2] + c2[2] + c3[2]))
-        dabs = dot(Ah, dA)
-        dAh = axpy(-dabs * inv, Ah, (dA[0] * inv, dA[1] * inv, dA[2] * inv))
+        a, Xu, Xv, Xw = _areal_tangent(svw, swu, suv, Ah, inv, U2, vec(y, base + i * d, d),
+                                       vec(y, base + j * d, d), vec(y, base + k * d, d))
         off = base + nq
-        a = -0.5 * U2 * dabs
         b = -0.5 * U1
         add_to(dy, off + i * d, d, a, Gu)
-        add_to(dy, off + i * d, d, b, axpy(1.0, cross(sub(dv, dw), Ah), cross(svw, dAh)))
+        add_to(dy, off + i * d, d, b, Xu)
         add_to(dy, off + j * d, d, a, Gv)
-        add_to(dy, off + j * d, d, b, axpy(1.0, cross(sub(dw, du), Ah), cross(swu, dAh)))
+        add_to(dy, off + j * d, d, b, Xv)
         add_to(dy, off + k * d, d, a, Gw)
-        add_to(dy, off + k * d, d, b, axpy(1.0, cross(sub(du, dv), Ah), cross(suv, dAh)))
+        add_to(dy, off + k * d, d, b, Xw)
 
 
 @helper
@@ -309,7 +344,9 @@ def pair_forces(y, dy, i, j, d, n, n_tan, prof, par, w):
         add_to(dy, base + nq + j * d, d, -w, g)
 
 
-# The same pair and ATM forces for L orbits at once (sums of terms, `system._general_lanes`):
+# The same pair, ATM, perimetric and areal forces for L orbits at once (any system but the
+# paper's three bodies in the plane under one term, which have loops of their own,
+# `system._general_lanes`):
 # each pair's or triangle's coordinates are first gathered into rows of G (G[r * L + k]:
 # row r of lane k, z rows zero in the plane), then one loop over the lanes computes what
 # the functions above compute, with their helpers in their order, into rows of another
@@ -394,3 +431,78 @@ def atm_tangent_lanes(G, O, L, Z):
         _put3(O, 1, L, k, sub(dH1, dH3))
         _put3(O, 4, L, k, sub(dH2, dH1))
         _put3(O, 7, L, k, sub(dH3, dH2))
+
+
+@lanes
+def perimetric_lanes(G, E, O, L):
+    """perimetric_forces of one triangle (bodies in G rows 0-8) up to U'(P): the unit
+    vectors into E rows 0-8, the side lengths into rows 9-11, the perimeter into row 12,
+    and the cyclic differences e1 - e3, e2 - e1, e3 - e2 into O rows 0-8."""
+    for k in range(L):
+        e1, e2, e3, L1, L2, L3 = _perimetric_sides(_row3(G, 0, L, k), _row3(G, 3, L, k),
+                                                   _row3(G, 6, L, k))
+        _put3(E, 0, L, k, e1)
+        _put3(E, 3, L, k, e2)
+        _put3(E, 6, L, k, e3)
+        E[9 * L + k], E[10 * L + k], E[11 * L + k] = L1, L2, L3
+        E[12 * L + k] = L1 + L2 + L3
+        _put3(O, 0, L, k, sub(e1, e3))
+        _put3(O, 3, L, k, sub(e2, e1))
+        _put3(O, 6, L, k, sub(e3, e2))
+
+
+@lanes
+def perimetric_tangent_lanes(G, E, U, O, L):
+    """perimetric_forces' tangent forces of one tangent vector (the bodies' deviations in G
+    rows 9-17; E as perimetric_lanes leaves it, U' and U'' in U): the differences g1 - g3,
+    g2 - g1, g3 - g2 into O rows 0-8, and their scale in _add_cyclic, 1.0, into row 9."""
+    for k in range(L):
+        g1, g2, g3 = _perimetric_tangent(
+            _row3(E, 0, L, k), _row3(E, 3, L, k), _row3(E, 6, L, k), E[9 * L + k],
+            E[10 * L + k], E[11 * L + k], U[k], U[L + k], _row3(G, 9, L, k),
+            _row3(G, 12, L, k), _row3(G, 15, L, k))
+        _put3(O, 0, L, k, sub(g1, g3))
+        _put3(O, 3, L, k, sub(g2, g1))
+        _put3(O, 6, L, k, sub(g3, g2))
+        O[9 * L + k] = 1.0
+
+
+@lanes
+def areal_lanes(G, E, L):
+    """areal_forces' Ahat (E rows 0-2), |A| (row 3) and 1/|A| (row 4) of one triangle
+    (bodies in G rows 0-8)."""
+    for k in range(L):
+        Ah, absA, inv = _areal_vector(_row3(G, 0, L, k), _row3(G, 3, L, k),
+                                      _row3(G, 6, L, k))
+        _put3(E, 0, L, k, Ah)
+        E[3 * L + k], E[4 * L + k] = absA, inv
+
+
+@lanes
+def areal_force_lanes(G, E, U, O, L):
+    """areal_forces' forces: -U'(|A|) / 2 into O row 0, the gradients (twice grad |A|) of
+    the three bodies into rows 1-9."""
+    for k in range(L):
+        gradients = _areal_gradients(_row3(G, 0, L, k), _row3(G, 3, L, k),
+                                     _row3(G, 6, L, k), _row3(E, 0, L, k))
+        O[k] = -0.5 * U[k]
+        _put3(O, 1, L, k, gradients[3])
+        _put3(O, 4, L, k, gradients[4])
+        _put3(O, 7, L, k, gradients[5])
+
+
+@lanes
+def areal_tangent_lanes(G, E, U, O, L):
+    """areal_forces' tangent terms of one tangent vector (deviations in G rows 9-17): the
+    gradients' scale into O row 0 and their variations, whose scale is areal_force_lanes'
+    row 0, into rows 1-9."""
+    for k in range(L):
+        svw, swu, suv, _, _, _ = _areal_gradients(_row3(G, 0, L, k), _row3(G, 3, L, k),
+                                                  _row3(G, 6, L, k), _row3(E, 0, L, k))
+        a, Xu, Xv, Xw = _areal_tangent(svw, swu, suv, _row3(E, 0, L, k), E[4 * L + k],
+                                       U[L + k], _row3(G, 9, L, k), _row3(G, 12, L, k),
+                                       _row3(G, 15, L, k))
+        O[k] = a
+        _put3(O, 1, L, k, Xu)
+        _put3(O, 4, L, k, Xv)
+        _put3(O, 7, L, k, Xw)

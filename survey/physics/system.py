@@ -14,7 +14,10 @@ from numba.extending import overload
 
 from ..catalog import defaults
 from .forces import (
+    areal_force_lanes,
     areal_forces,
+    areal_lanes,
+    areal_tangent_lanes,
     atm_energy,
     atm_forces,
     atm_lanes,
@@ -25,6 +28,8 @@ from .forces import (
     pair_geometry_lanes,
     pair_tangent_lanes,
     perimetric_forces,
+    perimetric_lanes,
+    perimetric_tangent_lanes,
     power_2,
     profile,
     profile_lanes,
@@ -415,9 +420,9 @@ def rhs_lanes(t, Y, dY, L, masses, d, measure, prof, par, n_tan, W, rb):
     instructions (from SIMD_MIN lanes on, and reduced states at any L): the general path's
     operations on the same values in the same order, without its loops, zero z components
     and accumulations, so every lane gets the bits `rhs` gives
-    (tests/physics/test_system.py). So do sums of pair and ATM terms, alone or beside such
-    a term (`general_lanes`). Otherwise (a perimetric or areal term of more bodies, or in
-    3-D, or two of them) `rhs` runs lane by lane."""
+    (tests/physics/test_system.py). So does every other system, term by term
+    (`general_lanes`: perimetric and areal terms of more bodies or in 3-D, pair and ATM
+    terms). Fewer than SIMD_MIN full states run `rhs` lane by lane."""
     if rb is not None:
         _planar_lanes(Y, dY, L, W, masses, measure, prof, par, n_tan, rb)
     else:
@@ -432,8 +437,9 @@ def _full_lanes(t, Y, dY, L, masses, d, measure, prof, par, n_tan, W):
         _planar_lanes(Y, dY, L, W, masses, measure, prof, par, n_tan, None)
     elif L == 1:
         rhs(t, Y, dY, masses, d, measure, prof, par, n_tan)
-    elif not (L >= SIMD_MIN and general_lanes(Y, dY, L, W, masses, d, measure, prof, par,
-                                              n_tan)):
+    elif L >= SIMD_MIN:
+        general_lanes(Y, dY, L, W, masses, d, measure, prof, par, n_tan)
+    else:
         nf = Y.size // L
         y, dy = W[:nf], W[nf:2 * nf]
         for k in range(L):
@@ -444,49 +450,54 @@ def _full_lanes(t, Y, dY, L, masses, d, measure, prof, par, n_tan, W):
                 dY[i * L + k] = dy[i]
 
 
-# Sums of pair and ATM terms (the LJAT clusters, gravity), alone or beside a perimetric or
-# areal term of three bodies in the plane, in loops over the lanes: a LJAT trimer's
-# orbit-step with a tangent vector cost 1.67 us in 32 lanes run lane by lane through `rhs`,
-# 2.23 alone; P^2/2 + Lennard-Jones + gravity 2.40 us, 3.42 alone. The workspace's rows: G
-# the gathered coordinates (18), P a pair's unit vector and distance (4), U its U' and U''
-# (2), O what is added to the rates (20).
-GENERAL_ROWS = 44
+# Any system but the paper's three bodies in the plane under one perimetric or areal term
+# (which _planar_lanes runs) in loops over the lanes: sums of pair and ATM terms (the LJAT
+# clusters, gravity), alone or beside such a term, and perimetric and areal terms of more
+# bodies or in 3-D. Lane by lane through `rhs` (32 lanes, an orbit-step with a tangent
+# vector), a LJAT trimer's cost 1.67 us, 2.23 alone; P^2/2 + Lennard-Jones + gravity 2.40
+# us, 3.42 alone; P^2/2 of three bodies in 3-D 1.15 us, 1.39 alone; of four in the plane
+# 1.83 us, 2.04 alone. Each kind of term runs in a function of its own (_pair_term_lanes,
+# _atm_term_lanes, _triplet_term_lanes): all in one, a LJAT trimer's orbit-step ran 10-25%
+# slower (415-420 -> 460-530 ns in 32 lanes). The workspace's rows: G the gathered
+# coordinates and deviations (18), P a pair's unit vector and distance (4), U the profile's
+# U' and U'' (2), O what is added to the rates (20), T a triangle's geometry (13).
+GENERAL_ROWS = 57
 
 
 def general_lanes(Y, dY, L, W, masses, d, measure, prof, par, n_tan):
-    """`_general_lanes` for a 2-D par whose terms it takes; returns whether it ran."""
+    """`_general_lanes` of a 2-D par (any system but the paper's: see _encode)."""
 
 
 @overload(general_lanes, jit_options=dict(error_model="numpy"), inline="always")
 def _general_lanes_overload(Y, dY, L, W, masses, d, measure, prof, par, n_tan):
-    if par.ndim == 1:
-        return lambda Y, dY, L, W, masses, d, measure, prof, par, n_tan: False
+    if par.ndim == 1:       # the paper's systems, which _planar_lanes runs
+        return lambda Y, dY, L, W, masses, d, measure, prof, par, n_tan: None
 
     def run(Y, dY, L, W, masses, d, measure, prof, par, n_tan):
-        lead = measure == PERIMETER or measure == AREA
-        if measure != NONE and not (lead and masses.size == 3 and d == 2):
-            return False
-        for row in range(1, par.shape[0]):
-            if par[row, 0] != DISTANCE and par[row, 0] != TRIANGLE:
-                return False
-        if lead:    # the velocities and the leading term's forces, as _leading_forces
+        planar = (measure == PERIMETER or measure == AREA) and masses.size == 3 and d == 2
+        if planar:      # the velocities and the leading term's forces, as _leading_forces
             _planar_lanes(Y, dY, L, W, masses, measure, prof, par, n_tan, None)
         _general_lanes(Y, dY, L, W[:18 * L], W[18 * L:22 * L], W[22 * L:24 * L],
-                       W[24 * L:GENERAL_ROWS * L], masses, d, par, n_tan, lead)
-        return True
+                       W[24 * L:44 * L], W[44 * L:GENERAL_ROWS * L], masses, d, measure, prof,
+                       par, n_tan, planar)
     return run
 
 
 @lanes
-def _general_lanes(Y, dY, L, G, P, U, O, masses, d, par, n_tan, lead):
-    """`rhs` of L full states under pair and ATM terms (par's rows 1, ...): the velocities
-    (unless `lead`: a leading term's lanes wrote them and its forces) and each term's forces
-    as `_leading_forces` and `_rows_forces` give them, term by term and pair by pair in
-    their order, each in loops over the lanes (forces.py's lane kernels), so every lane
-    gets the bits `rhs` gives."""
+def _general_lanes(Y, dY, L, G, P, U, O, T, masses, d, measure, prof, par, n_tan, lead):
+    """`rhs` of L full states: the velocities and the leading perimetric or areal term's
+    forces (unless `lead`: that term's lanes wrote them), then each further term's forces
+    (par's rows 1, ...), as `_leading_forces` and `_rows_forces` give them, term by term
+    and pair or triplet by pair or triplet in their order, each in loops over the lanes
+    (forces.py's lane kernels), so every lane gets the bits `rhs` gives."""
     N = masses.size
     nq = N * d
     n = 2 * nq
+    if d == 2:          # the z rows the gathers leave alone (forces.vec's 0.0)
+        for r in range(2, 18, 3):
+            z = G[r * L:(r + 1) * L]
+            for k in range(L):
+                z[k] = 0.0
     if not lead:
         # a body's d rows are one run of d L values: one loop each (tiny loops cost their
         # setup)
@@ -500,45 +511,98 @@ def _general_lanes(Y, dY, L, G, P, U, O, masses, d, par, n_tan, lead):
             force = dY[(n * t_ + nq) * L:(n * t_ + n) * L]
             for k in range(nq * L):
                 force[k] = 0.0
-    if d == 2:          # the z rows the gathers leave alone (forces.vec's 0.0)
-        for r in range(2, 18, 3):
-            z = G[r * L:(r + 1) * L]
-            for k in range(L):
-                z[k] = 0.0
+        if measure == PERIMETER or measure == AREA:
+            _triplet_term_lanes(Y, dY, L, G, T, U, O, N, d, measure, prof,
+                                (par[0, 0], par[0, 1]), n_tan)
     for row in range(1, par.shape[0]):
-        code, weighted, p = int(par[row, 1]), par[row, 2], par[row, 3:]
-        if par[row, 0] == DISTANCE:
-            for i in range(N - 1):
-                for j in range(i + 1, N):
-                    w = masses[i] * masses[j] if weighted != 0.0 else 1.0
-                    _gather(G, 0, Y, (i * d, j * d), d, L)
-                    pair_geometry_lanes(G, P, L)
-                    profile_lanes(code, p, P[3 * L:], U, L)
-                    for k in range(L):
-                        O[k] = w * U[k]
-                    _pair_sums(dY[(nq + i * d) * L:], dY[(nq + j * d) * L:], O, P, L, d)
-                    for t_ in range(n_tan):
-                        base = n * (1 + t_)
-                        _gather(G, 0, Y, (base + i * d, base + j * d), d, L)
-                        pair_tangent_lanes(G, P, U, O, L)
-                        _pair_tangent_sums(dY[(base + nq + i * d) * L:],
-                                           dY[(base + nq + j * d) * L:], w, O, L, d)
+        kind, code, p = int(par[row, 0]), int(par[row, 1]), par[row, 3:]
+        if kind == DISTANCE:
+            _pair_term_lanes(Y, dY, L, G, P, U, O, masses, d, code, p, par[row, 2] != 0.0,
+                             n_tan)
+        elif kind == TRIANGLE:
+            _atm_term_lanes(Y, dY, L, G, O, N, d, p[0], n_tan)
         else:
-            for i in range(N - 2):
-                for j in range(i + 1, N - 1):
-                    for k3 in range(j + 1, N):
-                        bodies = (i * d, j * d, k3 * d)
-                        _gather(G, 0, Y, bodies, d, L)
-                        atm_lanes(G, O, L, p[0])
-                        _add_cyclic_lanes(dY, nq, (i, j, k3), d, O, 0, 1, L)
-                        for t_ in range(n_tan):
-                            base = n * (1 + t_)
-                            _gather(G, 9, Y, (base + i * d, base + j * d, base + k3 * d),
-                                    d, L)
-                            atm_tangent_lanes(G, O[10 * L:], L, p[0])
-                            # dW times the H's differences, then W times the dH's
-                            _add_cyclic_lanes(dY, base + nq, (i, j, k3), d, O, 10, 1, L)
-                            _add_cyclic_lanes(dY, base + nq, (i, j, k3), d, O, 0, 11, L)
+            _triplet_term_lanes(Y, dY, L, G, T, U, O, N, d, kind, code, p, n_tan)
+
+
+@lanes
+def _pair_term_lanes(Y, dY, L, G, P, U, O, masses, d, code, p, weighted, n_tan):
+    """One pair term's forces, pair i < j by pair, as `_rows_forces` adds them
+    (forces.pair_forces)."""
+    N = masses.size
+    nq = N * d
+    n = 2 * nq
+    for i in range(N - 1):
+        for j in range(i + 1, N):
+            w = masses[i] * masses[j] if weighted else 1.0
+            _gather(G, 0, Y, (i * d, j * d), d, L)
+            pair_geometry_lanes(G, P, L)
+            profile_lanes(code, p, P[3 * L:], U, L)
+            for k in range(L):
+                O[k] = w * U[k]
+            _pair_sums(dY[(nq + i * d) * L:], dY[(nq + j * d) * L:], O, P, L, d)
+            for t_ in range(n_tan):
+                base = n * (1 + t_)
+                _gather(G, 0, Y, (base + i * d, base + j * d), d, L)
+                pair_tangent_lanes(G, P, U, O, L)
+                _pair_tangent_sums(dY[(base + nq + i * d) * L:],
+                                   dY[(base + nq + j * d) * L:], w, O, L, d)
+
+
+@lanes
+def _atm_term_lanes(Y, dY, L, G, O, N, d, Z, n_tan):
+    """One ATM term's forces, triplet i < j < k by triplet, as `_rows_forces` adds them
+    (forces.atm_forces)."""
+    nq = N * d
+    n = 2 * nq
+    for i in range(N - 2):
+        for j in range(i + 1, N - 1):
+            for k3 in range(j + 1, N):
+                bodies = (i, j, k3)
+                _gather(G, 0, Y, (i * d, j * d, k3 * d), d, L)
+                atm_lanes(G, O, L, Z)
+                _add_cyclic_lanes(dY, nq, bodies, d, O, O[L:], L)
+                for t_ in range(n_tan):
+                    base = n * (1 + t_)
+                    _gather(G, 9, Y, (base + i * d, base + j * d, base + k3 * d), d, L)
+                    atm_tangent_lanes(G, O[10 * L:], L, Z)
+                    # dW times the H's differences, then W times the dH's
+                    _add_cyclic_lanes(dY, base + nq, bodies, d, O[10 * L:], O[L:], L)
+                    _add_cyclic_lanes(dY, base + nq, bodies, d, O, O[11 * L:], L)
+
+
+@lanes
+def _triplet_term_lanes(Y, dY, L, G, E, U, O, N, d, measure, prof, par, n_tan):
+    """One perimetric or areal term's forces, triplet i < j < k by triplet, as
+    `_leading_forces` and `_rows_forces` add them (forces.perimetric_forces, areal_forces)."""
+    nq = N * d
+    n = 2 * nq
+    for i in range(N - 2):
+        for j in range(i + 1, N - 1):
+            for k3 in range(j + 1, N):
+                bodies = (i, j, k3)
+                _gather(G, 0, Y, (i * d, j * d, k3 * d), d, L)
+                if measure == PERIMETER:
+                    perimetric_lanes(G, E, O, L)
+                    profile_lanes(prof, par, E[12 * L:], U, L)
+                    _add_cyclic_lanes(dY, nq, bodies, d, U, O, L)
+                else:
+                    areal_lanes(G, E, L)
+                    profile_lanes(prof, par, E[3 * L:], U, L)
+                    areal_force_lanes(G, E, U, O, L)
+                    _add_cyclic_lanes(dY, nq, bodies, d, O, O[L:], L)
+                for t_ in range(n_tan):
+                    base = n * (1 + t_)
+                    _gather(G, 9, Y, (base + i * d, base + j * d, base + k3 * d), d, L)
+                    if measure == PERIMETER:
+                        perimetric_tangent_lanes(G, E, U, O, L)
+                        _add_cyclic_lanes(dY, base + nq, bodies, d, O[9 * L:], O, L)
+                    else:
+                        # U''(|A|) d|A| times the gradients, then U'(|A|) times their
+                        # variations (areal_forces' a and b)
+                        areal_tangent_lanes(G, E, U, O[10 * L:], L)
+                        _add_cyclic_lanes(dY, base + nq, bodies, d, O[10 * L:], O[L:], L)
+                        _add_cyclic_lanes(dY, base + nq, bodies, d, O, O[11 * L:], L)
 
 
 @helper
@@ -574,15 +638,14 @@ def _pair_tangent_sums(fi, fj, w, V, L, d):
 
 
 @helper
-def _add_cyclic_lanes(dY, off, bodies, d, O, s_row, v_row, L):
-    """forces._add_cyclic of every lane: the scale in O's row s_row, the three bodies'
-    differences from its row v_row on: body b's d components in rows v_row + 3 b ..."""
+def _add_cyclic_lanes(dY, off, bodies, d, S, V, L):
+    """forces._add_cyclic of every lane: the scale in S's first row, the three bodies'
+    differences in V's rows: body b's d components in rows 3 b ..."""
     for b in range(3):
         for c in range(d):
-            rate, s, v = dY[(off + bodies[b] * d + c) * L:], O[s_row * L:], \
-                O[(v_row + 3 * b + c) * L:]
+            rate, v = dY[(off + bodies[b] * d + c) * L:], V[(3 * b + c) * L:]
             for k in range(L):
-                rate[k] += s[k] * v[k]
+                rate[k] += S[k] * v[k]
 
 
 @leaf

@@ -82,13 +82,14 @@ def test_the_areal_system_in_lanes():
 
 @pytest.mark.parametrize("case", ["four bodies", "pair and triplet terms",
                                   "3-D pairs and triangles", "planar pairs of every profile",
-                                  "perimetric and pair terms", "areal and triplet terms"])
+                                  "perimetric and pair terms", "areal and triplet terms",
+                                  "perimetric and areal terms in 3-D"])
 def test_other_systems_in_lanes(case):
-    """Systems beyond the paper's: run lane by lane through `rhs` (a perimetric term on four
-    bodies) or in the SIMD loops of pair and ATM terms (system._general_lanes: LJAT, in 3-D
-    with unequal masses and mass-weighted gravity, pair profiles algebraic and
-    transcendental, and beside the paper's perimetric or areal term), with one or two
-    tangent vectors."""
+    """Systems beyond the paper's, in the SIMD loops of each term (system._general_lanes):
+    a perimetric term of four bodies, perimetric and areal terms together in 3-D, LJAT, in
+    3-D with unequal masses and mass-weighted gravity, pair profiles algebraic and
+    transcendental, and pair or ATM terms beside the paper's perimetric or areal term,
+    with one or two tangent vectors."""
     rng = np.random.default_rng(3)
     d, n_tan = 2, 1
     if case == "four bodies":
@@ -106,6 +107,10 @@ def test_other_systems_in_lanes(case):
         system = System(np.array([1.0, 0.9, 1.2]), 2, (
             make_potential("yukawa", {}, "pair"), make_potential("power", {}, "pair"),
             make_potential("lennard_jones", {}, "pair")))
+    elif case == "perimetric and areal terms in 3-D":
+        d, n_tan = 3, 2
+        system = System(np.array([1.0, 1.3, 0.7]), 3, (
+            make_potential("perimetric_power"), make_potential("areal_barrier")))
     elif case == "perimetric and pair terms":
         system = System(np.array([1.0, 0.9, 1.2]), 2, (
             make_potential("perimetric_power"), make_potential("lennard_jones", {}, "pair"),

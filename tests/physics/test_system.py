@@ -18,8 +18,16 @@ PLANAR = [t for t in TERMS if t.kind == "triplet" and t.name.startswith(("perime
                                                                            "areal"))]
 OTHERS = {"four bodies": (4, 2, (make_potential("perimetric_power"),)),
           "3-D": (3, 3, (make_potential("areal_barrier"),)),
+          "3-D perimetric": (3, 3, (make_potential("perimetric_power", {"exponent": 3.0}),)),
+          "four areal bodies in 3-D": (4, 3, (make_potential("areal_power"),)),
           "a sum of terms": (3, 2, (make_potential("perimetric_power"),
-                                    make_potential("lennard_jones", {}, "pair")))}
+                                    make_potential("lennard_jones", {}, "pair"))),
+          "two triplet terms": (5, 2, (make_potential("areal_barrier"),
+                                       make_potential("perimetric_power"),
+                                       make_potential("axilrod_teller"))),
+          "triplet terms and pairs in 3-D": (4, 3, (
+              make_potential("perimetric_power"), make_potential("areal_barrier"),
+              make_potential("gravity", {"G": 0.5}, "pair")))}
 
 
 def states(rng, nq, n_tan, count):
@@ -60,8 +68,9 @@ def test_the_simd_lanes_give_the_general_path_bit_for_bit(term, shift):
 
 @pytest.mark.parametrize("case", OTHERS, ids=list(OTHERS))
 def test_other_systems_in_lanes_give_the_same_bits(case):
-    """A perimetric term of four bodies, an areal one in 3-D: lane by lane through `rhs`;
-    the paper's term beside a pair term: the SIMD loops of both (system.general_lanes)."""
+    """Perimetric and areal terms of more bodies or in 3-D, alone, together and beside pair
+    and ATM terms (system.general_lanes from SIMD_MIN lanes on, `rhs` lane by lane below);
+    the paper's term beside a pair term (its own SIMD loops, then the pair's)."""
     rng = np.random.default_rng(8)
     N, d, terms = OTHERS[case]
     check(System(rng.uniform(0.5, 2.0, N), d, terms), rng, trials=16)
