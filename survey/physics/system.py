@@ -456,9 +456,9 @@ def _full_lanes(t, Y, dY, L, masses, d, measure, prof, par, n_tan, W):
 # bodies or in 3-D. Lane by lane through `rhs` (32 lanes, an orbit-step with a tangent
 # vector), a LJAT trimer's cost 1.67 us, 2.23 alone; P^2/2 + Lennard-Jones + gravity 2.40
 # us, 3.42 alone; P^2/2 of three bodies in 3-D 1.15 us, 1.39 alone; of four in the plane
-# 1.83 us, 2.04 alone. Each kind of term runs in a function of its own (_pair_term_lanes,
-# _atm_term_lanes, _triplet_term_lanes): all in one, a LJAT trimer's orbit-step ran 10-25%
-# slower (415-420 -> 460-530 ns in 32 lanes). The workspace's rows: G the gathered
+# 1.83 us, 2.04 alone. A pair term's loops and a triangle's run in functions of their own
+# (_pair_term_lanes, _triplet_term_lanes): in the one that loops over the terms, a LJAT
+# trimer's orbit-step ran 10-25% slower (415-420 -> 460-530 ns in 32 lanes). The workspace's rows: G the gathered
 # coordinates and deviations (18), P a pair's unit vector and distance (4), U the profile's
 # U' and U'' (2), O what is added to the rates (20), T a triangle's geometry (13).
 GENERAL_ROWS = 57
@@ -519,8 +519,6 @@ def _general_lanes(Y, dY, L, G, P, U, O, T, masses, d, measure, prof, par, n_tan
         if kind == DISTANCE:
             _pair_term_lanes(Y, dY, L, G, P, U, O, masses, d, code, p, par[row, 2] != 0.0,
                              n_tan)
-        elif kind == TRIANGLE:
-            _atm_term_lanes(Y, dY, L, G, O, N, d, p[0], n_tan)
         else:
             _triplet_term_lanes(Y, dY, L, G, T, U, O, N, d, kind, code, p, n_tan)
 
@@ -550,31 +548,10 @@ def _pair_term_lanes(Y, dY, L, G, P, U, O, masses, d, code, p, weighted, n_tan):
 
 
 @lanes
-def _atm_term_lanes(Y, dY, L, G, O, N, d, Z, n_tan):
-    """One ATM term's forces, triplet i < j < k by triplet, as `_rows_forces` adds them
-    (forces.atm_forces)."""
-    nq = N * d
-    n = 2 * nq
-    for i in range(N - 2):
-        for j in range(i + 1, N - 1):
-            for k3 in range(j + 1, N):
-                bodies = (i, j, k3)
-                _gather(G, 0, Y, (i * d, j * d, k3 * d), d, L)
-                atm_lanes(G, O, L, Z)
-                _add_cyclic_lanes(dY, nq, bodies, d, O, O[L:], L)
-                for t_ in range(n_tan):
-                    base = n * (1 + t_)
-                    _gather(G, 9, Y, (base + i * d, base + j * d, base + k3 * d), d, L)
-                    atm_tangent_lanes(G, O[10 * L:], L, Z)
-                    # dW times the H's differences, then W times the dH's
-                    _add_cyclic_lanes(dY, base + nq, bodies, d, O[10 * L:], O[L:], L)
-                    _add_cyclic_lanes(dY, base + nq, bodies, d, O, O[11 * L:], L)
-
-
-@lanes
 def _triplet_term_lanes(Y, dY, L, G, E, U, O, N, d, measure, prof, par, n_tan):
-    """One perimetric or areal term's forces, triplet i < j < k by triplet, as
-    `_leading_forces` and `_rows_forces` add them (forces.perimetric_forces, areal_forces)."""
+    """One perimetric, areal or ATM term's forces, triplet i < j < k by triplet, as
+    `_leading_forces` and `_rows_forces` add them (forces.perimetric_forces, areal_forces,
+    atm_forces)."""
     nq = N * d
     n = 2 * nq
     for i in range(N - 2):
@@ -586,10 +563,13 @@ def _triplet_term_lanes(Y, dY, L, G, E, U, O, N, d, measure, prof, par, n_tan):
                     perimetric_lanes(G, E, O, L)
                     profile_lanes(prof, par, E[12 * L:], U, L)
                     _add_cyclic_lanes(dY, nq, bodies, d, U, O, L)
-                else:
+                elif measure == AREA:
                     areal_lanes(G, E, L)
                     profile_lanes(prof, par, E[3 * L:], U, L)
                     areal_force_lanes(G, E, U, O, L)
+                    _add_cyclic_lanes(dY, nq, bodies, d, O, O[L:], L)
+                else:
+                    atm_lanes(G, O, L, par[0])
                     _add_cyclic_lanes(dY, nq, bodies, d, O, O[L:], L)
                 for t_ in range(n_tan):
                     base = n * (1 + t_)
@@ -597,12 +577,16 @@ def _triplet_term_lanes(Y, dY, L, G, E, U, O, N, d, measure, prof, par, n_tan):
                     if measure == PERIMETER:
                         perimetric_tangent_lanes(G, E, U, O, L)
                         _add_cyclic_lanes(dY, base + nq, bodies, d, O[9 * L:], O, L)
-                    else:
-                        # U''(|A|) d|A| times the gradients, then U'(|A|) times their
-                        # variations (areal_forces' a and b)
+                        continue
+                    # areal: U''(|A|) d|A| times the gradients, then U'(|A|) times their
+                    # variations (areal_forces' a and b); ATM: dW times the H's
+                    # differences, then W times the dH's
+                    if measure == AREA:
                         areal_tangent_lanes(G, E, U, O[10 * L:], L)
-                        _add_cyclic_lanes(dY, base + nq, bodies, d, O[10 * L:], O[L:], L)
-                        _add_cyclic_lanes(dY, base + nq, bodies, d, O, O[11 * L:], L)
+                    else:
+                        atm_tangent_lanes(G, O[10 * L:], L, par[0])
+                    _add_cyclic_lanes(dY, base + nq, bodies, d, O[10 * L:], O[L:], L)
+                    _add_cyclic_lanes(dY, base + nq, bodies, d, O, O[11 * L:], L)
 
 
 @helper
