@@ -365,6 +365,15 @@ def _put3(O, r, L, k, v):
     O[r * L + k], O[(r + 1) * L + k], O[(r + 2) * L + k] = v
 
 
+@helper
+def _put_cyclic(O, r, L, k, g1, g2, g3):
+    """The cyclic differences g1 - g3, g2 - g1, g3 - g2 (_add_cyclic's, bodies i, j, k) of
+    lane k into O's rows r .. r + 8."""
+    _put3(O, r, L, k, sub(g1, g3))
+    _put3(O, r + 3, L, k, sub(g2, g1))
+    _put3(O, r + 6, L, k, sub(g3, g2))
+
+
 @lanes
 def pair_geometry_lanes(G, P, L):
     """Unit vector from body i (G rows 0-2) to body j (rows 3-5) and their distance, into P
@@ -412,9 +421,7 @@ def atm_lanes(G, O, L, Z):
         parts = _atm_parts(_row3(G, 0, L, k), _row3(G, 3, L, k), _row3(G, 6, L, k), Z)
         W, H1, H2, H3 = parts[10], parts[14], parts[15], parts[16]
         O[k] = W
-        _put3(O, 1, L, k, sub(H1, H3))
-        _put3(O, 4, L, k, sub(H2, H1))
-        _put3(O, 7, L, k, sub(H3, H2))
+        _put_cyclic(O, 1, L, k, H1, H2, H3)
 
 
 @lanes
@@ -428,9 +435,7 @@ def atm_tangent_lanes(G, O, L, Z):
         dW, dH1, dH2, dH3 = _atm_tangent(parts, _row3(G, 9, L, k), _row3(G, 12, L, k),
                                          _row3(G, 15, L, k))
         O[k] = dW
-        _put3(O, 1, L, k, sub(dH1, dH3))
-        _put3(O, 4, L, k, sub(dH2, dH1))
-        _put3(O, 7, L, k, sub(dH3, dH2))
+        _put_cyclic(O, 1, L, k, dH1, dH2, dH3)
 
 
 @lanes
@@ -446,9 +451,7 @@ def perimetric_lanes(G, E, O, L):
         _put3(E, 6, L, k, e3)
         E[9 * L + k], E[10 * L + k], E[11 * L + k] = L1, L2, L3
         E[12 * L + k] = L1 + L2 + L3
-        _put3(O, 0, L, k, sub(e1, e3))
-        _put3(O, 3, L, k, sub(e2, e1))
-        _put3(O, 6, L, k, sub(e3, e2))
+        _put_cyclic(O, 0, L, k, e1, e2, e3)
 
 
 @lanes
@@ -461,9 +464,7 @@ def perimetric_tangent_lanes(G, E, U, O, L):
             _row3(E, 0, L, k), _row3(E, 3, L, k), _row3(E, 6, L, k), E[9 * L + k],
             E[10 * L + k], E[11 * L + k], U[k], U[L + k], _row3(G, 9, L, k),
             _row3(G, 12, L, k), _row3(G, 15, L, k))
-        _put3(O, 0, L, k, sub(g1, g3))
-        _put3(O, 3, L, k, sub(g2, g1))
-        _put3(O, 6, L, k, sub(g3, g2))
+        _put_cyclic(O, 0, L, k, g1, g2, g3)
         O[9 * L + k] = 1.0
 
 

@@ -458,9 +458,10 @@ def _full_lanes(t, Y, dY, L, masses, d, measure, prof, par, n_tan, W):
 # us, 3.42 alone; P^2/2 of three bodies in 3-D 1.15 us, 1.39 alone; of four in the plane
 # 1.83 us, 2.04 alone. A pair term's loops and a triangle's run in functions of their own
 # (_pair_term_lanes, _triplet_term_lanes): in the one that loops over the terms, a LJAT
-# trimer's orbit-step ran 10-25% slower (415-420 -> 460-530 ns in 32 lanes). The workspace's rows: G the gathered
-# coordinates and deviations (18), P a pair's unit vector and distance (4), U the profile's
-# U' and U'' (2), O what is added to the rates (20), T a triangle's geometry (13).
+# trimer's orbit-step ran 10-25% slower (415-420 -> 460-530 ns in 32 lanes). The
+# workspace's rows: G the gathered coordinates and deviations (18), P a pair's unit vector
+# and distance (4), U the profile's U' and U'' (2), O what is added to the rates (20), T a
+# triangle's geometry (13).
 GENERAL_ROWS = 57
 
 
