@@ -26,7 +26,7 @@ from .numerics.indicators import deviation_vectors
 from .numerics.integrate import _Frame, integrate, integrate_batch
 from .physics.families import initial_state
 from .physics.jit import kernel
-from .physics.system import SIMD_LANES, System, rhs, rhs_lanes, workspace_size
+from .physics.system import SIMD_LANES, System, rhs_lanes, state_size, workspace_size
 from .physics.terms import make_potential
 
 CASES = [("chaotic 'sides'", "sides", {}),
@@ -887,35 +887,30 @@ def default_cell(t_final=2000.0, repeats=5, folder="results/bench", out=print):
 
 
 @kernel
-def _rhs_loop(Y, reps, L, masses, d, measure, prof, par, n_tan):
-    """reps times the 12 right-hand-side evaluations of a step of L lanes, at one state."""
+def _rhs_loop(Y, reps, L, masses, d, measure, prof, par, n_tan, rb):
+    """reps times the 12 right-hand-side evaluations of a step of L lanes, at one state (rb:
+    the reduced states' mass ratios, as the driver runs the paper's systems)."""
     K = np.zeros((16, Y.size))
     W = np.zeros(workspace_size(L, Y.size // L))
     for _ in range(reps):
         for s in range(12):
-            if L == 1:
-                rhs(0.0, Y, K[s], masses, d, measure, prof, par, n_tan)
-            else:
-                rhs_lanes(0.0, Y, K[s], L, masses, d, measure, prof, par, n_tan, W, None)
+            rhs_lanes(0.0, Y, K[s], L, masses, d, measure, prof, par, n_tan, W, rb)
     return K[11, 0]
 
 
 @kernel
-def _stage_loop(Y, reps, h, L, masses, d, measure, prof, par, n_tan):
+def _stage_loop(Y, reps, h, L, masses, d, measure, prof, par, n_tan, rb):
     """reps times a step's stages and error norms of L lanes, from one state."""
     nf = Y.size // L
     K, YT, YN = np.zeros((16, Y.size)), np.zeros(Y.size), np.zeros(Y.size)
     W, S = np.zeros(workspace_size(L, nf)), np.zeros(2 * (nf + 1) * L)
     H, err = np.full(L, h), np.zeros(L)
     HH = np.full(Y.size, h)
-    if L == 1:
-        rhs(0.0, Y, K[0], masses, d, measure, prof, par, n_tan)
-    else:
-        rhs_lanes(0.0, Y, K[0], L, masses, d, measure, prof, par, n_tan, W, None)
+    rhs_lanes(0.0, Y, K[0], L, masses, d, measure, prof, par, n_tan, W, rb)
     acc = 0.0
     for _ in range(reps):
-        stages(masses, d, measure, prof, par, n_tan, L, Y, HH, K, YT, YN, W, None)
-        error_norms(Y, YN, K, L, 2 * masses.size * d, 1e-12, 1e-12, H, err, S)
+        stages(masses, d, measure, prof, par, n_tan, L, Y, HH, K, YT, YN, W, rb)
+        error_norms(Y, YN, K, L, state_size(masses, d, rb), 1e-12, 1e-12, H, err, S)
         acc += err[0]
     return acc
 
@@ -938,19 +933,24 @@ def step_costs(t_final=2000.0, repeats=5, lanes=(1, 4, 8, 16), out=print):
             h = t_final / one.n_steps
             args = system.kernel_args
             for L in lanes:
-                y = np.concatenate([y0, *w]) if n_tan else y0.copy()
-                Y = np.repeat(y[:, None], L, 1).ravel()
                 starts = np.repeat(y0[None], L, 0)
                 tangents = np.repeat(w[None], L, 0) if n_tan else None
-                _rhs_loop(Y, 1, L, *args, n_tan)
-                _stage_loop(Y, 1, h, L, *args, n_tan)
+                # the states the driver integrates: each orbit's relative motion
+                frame = _Frame.of(system, starts, np.zeros((L, n_tan, y0.size))
+                                  if tangents is None else tangents, [])
+                Y = np.ascontiguousarray(frame.reduce(
+                    starts if tangents is None else
+                    np.concatenate([starts, tangents.reshape(L, -1)], 1), n_tan).T).ravel()
+                _rhs_loop(Y, 1, L, *args, n_tan, frame.ratios)
+                _stage_loop(Y, 1, h, L, *args, n_tan, frame.ratios)
                 reps = max(1, steps // L)
                 # interleaved, so a slow spell of the machine does not fall on one of three
                 best = [math.inf] * 3
                 for _ in range(repeats):
                     for k, go in enumerate((
-                            lambda: _rhs_loop(Y, reps, L, *args, n_tan),
-                            lambda: _stage_loop(Y, reps, h, L, *args, n_tan),
+                            lambda: _rhs_loop(Y, reps, L, *args, n_tan, frame.ratios),
+                            lambda: _stage_loop(Y, reps, h, L, *args, n_tan,
+                                                      frame.ratios),
                             lambda: integrate_batch(system, starts, t_final, tangents=tangents,
                                                     megno=n_tan > 0, lanes=L))):
                         best[k] = min(best[k], _best_time(go, 1)[0])
