@@ -502,14 +502,18 @@ def refined_chunk_size(cells: int, workers: int, per_cell: int) -> int:
 
 def _compute(client, task, starts, todo, folder, key, config, bar, round_):
     """The cells `todo` in chunks, one task each (first_runs); a chunk's cells whose
-    verdict is in doubt then run longer in a task each (extend_cells): ahead of the chunks
-    still waiting while some wait, and at the end each on a worker with nothing to do (the
-    scheduler would queue two on the worker that just finished, while another finishes
-    soon after and idles). A chunk is saved when all its cells are final."""
+    verdict is in doubt then run longer (extend_cells), several to a task, their orbits
+    lanes of one batch (one cell's orbits leave most of a batch's lanes idle): ahead of the
+    chunks still waiting while some wait, and at the end spread over the workers, the
+    costliest first, each task to a worker with nothing to do (the scheduler would queue
+    two on the worker that just finished, while another finishes soon after and idles). A
+    chunk is saved when all its cells are final."""
     from dask.distributed import as_completed
     slots = {w: info["nthreads"] for w, info in client.scheduler_info()["workers"].items()}
-    size = config.tables["dask"]["chunk_size"] or chunk_size(todo.size, len(slots),
-                                                            jobs_per_cell(task))
+    per_cell = jobs_per_cell(task)
+    size = config.tables["dask"]["chunk_size"] or chunk_size(todo.size, len(slots), per_cell)
+    # an extension task holds about one round of SIMD lanes
+    group = max(1, -(-SIMD_LANES // per_cell))
     retries = config.tables["dask"]["retries"]
     # the archive's imports, in a thread of this process while the workers compute: after
     # them they added ~0.5 s to a scan whose tasks all end together (the 101-orbit bench
@@ -518,51 +522,65 @@ def _compute(client, task, starts, todo, folder, key, config, bar, round_):
     threading.Thread(target=archive.prefetch, name="prefetch", daemon=True).start()
     # a chunk by its first cell: its ids, result rows, extensions pending
     chunks = {int(ids[0]): [ids, None, 0] for ids in _chunks(todo, size)}
+    # a task's future: the first cell of its chunk, or the (chunk, row) of its extensions
     futures = {client.submit(first_runs, task, ids, starts[ids], pure=False,
                              key=f"cells-{key}-{round_}-{first}",
-                             retries=retries): (first, None)
+                             retries=retries): first
                for first, (ids, _, _) in chunks.items()}
     queue = as_completed(futures)
 
-    def extend(first, k, worker=None):
-        cell = chunks[first][0][k:k + 1]
-        history = chunks[first][1][V.regime_history][k:k + 1]
-        extension = client.submit(extend_cells, task, cell, starts[cell], history,
+    def extend(cells, worker=None):
+        ids = np.array([chunks[first][0][k] for first, k in cells])
+        history = np.concatenate([chunks[first][1][V.regime_history][k:k + 1]
+                                  for first, k in cells])
+        extension = client.submit(extend_cells, task, ids, starts[ids], history,
                                   pure=False, priority=1, retries=retries,
                                   workers=worker, allow_other_workers=worker is not None,
-                                  key=f"longer-{key}-{round_}-{int(cell[0])}")
-        futures[extension] = (first, k)
+                                  key=f"longer-{key}-{round_}-{int(ids[0])}")
+        futures[extension] = cells
         queue.add(extension)
 
-    saved, held = {}, []
+    saved, held = {}, []        # held: (the first run's right-hand sides, chunk, row)
     for future in queue:
-        first, k = futures.pop(future)
-        chunk = chunks[first]
-        if k is None:                   # first_runs: (rows, rows in doubt)
+        job = futures.pop(future)
+        if isinstance(job, int):        # first_runs: (rows, rows in doubt)
+            chunk = chunks[job]
             chunk[1], doubt = future.result()
             chunk[2] = doubt.size
-            held += [(first, int(k)) for k in doubt]
+            held += [(int(chunk[1][V.n_rhs][k]), job, int(k)) for k in doubt]
+            ended = [job]
         else:
-            merge_rows(chunk[1], np.array([k]), future.result())
-            chunk[2] -= 1
+            rows = future.result()
+            for i, (first, k) in enumerate(job):
+                merge_rows(chunks[first][1], np.array([k]),
+                           {name: values[i:i + 1] for name, values in rows.items()})
+                chunks[first][2] -= 1
+            ended = sorted({first for first, _ in job})
         future.release()
-        if chunk[2] == 0:
-            ids, rows, _ = chunks.pop(first)
-            save_chunk(folder, key, ids, rows)
-            saved[chunk_path(folder, ids)] = ids
-            bar.update(len(ids))
+        for first in ended:
+            if chunks[first][2] == 0:
+                ids, rows, _ = chunks.pop(first)
+                save_chunk(folder, key, ids, rows)
+                saved[chunk_path(folder, ids)] = ids
+                bar.update(len(ids))
         if held:
-            waiting = sum(k is None for _, k in futures.values()) > sum(slots.values())
-            if waiting or not futures:
-                for first, k in held:
-                    extend(first, k)
+            held.sort(reverse=True)
+            waiting = sum(isinstance(j, int) for j in futures.values()) > sum(slots.values())
+            # dealt costliest first, so that a task's cells end alike
+            n = -(-len(held) // group)
+            if waiting:
+                for g in range(n):
+                    extend([(first, k) for _, first, k in held[g::n]])
                 held = []
-            else:
-                busy = client.processing()
-                for w in slots:
-                    for _ in range(slots[w] - len(busy.get(w, ()))):
-                        if held:
-                            extend(*held.pop(0), worker=[w])
+                continue
+            n = max(n, sum(slots.values()))
+            tasks = [held[g::n] for g in range(n)]
+            busy = client.processing()
+            free = [w for w in slots for _ in range(slots[w] - len(busy.get(w, ())))]
+            for w, cells in zip(free, tasks):
+                if cells:
+                    extend([(first, k) for _, first, k in cells], worker=[w])
+            held = [cell for cells in tasks[len(free):] for cell in cells]
     return saved
 
 
