@@ -503,11 +503,12 @@ def refined_chunk_size(cells: int, workers: int, per_cell: int) -> int:
 def _compute(client, task, starts, todo, folder, key, config, bar, round_):
     """The cells `todo` in chunks, one task each (first_runs); a chunk's cells whose
     verdict is in doubt then run longer (extend_cells), several to a task, their orbits
-    lanes of one batch (one cell's orbits leave most of a batch's lanes idle): ahead of the
-    chunks still waiting while some wait, and at the end spread over the workers, the
-    costliest first, each task to a worker with nothing to do (the scheduler would queue
-    two on the worker that just finished, while another finishes soon after and idles). A
-    chunk is saved when all its cells are final."""
+    lanes of one batch (one cell's orbits leave most of a batch's lanes idle): while chunks
+    wait, a round of SIMD lanes' worth ahead of them (or fewer, when 2 chunks a worker wait
+    for theirs), and at the end spread over the workers, the costliest first, each task to
+    a worker with nothing to do (the scheduler would queue two on the worker that just
+    finished, while another finishes soon after and idles). A chunk is saved when all its
+    cells are final."""
     from dask.distributed import as_completed
     slots = {w: info["nthreads"] for w, info in client.scheduler_info()["workers"].items()}
     per_cell = jobs_per_cell(task)
@@ -565,18 +566,25 @@ def _compute(client, task, starts, todo, folder, key, config, bar, round_):
                 bar.update(len(ids))
         if held:
             held.sort(reverse=True)
-            waiting = sum(isinstance(j, int) for j in futures.values()) > sum(slots.values())
+            chunks_out = sum(isinstance(j, int) for j in futures.values())
+            waiting = chunks_out > sum(slots.values())
             # dealt costliest first, so that a task's cells end alike
             n = -(-len(held) // group)
-            if waiting:
+            # while chunks wait: a round of lanes' worth ahead of them, or what 2 chunks a
+            # worker hold back from their checkpoints; all, once nothing else is running
+            if not futures or waiting and (
+                    len(held) >= group or len({c[1] for c in held}) >= 2 * len(slots)):
                 for g in range(n):
                     extend([(first, k) for _, first, k in held[g::n]])
                 held = []
+            if waiting or not held:
                 continue
-            n = max(n, sum(slots.values()))
-            tasks = [held[g::n] for g in range(n)]
             busy = client.processing()
             free = [w for w in slots for _ in range(slots[w] - len(busy.get(w, ())))]
+            # a share for each free worker and each still running a chunk (whose cells in
+            # doubt join the rest when it returns)
+            n = max(n, len(free) + chunks_out)
+            tasks = [held[g::n] for g in range(n)]
             for w, cells in zip(free, tasks):
                 if cells:
                     extend([(first, k) for _, first, k in cells], worker=[w])
