@@ -53,9 +53,14 @@ def test_a_verdict_in_doubt_is_decided_again_on_a_run_four_times_longer(tmp_path
         assert a.tobytes() == b.tobytes(), name
     np.testing.assert_array_equal(ds[V.regime].values[extended],
                                   longer[V.regime].values[extended])
-    # the survey ran the extensions as tasks of their own; verify runs them in the cells'
+    # the survey ran the extensions in a task of their own; verify runs them in the cells'
     ok, lines = verify(tmp_path / "v.nc", cells=4)
     assert ok, lines
+    # and a survey of one cell a chunk on two workers (its cells in doubt held while
+    # chunks wait, then shared out at the end) in other tasks: the same bits
+    apart = survey(tmp_path, "apart", 100.0, dask={"workers": 2, "chunk_size": 1})
+    for name in (k for k in ds.data_vars if BY_NAME[k].reproducible):
+        assert ds[name].values.tobytes() == apart[name].values.tobytes(), name
 
 
 def test_extend_zero_decides_at_t_only(tmp_path):
