@@ -571,9 +571,12 @@ def _compute(client, task, starts, todo, folder, key, config, bar, round_):
             # dealt costliest first, so that a task's cells end alike
             n = -(-len(held) // group)
             # while chunks wait: a round of lanes' worth ahead of them, or what 2 chunks a
-            # worker hold back from their checkpoints; all, once nothing else is running
+            # worker hold back from their checkpoints; all, once nothing else is running,
+            # a share for each worker
             if not futures or waiting and (
                     len(held) >= group or len({c[1] for c in held}) >= 2 * len(slots)):
+                if not futures:
+                    n = min(len(held), max(n, sum(slots.values())))
                 for g in range(n):
                     extend([(first, k) for _, first, k in held[g::n]])
                 held = []
