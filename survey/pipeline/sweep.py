@@ -500,15 +500,39 @@ def refined_chunk_size(cells: int, workers: int, per_cell: int) -> int:
                       max(lanes, -(-cells // (4 * workers))), -(-cells // workers)))
 
 
+def deal_doubts(held, group, threads, workers, chunks_out, idle, free):
+    """The tasks to submit now for the cells in doubt `held` ((cost, chunk, row): the first
+    run's right-hand sides), as ([(chunk, row), ...], worker or None), and the cells to hold
+    back. Cells are dealt costliest first, so that a task's cells end alike, in tasks of
+    about `group` cells (a round of SIMD lanes). While chunks wait (`chunks_out` > threads):
+    nothing until a round of lanes' worth is held or 2 chunks a worker wait for theirs (a
+    chunk is checkpointed once all its cells are final), then all, ahead of the chunks. At
+    the end: one task to each free worker (`free()`), with a share kept for each worker
+    still running a chunk (whose cells in doubt join the rest when it returns); once
+    nothing runs (`idle`), all, a share for each thread."""
+    held = sorted(held, reverse=True)
+    n = -(-len(held) // group)
+    if idle:
+        n = min(len(held), max(n, threads))
+        return [([(c, k) for _, c, k in held[g::n]], None) for g in range(n)], []
+    if chunks_out > threads:
+        if len(held) >= group or len({c for _, c, _ in held}) >= 2 * workers:
+            return [([(c, k) for _, c, k in held[g::n]], None) for g in range(n)], []
+        return [], held
+    free = free()
+    n = max(n, len(free) + chunks_out)
+    shares = [held[g::n] for g in range(n)]
+    return ([([(c, k) for _, c, k in cells], w) for w, cells in zip(free, shares) if cells],
+            [cell for cells in shares[len(free):] for cell in cells])
+
+
 def _compute(client, task, starts, todo, folder, key, config, bar, round_):
     """The cells `todo` in chunks, one task each (first_runs); a chunk's cells whose
     verdict is in doubt then run longer (extend_cells), several to a task, their orbits
-    lanes of one batch (one cell's orbits leave most of a batch's lanes idle): while chunks
-    wait, a round of SIMD lanes' worth ahead of them (or fewer, when 2 chunks a worker wait
-    for theirs), and at the end spread over the workers, the costliest first, each task to
-    a worker with nothing to do (the scheduler would queue two on the worker that just
-    finished, while another finishes soon after and idles). A chunk is saved when all its
-    cells are final."""
+    lanes of one batch (one cell's orbits leave most of a batch's lanes idle), as
+    `deal_doubts` deals them: at the end each task to a worker with nothing to do (the
+    scheduler would queue two on the worker that just finished, while another finishes
+    soon after and idles). A chunk is saved when all its cells are final."""
     from dask.distributed import as_completed
     slots = {w: info["nthreads"] for w, info in client.scheduler_info()["workers"].items()}
     per_cell = jobs_per_cell(task)
@@ -541,6 +565,11 @@ def _compute(client, task, starts, todo, folder, key, config, bar, round_):
         futures[extension] = cells
         queue.add(extension)
 
+    def free():
+        """A worker for each of its threads with nothing to do."""
+        busy = client.processing()
+        return [w for w in slots for _ in range(slots[w] - len(busy.get(w, ())))]
+
     saved, held = {}, []        # held: (the first run's right-hand sides, chunk, row)
     for future in queue:
         job = futures.pop(future)
@@ -565,33 +594,11 @@ def _compute(client, task, starts, todo, folder, key, config, bar, round_):
                 saved[chunk_path(folder, ids)] = ids
                 bar.update(len(ids))
         if held:
-            held.sort(reverse=True)
             chunks_out = sum(isinstance(j, int) for j in futures.values())
-            waiting = chunks_out > sum(slots.values())
-            # dealt costliest first, so that a task's cells end alike
-            n = -(-len(held) // group)
-            # while chunks wait: a round of lanes' worth ahead of them, or what 2 chunks a
-            # worker hold back from their checkpoints; all, once nothing else is running,
-            # a share for each worker
-            if not futures or waiting and (
-                    len(held) >= group or len({c[1] for c in held}) >= 2 * len(slots)):
-                if not futures:
-                    n = min(len(held), max(n, sum(slots.values())))
-                for g in range(n):
-                    extend([(first, k) for _, first, k in held[g::n]])
-                held = []
-            if waiting or not held:
-                continue
-            busy = client.processing()
-            free = [w for w in slots for _ in range(slots[w] - len(busy.get(w, ())))]
-            # a share for each free worker and each still running a chunk (whose cells in
-            # doubt join the rest when it returns)
-            n = max(n, len(free) + chunks_out)
-            tasks = [held[g::n] for g in range(n)]
-            for w, cells in zip(free, tasks):
-                if cells:
-                    extend([(first, k) for _, first, k in cells], worker=[w])
-            held = [cell for cells in tasks[len(free):] for cell in cells]
+            tasks, held = deal_doubts(held, group, sum(slots.values()), len(slots),
+                                      chunks_out, not futures, free)
+            for cells, worker in tasks:
+                extend(cells, worker=None if worker is None else [worker])
     return saved
 
 
@@ -605,8 +612,9 @@ def verify(path, cells: int = 8, seed: int = 0, differences: dict | None = None)
     """Check an archive against its stored config -- the config's sha256, the grid
     coordinates, the variables, their dimensions and attributes -- then recompute a sample
     of cells and compare every variable the schema declares reproducible, bit for bit: on
-    any x86-64 machine the cells compute the same bits (survey.physics.portable). Returns (ok, report lines), each mismatch with its largest difference relative to the
-    value; `differences`, if given, receives those per variable. A file that is not a survey
+    any x86-64 machine the cells compute the same bits (survey.physics.portable). Returns
+    (ok, report lines), each mismatch with its largest difference relative to the value;
+    `differences`, if given, receives those per variable. A file that is not a survey
     archive raises ArchiveError."""
     with archive.open_archive(path) as ds:
         try:

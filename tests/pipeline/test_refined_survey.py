@@ -223,3 +223,35 @@ def test_a_refined_map_is_written_verified_drawn_and_reported(tmp_path):
     assert "| 80 |" in text and "| 100 |" in text and rows.size > 2
     ok, lines = verify(out, cells=3)
     assert ok, lines
+
+
+def test_cells_in_doubt_are_dealt_so_no_worker_ends_alone():
+    """deal_doubts: while chunks wait, the cells in doubt are held until they make a round
+    of lanes (or 2 chunks a worker wait for theirs), then go out together; at the end a
+    free worker takes its share, the rest waits for the worker still running a chunk;
+    once nothing runs, every worker gets a share -- costliest first, each cell once."""
+    from survey.pipeline.sweep import deal_doubts
+    held = [(10, 0, 1), (30, 0, 4), (20, 5, 2)]        # (cost, chunk, row)
+    never = lambda: pytest.fail("free workers asked for while chunks wait")   # noqa: E731
+    # chunks wait: too few cells, from too few chunks, to go out yet
+    assert deal_doubts(held, 8, 2, 2, 5, False, never) == ([], sorted(held, reverse=True))
+    # a round of lanes' worth: all, in tasks of about one round each, ahead of the chunks
+    many = [(c, c % 4, c) for c in range(20)]
+    tasks, kept = deal_doubts(many, 8, 2, 2, 5, False, never)
+    assert kept == [] and len(tasks) == 3 and all(w is None for _, w in tasks)
+    dealt = sorted(x for cells, _ in tasks for x in cells)
+    assert dealt == sorted((c % 4, c) for c in range(20))
+    assert tasks[0][0][0] == (19 % 4, 19)                # the costliest first
+    # 2 chunks a worker wait for theirs: out, though fewer than a round
+    spread = [(c, c, 0) for c in range(4)]
+    assert deal_doubts(spread, 8, 2, 2, 5, False, never)[1] == []
+    # the end: one worker free, another running the last chunk -- half now, half kept
+    tasks, kept = deal_doubts(held, 8, 2, 2, 1, False, lambda: ["a"])
+    assert [w for _, w in tasks] == ["a"] and tasks[0][0] == [(0, 4), (0, 1)]
+    assert kept == [(20, 5, 2)]
+    # that worker's chunk returns: it takes all that is left (no lone last cell)
+    tasks, kept = deal_doubts(kept + [(5, 7, 3)], 8, 2, 2, 0, False, lambda: ["b"])
+    assert tasks == [([(5, 2), (7, 3)], "b")] and kept == []
+    # nothing runs: a share for each thread
+    tasks, kept = deal_doubts(held, 8, 2, 2, 0, True, never)
+    assert kept == [] and [len(cells) for cells, _ in tasks] == [2, 1]
