@@ -950,7 +950,7 @@ def step_costs(t_final=2000.0, repeats=5, lanes=(1, 4, 8, 16), out=print):
                     for k, go in enumerate((
                             lambda: _rhs_loop(Y, reps, L, *args, n_tan, frame.ratios),
                             lambda: _stage_loop(Y, reps, h, L, *args, n_tan,
-                                                      frame.ratios),
+                                                frame.ratios),
                             lambda: integrate_batch(system, starts, t_final, tangents=tangents,
                                                     megno=n_tan > 0, lanes=L))):
                         best[k] = min(best[k], _best_time(go, 1)[0])
