@@ -25,7 +25,7 @@ from .numerics.dop853 import error_norms, stages
 from .numerics.indicators import deviation_vectors
 from .numerics.integrate import _Frame, integrate, integrate_batch
 from .physics.families import initial_state
-from .physics.jit import kernel
+from .physics.jit import kernel, leaf
 from .physics.system import SIMD_LANES, System, rhs_lanes, state_size, workspace_size
 from .physics.terms import make_potential
 
@@ -886,12 +886,12 @@ def default_cell(t_final=2000.0, repeats=5, folder="results/bench", out=print):
     return rows
 
 
-@kernel
-def _rhs_loop(Y, reps, L, masses, d, measure, prof, par, n_tan, rb):
+@leaf
+def _rhs_loop(Y, K, W, reps, L, masses, d, measure, prof, par, n_tan, rb):
     """reps times the 12 right-hand-side evaluations of a step of L lanes, at one state (rb:
-    the reduced states' mass ratios, as the driver runs the paper's systems)."""
-    K = np.zeros((16, Y.size))
-    W = np.zeros(workspace_size(L, Y.size // L))
+    the reduced states' mass ratios, as the driver runs the paper's systems), into K's
+    rows; W: the workspace. Without reference counting, as the driver (the rows' views
+    would each cost an atomic increment and decrement)."""
     for _ in range(reps):
         for s in range(12):
             rhs_lanes(0.0, Y, K[s], L, masses, d, measure, prof, par, n_tan, W, rb)
@@ -941,14 +941,16 @@ def step_costs(t_final=2000.0, repeats=5, lanes=(1, 4, 8, 16), out=print):
                 Y = np.ascontiguousarray(frame.reduce(
                     starts if tangents is None else
                     np.concatenate([starts, tangents.reshape(L, -1)], 1), n_tan).T).ravel()
-                _rhs_loop(Y, 1, L, *args, n_tan, frame.ratios)
+                K, W = np.zeros((16, Y.size)), np.zeros(workspace_size(L, Y.size // L))
+                _rhs_loop(Y, K, W, 1, L, *args, n_tan, frame.ratios)
                 _stage_loop(Y, 1, h, L, *args, n_tan, frame.ratios)
                 reps = max(1, steps // L)
                 # interleaved, so a slow spell of the machine does not fall on one of three
                 best = [math.inf] * 3
                 for _ in range(repeats):
                     for k, go in enumerate((
-                            lambda: _rhs_loop(Y, reps, L, *args, n_tan, frame.ratios),
+                            lambda: _rhs_loop(Y, K, W, reps, L, *args, n_tan,
+                                              frame.ratios),
                             lambda: _stage_loop(Y, reps, h, L, *args, n_tan,
                                                 frame.ratios),
                             lambda: integrate_batch(system, starts, t_final, tangents=tangents,
