@@ -512,18 +512,21 @@ def deal_doubts(held, group, threads, workers, chunks_out, idle, free):
     nothing runs (`idle`), all, a share for each thread."""
     held = sorted(held, reverse=True)
     n = -(-len(held) // group)
+
+    def dealt(n, workers):
+        shares = [[(c, k) for _, c, k in held[g::n]] for g in range(n)]
+        return [(cells, w) for w, cells in zip(workers, shares) if cells]
+
     if idle:
         n = min(len(held), max(n, threads))
-        return [([(c, k) for _, c, k in held[g::n]], None) for g in range(n)], []
+        return dealt(n, [None] * n), []
     if chunks_out > threads:
         if len(held) >= group or len({c for _, c, _ in held}) >= 2 * workers:
-            return [([(c, k) for _, c, k in held[g::n]], None) for g in range(n)], []
+            return dealt(n, [None] * n), []
         return [], held
     free = free()
     n = max(n, len(free) + chunks_out)
-    shares = [held[g::n] for g in range(n)]
-    return ([([(c, k) for _, c, k in cells], w) for w, cells in zip(free, shares) if cells],
-            [cell for cells in shares[len(free):] for cell in cells])
+    return dealt(n, free), [cell for g in range(len(free), n) for cell in held[g::n]]
 
 
 def _compute(client, task, starts, todo, folder, key, config, bar, round_):
