@@ -3,6 +3,7 @@ asks for (the speed numbers themselves are never asserted: they live in the benc
 import math
 import sys
 
+import numpy as np
 import pytest
 
 from survey import bench
@@ -18,7 +19,11 @@ def test_bench_parts_run_and_print_their_ratios(tmp_path):
     bench.fixed_costs(folder=str(tmp_path), repeats=1, out=lines.append, cold=False)
     rows = bench.interaction_terms(t_final=2.0, repeats=1, out=lines.append)
     assert all(r["same"] for r in rows)     # the two paths give the same orbit
-    steps = bench.step_costs(t_final=2.0, repeats=1, lanes=(1, 16), out=lines.append)
+    steps, plain = bench.step_costs(t_final=2.0, repeats=1, lanes=(1, 16), out=lines.append)
+    assert plain > 0 and "plain scalar code" in lines[-1]
+    # the plain baseline integrates the orbit survey integrates (8 relative components)
+    _, _, y, ref = bench.plain_step(t_final=20.0, repeats=1)
+    assert np.max(np.abs(y - ref)) < 1e-9
     assert [(r[0], r[1], r[2]) for r in steps] == [(c[0], k, L) for c in bench.CASES
                                                    for k in (0, 1) for L in (1, 16)]
     assert all(r[3] > 0 and r[5] > 0 for r in steps)      # steps taken, RHS time measured
