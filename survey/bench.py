@@ -1,7 +1,9 @@
 """`python -m survey bench`: survey against its baselines, measured in the same run -- a
 101-orbit grid end to end against heyoka's SIMD batch ensemble (`scan_vs_heyoka`), a
 default cell against its bare orbit (`default_cell`), what a survey costs beside its cells
-(`fixed_costs`), how busy a refined map keeps the workers (`refined_map`), survey's DOP853 against scipy's DOP853 (NumPy right-hand side) and heyoka's
+(`fixed_costs`), how busy a refined map keeps the workers (`refined_map`), where a step
+goes and one orbit's step against the same step in plain scalar code (`step_costs`),
+survey's DOP853 against scipy's DOP853 (NumPy right-hand side) and heyoka's
 Taylor integrator on the paper's two orbits (`run`), the cost of indicators, sections and
 the torus analysis, the scaling on 1 vs 2 workers, the driver's memory, and what the paper's
 one-term systems would pay on the general path of sums of terms (`interaction_terms`).
