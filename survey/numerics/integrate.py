@@ -822,11 +822,12 @@ def tangent_norm(y, off, n, rb):
 @helper
 def _rhs_one(t, y, dy, masses, d, measure, prof, par, n_tan, W, rb):
     """The right-hand side at one state: `rhs`, or for a reduced state its lane loops at
-    L = 1 (W: their workspace)."""
+    L = 1 (W: their workspace). The 1 is given as an int64: a literal one is a type of its
+    own, and compiled a second copy of the lanes' right-hand sides (~7 s of a first run)."""
     if rb is None:
         rhs(t, y, dy, masses, d, measure, prof, par, n_tan)
     else:
-        rhs_lanes(t, y, dy, 1, masses, d, measure, prof, par, n_tan, W, rb)
+        rhs_lanes(t, y, dy, np.int64(1), masses, d, measure, prof, par, n_tan, W, rb)
 
 
 @lanes

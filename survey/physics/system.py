@@ -426,15 +426,18 @@ def rhs_lanes(t, Y, dY, L, masses, d, measure, prof, par, n_tan, W, rb):
     if rb is not None:
         _planar_lanes(Y, dY, L, W, masses, measure, prof, par, n_tan, rb)
     else:
-        _full_lanes(t, Y, dY, L, masses, d, measure, prof, par, n_tan, W)
+        _full_lanes(t, Y, dY, L, masses, d, measure, prof, par, n_tan, W, rb)
 
 
 @helper
-def _full_lanes(t, Y, dY, L, masses, d, measure, prof, par, n_tan, W):
-    """`rhs_lanes` of full states."""
+def _full_lanes(t, Y, dY, L, masses, d, measure, prof, par, n_tan, W, rb):
+    """`rhs_lanes` of full states (rb is None). rb is passed on, not a literal None: where
+    rb is a tuple, numba still types this branch that never runs, and a literal None
+    compiled a full-state copy of the lanes' right-hand sides into every reduced batch's
+    kernels (~3-5 s of a first run)."""
     if L >= SIMD_MIN and masses.size == 3 and d == 2 and par.ndim == 1 and (
             measure == PERIMETER or measure == AREA):
-        _planar_lanes(Y, dY, L, W, masses, measure, prof, par, n_tan, None)
+        _planar_lanes(Y, dY, L, W, masses, measure, prof, par, n_tan, rb)
     elif L == 1:
         rhs(t, Y, dY, masses, d, measure, prof, par, n_tan)
     elif L >= SIMD_MIN:
