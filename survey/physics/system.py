@@ -265,6 +265,14 @@ def lead_params(par):
     """The two parameters of the leading perimetric or areal term (see _encode)."""
 
 
+@helper
+def _term_params(par, row):
+    """The two parameters of a further term (par's row `row`), a pair of floats as
+    lead_params gives the leading term's: the term kernels are compiled once for both (a
+    view of the row compiled a second copy of each into a first run of such a system)."""
+    return par[row, 3], par[row, 4]
+
+
 def velocities_and_forces(y, dy, masses, d, measure, prof, par, n_tan):
     """dq/dt, dp/dt and the tangent blocks of `rhs` (see _encode)."""
 
@@ -343,7 +351,8 @@ def _rows_energy(q, masses, d, par):
     N = masses.size
     total = 0.0
     for row in range(1, par.shape[0]):
-        kind, code, weighted, p = int(par[row, 0]), int(par[row, 1]), par[row, 2], par[row, 3:]
+        kind, code, weighted = int(par[row, 0]), int(par[row, 1]), par[row, 2]
+        p = _term_params(par, row)
         if kind == DISTANCE:
             for i in range(N - 1):
                 for j in range(i + 1, N):
@@ -519,7 +528,7 @@ def _general_lanes(Y, dY, L, G, P, U, O, T, masses, d, measure, prof, par, n_tan
             _triplet_term_lanes(Y, dY, L, G, T, U, O, N, d, measure, prof,
                                 (par[0, 0], par[0, 1]), n_tan)
     for row in range(1, par.shape[0]):
-        kind, code, p = int(par[row, 0]), int(par[row, 1]), par[row, 3:]
+        kind, code, p = int(par[row, 0]), int(par[row, 1]), _term_params(par, row)
         if kind == DISTANCE:
             _pair_term_lanes(Y, dY, L, G, P, U, O, masses, d, code, p, par[row, 2] != 0.0,
                              n_tan)
@@ -1026,7 +1035,8 @@ def _rows_forces(y, dy, masses, d, n, n_tan, par):
     """Add the forces of the terms after the leading one (par's rows 1, ...)."""
     N = masses.size
     for row in range(1, par.shape[0]):
-        kind, code, weighted, p = int(par[row, 0]), int(par[row, 1]), par[row, 2], par[row, 3:]
+        kind, code, weighted = int(par[row, 0]), int(par[row, 1]), par[row, 2]
+        p = _term_params(par, row)
         if kind == DISTANCE:
             for i in range(N - 1):
                 for j in range(i + 1, N):
