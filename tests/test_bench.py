@@ -14,7 +14,7 @@ def test_bench_parts_run_and_print_their_ratios(tmp_path):
     bench.scan_vs_heyoka(cells=3, t_final=2.0, repeats=1, folder=str(tmp_path),
                          out=lines.append)
     bench.default_cell(t_final=2.0, repeats=1, folder=str(tmp_path), out=lines.append)
-    # the cold run compiles every kernel into an empty cache (a minute on 2 cores; the
+    # the cold run compiles every kernel into an empty cache (half a minute on 2 cores; the
     # portability test compiles them all cold already): its timer is checked on its own below
     bench.fixed_costs(folder=str(tmp_path), repeats=1, out=lines.append, cold=False)
     rows = bench.interaction_terms(t_final=2.0, repeats=1, out=lines.append)

@@ -71,7 +71,7 @@ def refresh_kernel_cache(package: Path = PACKAGE):
 
 def kernels_cached(package: Path = PACKAGE) -> bool:
     """Whether numba's disk cache holds survey's kernels (else the first survey compiles
-    them, about a minute on 2 cores)."""
+    them, half a minute to a minute on 2 cores)."""
     return any(cache_folder(package / "numerics").glob("integrate._run-*.nbi"))
 
 

@@ -318,7 +318,7 @@ def warm_up(task: CellTask, first, starts):
 
 def warm_beside(task: CellTask, first, starts):
     """On a first run, in a worker while the driver compiles the integrator (warm_up, one
-    core for a minute): compile the kernels the survey needs after it -- the energies a
+    core for half a minute): compile the kernels the survey needs after it -- the energies a
     cell's results take (which warm_up compiled after the integrator), the torus analysis
     and the move of lanes to a smaller batch (which a cell's first real run compiled in
     every worker) and the linear algebra of the report's special solutions (which the

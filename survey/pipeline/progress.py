@@ -11,7 +11,7 @@ import time
 
 # how long the kernels take to compile on a machine's first run (README: measured), said
 # wherever a user waits for it
-FIRST_COMPILE = "about a minute on 2 cores"
+FIRST_COMPILE = "half a minute to a minute on 2 cores"
 COMPILING = ("compiling survey's kernels for this kind of system (the first run only: "
              f"{FIRST_COMPILE}; later runs load them from numba's disk cache)")
 
