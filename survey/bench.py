@@ -953,6 +953,8 @@ def _plain_rhs(y, dy):
 
 @helper
 def _plain_stage(y, yt, K, h, comb, s):
+    """Stage s of `_plain_dop853` from the tableau row comb (a helper, as numba cannot loop
+    over the rows: each is a tuple of its own length)."""
     for i in range(y.size):
         yt[i] = fma(h, _dot(K, i, comb), y[i])
     _plain_rhs(yt, K[s])
