@@ -25,7 +25,9 @@ from ..physics.equilibria import (
     rotations,
 )
 
-TURN = 0.984807753012208    # cos 10 degrees: a step whose tangent or chord turns more is halved
+TURN_DEGREES = 10.0         # a step whose tangent or chord turns more is halved
+TURN = 0.984807753012208    # its cosine
+GAP = 1e-6                  # scaled distance beyond which a bisection's ends are two branches
 
 
 class Located(NamedTuple):
@@ -37,22 +39,46 @@ class Located(NamedTuple):
     x: np.ndarray             # the scaled unknowns there (mean of the last bracket's ends)
 
 
+class Branch(NamedTuple):
+    """A followed family: its members [(member, x, t)], where its tests change, whether it
+    reached the end value, and if not why it stopped."""
+
+    members: list
+    found: list[Located]
+    complete: bool
+    ended: str                # '' if complete
+
+
+SMALLEST = 1e-6     # the smallest step, relative to the nominal one: below it the family ends
+
+
+def on_row(row: np.ndarray, x: np.ndarray, target: float) -> bool:
+    """Whether x meets the bordering row row . x = target (to rounding): a corrector may
+    stop only there, not at a start that already solves the other equations."""
+    return abs(target - linalg.dot(row, x)) <= 1e-12 * max(abs(target), 1.0)
+
+
 def tangent(A: np.ndarray, previous: np.ndarray) -> np.ndarray:
     """The unit null vector of A, oriented along `previous`."""
     t = linalg.svd(A)[1][-1]
     return -t if linalg.dot(t, previous) < 0 else t
 
 
-def follow(solve: Callable, x0: np.ndarray, to: float, steps: int,
-           signature: Callable | None = None, max_members: int = 1000):
-    """The members [(member, x, t)] from scaled x0 (its parameter held at x0[-1]) to the
-    scaled parameter value `to`, and whether it was reached. The step advances the
-    parameter by 1/steps where the family runs along it (the state by at most 0.1),
-    halved where the corrector fails, where the new tangent or the chord turns by more
-    than 10 degrees, or where `signature(member)` (e.g. stability indices) moves by more
-    than 0.1: signs of a jump to another branch. Stops at `to` (a last member solved
-    there), at max_members, after ds falls to 1e-4 of its nominal value, or where the
-    family has turned back and run twice the span past its start."""
+def follow(solve: Callable, x0: np.ndarray, to: float, steps: int, tests: dict[str, Callable],
+           signature: Callable | None = None, bisect: float = 1e-9,
+           max_members: int = 1000) -> Branch:
+    """The family from scaled x0 (its parameter held at x0[-1]) to the scaled parameter
+    value `to`. The step advances the parameter by 1/steps where the family runs along it
+    (the state by at most 0.1) and is halved where a step fails a check: the corrector
+    does not converge; the new tangent or the chord turns by more than 10 degrees, or
+    `signature(member)` (e.g. stability indices) moves by more than 0.1 -- signs of a
+    jump to another branch; or a test(member, tangent) (a fold: `lambda m, t: t[-1] > 0`,
+    a count of stable modes) changes between the members and its bisection along the
+    arclength (to `bisect`) does not close up: the members on either side stay apart, a
+    gap between two branches rather than a bifurcation on one. A step that fails at the
+    smallest size (SMALLEST of the nominal) ends the family there, unreported: nothing
+    past a failed check is a member. Also ends at `to` (a last member solved there), at
+    max_members, or where it has turned back and run twice the span past its start."""
     direction = np.zeros(x0.size)
     direction[-1] = np.sign(to - x0[-1])
     first = solve(x0, direction, linalg.dot(direction, x0))
@@ -60,61 +86,84 @@ def follow(solve: Callable, x0: np.ndarray, to: float, steps: int,
         raise ValueError("the start does not converge as a member of the family")
     member, x, A = first
     members = [(member, x, tangent(A, direction))]
+    found: list[Located] = []
     start = x[-1]
     ds = nominal = 1.0 / steps
-    while len(members) < max_members and abs(members[-1][1][-1] - start) <= 2.0:
+    while True:
+        if len(members) >= max_members:
+            return Branch(members, found, False, f"stopped at {max_members} members")
+        if abs(members[-1][1][-1] - start) > 2.0:
+            return Branch(members, found, False, "turned back and ran twice the span past "
+                                                 "its start")
         member, x, t = members[-1]
-        found = solve(x + ds * t, t, linalg.dot(t, x) + ds)
-        if found is None:
-            ds /= 2
-            if ds < 1e-4 * nominal:
-                break
-            continue
-        member2, x2, A2 = found
-        t2 = tangent(A2, t)
-        chord = (x2 - x) / max(linalg.norm(x2 - x), 1e-300)
-        moved = 0.0
-        if signature is not None:
-            a, b = signature(member), signature(member2)
-            moved = np.max(np.abs(a - b), initial=0.0) if a.size == b.size else np.inf
-        turn = min(linalg.dot(t2, t), linalg.dot(chord, t))
-        if (turn < TURN or moved > 0.1) and ds > 1e-3 * nominal:
-            ds /= 2
-            continue
-        if (x2[-1] - to) * (x[-1] - to) <= 0:        # passed the end: solve there
+        got, last = solve(x + ds * t, t, linalg.dot(t, x) + ds), False
+        if got is not None and (got[1][-1] - to) * (x[-1] - to) <= 0:   # passed the end
             row = np.zeros(x.size)
             row[-1] = 1.0
-            last = solve(x + (to - x[-1]) / t[-1] * t if abs(t[-1]) > 0.1 else x2, row, to)
-            if last is not None:
-                members.append((last[0], last[1], tangent(last[2], t)))
-                return members, True
-            break
-        members.append((member2, x2, t2))
-        ds = min(nominal / max(abs(t2[-1]), 1e-3), 0.1, 2 * ds)
-    return members, False
+            got = solve(x + (to - x[-1]) / t[-1] * t if abs(t[-1]) > 0.1 else got[1], row, to)
+            last = True
+        problem, located = _step_problem(members[-1], got, solve, tests, signature, bisect)
+        if problem:
+            ds /= 2
+            if ds < SMALLEST * nominal:
+                return Branch(members, found, False, problem)
+            continue
+        members.append(located.pop())
+        found += located
+        if last:
+            return Branch(members, found, True, "")
+        ds = min(nominal / max(abs(members[-1][2][-1]), 1e-3), 0.1, 2 * ds)
 
 
-def locate(members, solve: Callable, tests: dict[str, Callable], bisect: float = 1e-9):
-    """Every change of each test(member, tangent) between consecutive members, bisected
-    along the arclength from the earlier one to `bisect`: [Located] in the family's
-    order. A fold is the test `lambda m, t: t[-1] > 0`."""
-    found = []
-    for (a, xa, ta), (b, xb, tb) in zip(members, members[1:]):
-        for name, test in tests.items():
-            if test(a, ta) == test(b, tb):
-                continue
-            lo, hi = 0.0, linalg.dot(ta, xb - xa)
-            ends = [xa, xb]
-            while hi - lo > bisect:
-                mid = 0.5 * (lo + hi)
-                got = solve(xa + mid * ta, ta, linalg.dot(ta, xa) + mid)
-                if got is None:
-                    break
-                side = int(test(got[0], tangent(got[2], ta)) != test(a, ta))
-                ends[side] = got[1]
-                lo, hi = (mid, hi) if side == 0 else (lo, mid)
-            found.append(Located(name, a, b, 0.5 * (ends[0] + ends[1])))
-    return found
+def _step_problem(previous, got, solve, tests, signature, bisect):
+    """(why the step to `got` fails its checks or '', [where tests change..., the new
+    member (member, x, t)])."""
+    if got is None:
+        return "the corrector does not converge", []
+    member, x, t = previous
+    member2, x2, A2 = got
+    t2 = tangent(A2, t)
+    chord = (x2 - x) / max(linalg.norm(x2 - x), 1e-300)
+    turn = min(linalg.dot(t2, t), linalg.dot(chord, t))
+    if turn < TURN:
+        return f"the family's tangent turns by more than {TURN_DEGREES:g} degrees", []
+    if signature is not None:
+        a, b = signature(member), signature(member2)
+        moved = np.max(np.abs(a - b), initial=0.0) if a.size == b.size else np.inf
+        if moved > 0.1:
+            return f"the stability indices jump by {moved:.2g}", []
+    located = []
+    for name, test in tests.items():
+        if test(member, t) == test(member2, t2):
+            continue
+        at, gap = _bisect(previous, x2, solve, name, test, bisect)
+        if gap:
+            return (f"where its {name} test changes, the members on either side stay "
+                    f"{gap:.1e} apart (scaled) instead of closing up: a jump to another "
+                    "branch, not a bifurcation on one", [])
+        located.append(Located(name, member, member2, at))
+    return "", located + [(member2, x2, t2)]
+
+
+def _bisect(previous, xb, solve, name, test, bisect):
+    """(x where `test` changes between the member `previous` and the unknowns xb, bisected
+    along the arclength to `bisect`; how far its bracket's ends stay apart where that is
+    more than the bracket's width -- or the corrector fails inside it, so that the ends
+    cannot be brought together -- else 0). On one branch the ends close up as the bracket
+    shrinks; across a jump between two branches they stay a gap apart."""
+    a, xa, ta = previous
+    lo, hi = 0.0, linalg.dot(ta, xb - xa)
+    ends = [xa, xb]
+    while hi - lo > bisect:
+        mid = 0.5 * (lo + hi)
+        got = solve(xa + mid * ta, ta, linalg.dot(ta, xa) + mid)
+        if got is None:
+            return 0.5 * (ends[0] + ends[1]), max(linalg.norm(ends[1] - ends[0]), GAP)
+        side = int(test(got[0], tangent(got[2], ta)) != test(a, ta))
+        ends[side] = got[1]
+        lo, hi = (mid, hi) if side == 0 else (lo, mid)
+    apart = linalg.norm(ends[1] - ends[0])
+    return 0.5 * (ends[0] + ends[1]), (apart if apart > 10 * (hi - lo) + GAP else 0.0)
 
 
 def equilibrium_family(systems: Callable, start, p0: float, to: float, steps: int = 20,
@@ -163,9 +212,9 @@ def equilibrium_family(systems: Callable, start, p0: float, to: float, steps: in
                            np.hstack([R, np.zeros((len(R), 1))])]) * scale
             F = np.concatenate([g, np.zeros(len(R))])
             error = linalg.norm(g) / size
-            if not np.isfinite(error) or error > 10 * best:
+            if not np.isfinite(error) or (error > 10 * best and on_row(row, x, target)):
                 return None
-            if error <= 1e-12:
+            if error <= 1e-12 and on_row(row, x, target):
                 q = (w * linalg.dot(T, xi)).reshape(first.positions.shape)
                 try:
                     eq = relative_equilibrium(system, q, spin(p), rotation_rate)
@@ -177,11 +226,14 @@ def equilibrium_family(systems: Callable, start, p0: float, to: float, steps: in
                                  np.concatenate([-F, [target - linalg.dot(row, x)]]), 1e-14)
         return None
 
-    members, complete = follow(solve, np.concatenate([xi0, [p0]]) / scale, to / scale[-1],
-                               steps, max_members=max_members)
     tests = {"fold": lambda e, t: bool(t[-1] > 0), "axis": lambda e, t: e.on_axis}
+    branch = follow(solve, np.concatenate([xi0, [p0]]) / scale, to / scale[-1], steps, tests,
+                    bisect=bisect, max_members=max_members)
+    values, branch = at_labels(branch, scale[-1], to, lambda p, e: [
+        ("J", e.angular_momentum, spin(p)) if spin(p) is not None else
+        ("Omega", e.rotation_rate, rotation_rate)], 1e-9)
     found = []
-    for at in locate(members, solve, tests, bisect):
+    for at in branch.found:
         p_at = float(at.x[-1] * scale[-1])
         if at.test == "fold":
             found.append(Bifurcation(p_at, "fold"))
@@ -193,7 +245,37 @@ def equilibrium_family(systems: Callable, start, p0: float, to: float, steps: in
                          & (np.abs(lam.imag) > AXIS_TOLERANCE * big))
         found.append(Bifurcation(p_at, "complex quartet (Krein collision)" if quartet
                                  else "real pair"))
-    values = [float(x[-1] * scale[-1]) for _, x, _ in members]
-    if complete:
-        values[-1] = float(to)        # solved there; the scaling's rounding aside
-    return [(v, e) for v, (e, _, _) in zip(values, members)], found, complete
+    return EquilibriumFamily([(v, e) for v, (e, _, _) in zip(values, branch.members)], found,
+                             branch.complete, branch.ended)
+
+
+class EquilibriumFamily(NamedTuple):
+    members: list             # [(parameter, RelativeEquilibrium)]
+    bifurcations: list[Bifurcation]
+    complete: bool            # reached the end value
+    ended: str                # if not, why it stopped
+
+
+def at_labels(branch: Branch, scale: float, to: float, held: Callable, rtol: float):
+    """(the parameter of each member, unscaled; the branch) -- the branch cut before the
+    first member that is not at what it is labelled with: held(p, member) lists (name,
+    its value, the value it must have at parameter p), each to `rtol`. The last label is
+    `to` where the branch reached it, to the scaling's rounding."""
+    values = np.array([x[-1] * scale for _, x, _ in branch.members])
+    if branch.complete:
+        if not abs(values[-1] - to) <= 1e-12 * max(abs(to), 1.0):
+            branch = branch._replace(complete=False, ended=f"its last member is at "
+                                                            f"{values[-1]:.10g}, not {to:g}")
+        else:
+            values[-1] = to
+    for k, (p, (member, _, _)) in enumerate(zip(values, branch.members)):
+        for name, value, wanted in held(p, member):
+            if not abs(value - wanted) <= rtol * max(abs(wanted), 1.0):
+                if k == 0:
+                    raise ValueError(f"the start has {name} = {value:.10g}, not {wanted:.10g}")
+                kept = {id(m) for m, _, _ in branch.members[:k]}
+                return values[:k], Branch(
+                    branch.members[:k], [f for f in branch.found if id(f.after) in kept],
+                    False, f"the member labelled {p:.10g} has {name} = {value:.10g}, not "
+                           f"{wanted:.10g}: it and the rest are dropped")
+    return values, branch

@@ -31,7 +31,7 @@ from ..physics.equilibria import (
     nontrivial_subspace,
 )
 from ..physics.system import System, rhs
-from .continuation import follow, locate
+from .continuation import at_labels, follow, on_row
 from .integrate import integrate
 
 UNIT_CIRCLE = 1e-6          # ||mu| - 1| below which a multiplier is on the unit circle
@@ -48,6 +48,7 @@ class PeriodicOrbit(NamedTuple):
     residuals: np.ndarray     # the same before each Newton step, then after the last
     multipliers: np.ndarray   # non-trivial Floquet multipliers (complex), by angle
     monodromy: np.ndarray     # R^-1 dy(T)/dy(0) (n, n)
+    motion: "Motion"          # how far it leaves its start and how far its velocity turns
 
     @property
     def stable(self) -> bool:
@@ -96,6 +97,70 @@ class PeriodicOrbit(NamedTuple):
         elliptic, R < 0 hyperbolic, R > 1 inverse hyperbolic. For a two-degree-of-freedom
         subsystem (the isosceles plane) its pair's R is the classical residue."""
         return (1.0 - self.indices) / 2.0
+
+
+class Motion(NamedTuple):
+    """What shows a converged shooting solution is an orbit that goes somewhere and comes
+    back, not a start that never left, both measured in the frame turning with the orbit's
+    mean rotation theta t / T (a relative periodic orbit closes there)."""
+
+    excursion: float    # max over the period of |q(t) - q(0)| / |q(0)|, q the positions
+    turning: float      # the angle the bodies' velocity turns through over a period / 2 pi
+
+    def problem(self, return_error: float, tol: float) -> str:
+        """Why this is not a periodic orbit ('' if it is): it must leave its start by far
+        more than it misses returning (EXCURSION times the return error, or the
+        tolerance), and the velocity of its configuration q(t) must turn through a full
+        circle -- a closed curve's total curvature is at least 2 pi (Fenchel's theorem), so
+        a velocity that turns less never brings the bodies back."""
+        floor = EXCURSION * max(return_error, tol)
+        if not self.excursion >= floor:
+            return (f"it leaves its start by only {self.excursion:.1e} of its size over the "
+                    f"period, less than {EXCURSION:.0e} times its return error "
+                    f"({floor:.1e}): the start barely moves in that time (a period below "
+                    "the flow's time scale, or a start at rest or in rigid rotation: see "
+                    "`python -m survey equilibria`)")
+        if not self.turning >= TURNING:
+            return (f"its velocity turns through {self.turning:.3f} of a full circle over "
+                    "the period; a closed orbit's turns through at least one (Fenchel)")
+        return ""
+
+
+EXCURSION = 1e3         # a periodic orbit leaves its start by this times its return error
+TURNING = 0.99          # ... and its velocity turns through this much of 2 pi at least
+SAMPLES = 4096          # points of the period where both are measured
+SHORTEST = 1e3          # a period guess below 1/SHORTEST of the flow's time scale is refused
+
+
+def motion(system: System, y, period: float, rotation: float, tol: float) -> Motion:
+    """The Motion of the orbit from y over `period`, in the frame turning by `rotation`
+    over it, from SAMPLES points of the dense output; the velocity is the bodies', p / m
+    (less the frame's), where it is not zero (a brake orbit's stops: there it reverses).
+    Portable arithmetic: the same bits on every machine, as the rest of a family archive."""
+    times = np.linspace(0.0, period, SAMPLES + 1)
+    out = integrate(system, y, period, t_eval=times, rtol=tol, atol=tol)
+    if not out.ok:
+        return Motion(0.0, 0.0)
+    ys = out.samples.copy()
+    nq = system.n // 2
+    ys[:, nq:] /= np.repeat(system.masses, system.dim)      # velocities
+    if rotation:      # into the turning frame: less the frame's velocity, rotated back
+        rate = rotation / period
+        ys[:, nq:] -= rate * linalg.dot(ys[:, :nq], _generator(system)[:nq, :nq].T)
+        s, c = portable.vsincos(-rate * times)
+        x, z = ys[:, 0::2].copy(), ys[:, 1::2].copy()
+        ys[:, 0::2] = c[:, None] * x - s[:, None] * z
+        ys[:, 1::2] = s[:, None] * x + c[:, None] * z
+    q, v = ys[:, :nq], ys[:, nq:]
+    excursion = float(np.max(portable.vnorm(q - q[0]))) / linalg.norm(y[:nq])
+    v = v[portable.vnorm(v) > 0]
+    if len(v) < 2:
+        return Motion(excursion, 0.0)
+    u = v / portable.vnorm(v)[:, None]
+    # the angle between consecutive directions, 2 atan(|u - v| / |u + v|): exact near 0 and pi
+    angles = 2.0 * portable.vatan2(portable.vnorm(u[1:] - u[:-1]),
+                                   portable.vnorm(u[1:] + u[:-1]))
+    return Motion(excursion, float(portable.vdot(angles, np.ones(angles.size))) / (2 * np.pi))
 
 
 def _rotation(system: System, theta: float) -> np.ndarray:
@@ -220,9 +285,31 @@ class _Shooting(NamedTuple):
                                 linalg.chain(internal.T, J, internal))
         mu = linalg.eigvals(linalg.chain(W.T, Mi, W))
         mu = mu[np.lexsort((linalg.modulus(mu), linalg.argument(mu)))]
+        moved = motion(system, y, T, theta if self.rotating else 0.0, self.tol)
+        problem = moved.problem(residuals[-1], self.tol)
+        if problem:
+            raise ValueError(f"not a periodic orbit: {problem}")
         return PeriodicOrbit(y, T, theta, float(system.energy(y)),
                              float(system.angular_momentum(y)) if d == 2 else 0.0,
-                             residuals[-1], np.array(residuals), mu, M)
+                             residuals[-1], np.array(residuals), mu, M, moved)
+
+
+class GuessError(ValueError):
+    """A period guess (or start) that no periodic orbit can come from."""
+
+
+def time_scale(system: System, y) -> float:
+    """The flow's own time scale at y: |f| / |Df f|, the time its velocity f takes to turn
+    (or change) by its own size; inf where it does not change, 0 at an equilibrium. A
+    periodic orbit's velocity turns through at least 2 pi over the period, so the period is
+    at least 2 pi times the smallest of these along the orbit."""
+    f = _flow(system, y)
+    size = linalg.norm(f)
+    if not size > 0:
+        return 0.0
+    h = 1e-6 * linalg.norm(y) / size
+    change = linalg.norm(_flow(system, y + h * f) - _flow(system, y - h * f)) / (2 * h)
+    return size / change if change > 0 else np.inf
 
 
 def _converged(error, best, tol) -> bool:
@@ -248,6 +335,14 @@ def periodic_orbit(system: System, guess, period: float, rotating: bool = False,
     q = q - np.sum(system.masses[:, None] * q, axis=0) / system.masses.sum()
     p = p - system.masses[:, None] * np.sum(p, axis=0) / system.masses.sum()
     y = np.concatenate([q.ravel(), p.ravel()])
+    tau = time_scale(system, y)
+    if not period * SHORTEST >= tau:
+        raise GuessError(
+            "the guess is at rest (its velocity and forces vanish): no periodic orbit "
+            "passes through it" if tau == 0 else
+            f"a period of {period:.3g} is below 1/{SHORTEST:g} of the flow's time scale at the "
+            f"guess ({tau:.3g}: the time its velocity takes to change by its own size); a "
+            "periodic orbit's velocity turns through a full circle in a period")
     energy = float(system.energy(y)) if energy is None else float(energy)
     shooting = _Shooting(rotating, energy, float(system.angular_momentum(y)) if d == 2
                          else 0.0, tol)
@@ -319,6 +414,7 @@ class Family(NamedTuple):
     members: list[PeriodicOrbit]
     bifurcations: list[Bifurcation]   # folds and multipliers leaving or joining the circle
     complete: bool                    # reached the end value
+    ended: str                        # if not, why it stopped
 
 
 def periodic_family(systems: Callable[[float], System], orbit: PeriodicOrbit, p0: float,
@@ -331,7 +427,9 @@ def periodic_family(systems: Callable[[float], System], orbit: PeriodicOrbit, p0
     held, systems ignores p) or a parameter of the system at fixed energy. Unknowns (y, T[,
     theta], p) scaled by |y|, T, 1 and |to - p0|; a step that moves a stability index by
     more than 0.1 is halved. Folds and changes of the number of multipliers on the unit
-    circle are bisected along the arclength to `bisect` of |to - p0| and named."""
+    circle are bisected along the arclength to `bisect` of |to - p0| and named. Every
+    member is an orbit that moves (Motion) and is checked to be at its label: its energy
+    and, rotating, its J are the parameter or the start's, to 1e4 tol."""
     n = orbit.state.size
     extra = 2 if rotating else 1
     if pinned == "angular_momentum" and not rotating:
@@ -368,30 +466,42 @@ def periodic_family(systems: Callable[[float], System], orbit: PeriodicOrbit, p0
             except ValueError:
                 return None
             residuals.append(error)
-            if _converged(error, best, tol):
-                if error > 1e4 * tol:
+            if on_row(t_row, x, target):    # (a start off the row takes a step first)
+                if _converged(error, best, tol):
+                    if error > 1e4 * tol:
+                        return None
+                    try:
+                        o = shooting.orbit(system, y, T, theta, phi, residuals)
+                    except ValueError:      # not an orbit that moves: no member
+                        return None
+                    return o, x, np.hstack([A, col[:, None]]) * scale
+                if error > 10 * best:
                     return None
-                o = shooting.orbit(system, y, T, theta, phi, residuals)
-                return o, x, np.hstack([A, col[:, None]]) * scale
-            if error > 10 * best:
-                return None
-            best = min(best, error)
+                best = min(best, error)
             As = np.hstack([A, col[:, None]]) * scale
             full = np.vstack([As, t_row])
             rhs_ = np.concatenate([-F, [target - linalg.dot(t_row, x)]])
             x = x + linalg.lstsq(full, rhs_, 1e-14)
         return None
 
-    members, complete = follow(solve, pack(orbit, p0), to / scale[-1], steps,
-                               lambda o: o.indices, max_members)
     tests = {"fold": lambda o, t: bool(t[-1] > 0), "circle": lambda o, t: o.on_circle}
+    branch = follow(solve, pack(orbit, p0), to / scale[-1], steps, tests, lambda o: o.indices,
+                    bisect, max_members)
+
+    def held(p, o):
+        """What the member labelled p must have: the energy (p, or the start's) and, for a
+        rotating orbit, J (p, or the start's)."""
+        out = [("E", o.energy, p if pinned == "energy" else orbit.energy)]
+        if rotating:
+            out.append(("J", o.angular_momentum,
+                        p if pinned == "angular_momentum" else orbit.angular_momentum))
+        return out
+    values, branch = at_labels(branch, scale[-1], to, held, 1e4 * tol)
     found = [Bifurcation(float(at.x[-1] * scale[-1]), "fold" if at.test == "fold" else
                          _crossing(at.before, at.after), float(at.x[n] * scale[n]))
-             for at in locate(members, solve, tests, bisect)]
-    values = np.array([x[-1] * scale[-1] for _, x, _ in members])
-    if complete:
-        values[-1] = to               # solved there; the scaling's rounding aside
-    return Family(values, [o for o, _, _ in members], found, complete)
+             for at in branch.found]
+    return Family(values, [o for o, _, _ in branch.members], found, branch.complete,
+                  branch.ended)
 
 
 def _crossing(a: PeriodicOrbit, b: PeriodicOrbit) -> str:

@@ -35,15 +35,25 @@ def term_axis_names(s: dict) -> list[dict]:
 
 
 def build_system(s: dict, at: dict | None = None) -> System:
-    """The System of a validated [system] table; `at` gives the values of parameters that
-    are grid axes (by axis name)."""
+    """The System of a validated [system] table; `at` gives the values of term parameters
+    by axis name -- a grid axis, or a family's parameter -- whether [system] wrote them or
+    left them at their defaults. A name that is no parameter of the system's terms raises
+    ValueError: a value that reached no term would be a silent no-op."""
     masses = s["masses"] if s["masses"] is not None else [1.0] * s["bodies"]
-    terms = []
+    at = at or {}
+    terms, used = [], set()
     weighted = [t.get("mass_weighted", False) for t in s["interactions"] or [{}]]
     for (kind, name, params), axis_names, w in zip(system_terms(s), term_axis_names(s),
                                                    weighted):
-        values = {k: (at or {}).get(axis_names[k], v) for k, v in params.items()}
+        values = dict(params)
+        for key, axis in axis_names.items():
+            if axis in at:
+                values[key] = at[axis]
+                used.add(axis)
         terms.append(make_potential(name, values, kind, w))
+    if set(at) - used:
+        raise ValueError(f"{sorted(set(at) - used)[0]!r} is no parameter of the system's "
+                         "terms")
     return System(np.array(masses, dtype=float), s["dim"], tuple(terms))
 
 

@@ -18,7 +18,9 @@ from ..analysis.refine import as_grid, cell_label, cell_values
 from ..catalog.errors import ConfigError, SurveyError
 from ..numerics.integrate import integrate
 from ..numerics.periodic import (
+    EXCURSION,
     Family,
+    GuessError,
     PeriodicOrbit,
     lyapunov_start,
     periodic_family,
@@ -149,7 +151,7 @@ def _family_systems(config_system: dict, parameter: str, table: str = "equilibri
 def solve_equilibria(path):
     """(system, table, found): the relative equilibria from the start and the seeded
     configurations, or with [equilibria] parameter the start's family, (members,
-    bifurcations, complete)."""
+    bifurcations, complete, ended): a continuation.EquilibriumFamily."""
     config, system, start, table = load_equilibria(path)
     if table["parameter"]:
         return system, table, _equilibrium_family(path, config, system, start, table)
@@ -161,7 +163,7 @@ def solve_equilibria(path):
 def _equilibrium_family(path, config, system, start, table):
     """The family of the start's relative equilibrium along [equilibria] parameter, from its
     value in [system] to `to` (pseudo-arclength, about `steps` members where it runs along
-    the parameter): (members, bifurcations, complete)."""
+    the parameter): a continuation.EquilibriumFamily."""
     from ..numerics.continuation import equilibrium_family
     if table["to"] is None:
         raise ConfigError("[equilibria].to", "is required with a parameter: its last value")
@@ -176,19 +178,20 @@ def _equilibrium_family(path, config, system, start, table):
         raise ConfigError("[equilibria].to", f"equals the parameter's start value {p0:g}; "
                                              "give the family's other end")
     try:
-        members, found, complete = equilibrium_family(
+        return equilibrium_family(
             systems, start, p0, table["to"], table["steps"], table["angular_momentum"],
             table["rotation_rate"], spin_parameter=spin)
     except ValueError as exc:
         raise SurveyError(f"{path}: the family does not start: {exc}") from None
-    return members, found, complete
 
 
-def family_text(table: dict, members, found, complete: bool) -> str:
+def family_text(table: dict, family) -> str:
+    """A family of relative equilibria (continuation.EquilibriumFamily) as text."""
     name = table["parameter"]
-    lines = [f"Family along {name} ({len(members)} members, " + ("reaching" if complete else
-                                                                 "not reaching")
-             + f" {name} = {table['to']:g}):", "",
+    members, found = family.members, family.bifurcations
+    lines = [f"Family along {name} ({len(members)} members, " + (
+        "reaching" if family.complete else "not reaching") + f" {name} = {table['to']:g}"
+             + ("" if family.complete else f": {family.ended}") + "):", "",
              f"| {name} | E | J | Omega | stable | largest growth rate |",
              "| --- | --- | --- | --- | --- | --- |"]
     for p, e in members:
@@ -201,10 +204,11 @@ def family_text(table: dict, members, found, complete: bool) -> str:
     return "\n".join(lines)
 
 
-def equilibrium_dataset(table: dict, members, found, config_text: str):
+def equilibrium_dataset(table: dict, family, config_text: str):
     """A family of relative equilibria as a labelled xarray Dataset: per member the
     parameter, E, J, Omega, the positions, the reduced eigenvalues and the stability."""
     import xarray as xr
+    members, found = family.members, family.bifurcations
     n = max(e.eigenvalues.size for _, e in members)
     lam = np.full((len(members), n), np.nan + 0j)
     for i, (_, e) in enumerate(members):
@@ -230,7 +234,8 @@ def equilibrium_dataset(table: dict, members, found, config_text: str):
          "bifurcation_kind": ("bifurcation", np.array([b.kind for b in found], dtype=object))},
         coords={table["parameter"]: ("member", [p for p, _ in members])},
         attrs={"title": f"relative equilibria along {table['parameter']}",
-               "family": "equilibria", "config": config_text})
+               "family": "equilibria", "complete": int(family.complete),
+               "ended": family.ended, "config": config_text})
 
 
 def write_archive(ds, path, command: str) -> Path:
@@ -292,15 +297,17 @@ def print_equilibria(path, as_json_text: bool = False, output=None,
     _refuse_output(path, "equilibria", output)
     system, table, found = solve_equilibria(path)
     if table["parameter"]:
-        members, found, complete = found
+        family = found
         if output:
-            ds = equilibrium_dataset(table, members, found, Path(path).read_text())
+            ds = equilibrium_dataset(table, family, Path(path).read_text())
             print(f"wrote {write_archive(ds, output, command)}")
-        print(json.dumps({"family": equilibria_json([e for _, e in members])["equilibria"],
-                          table["parameter"]: [p for p, _ in members],
-                          "complete": complete,
-                          "bifurcations": [b._asdict() for b in found]}, indent=1)
-              if as_json_text else family_text(table, members, found, complete))
+        print(json.dumps({"family": equilibria_json([e for _, e in family.members])[
+                              "equilibria"],
+                          table["parameter"]: [float(p) for p, _ in family.members],
+                          "complete": family.complete, "ended": family.ended,
+                          "bifurcations": [b._asdict() for b in family.bifurcations]},
+                         indent=1)
+              if as_json_text else family_text(table, family))
         return 0
     print(json.dumps(equilibria_json(found), indent=1) if as_json_text else
           equilibria_text(system, table, found))
@@ -350,6 +357,9 @@ def solve_periodic(path) -> tuple[System, dict, PeriodicOrbit | Family]:
     try:
         orbit = periodic_orbit(system, start, table["period"], table["rotating"],
                                table["energy"], table["tol"])
+    except GuessError as exc:
+        raise ConfigError("[periodic].period" if not table["mode"] else "[periodic].mode",
+                          str(exc)) from None
     except ValueError as exc:
         raise SurveyError(f"{path}: {exc}; try another [periodic] period or start") from None
     if not table["parameter"]:
@@ -396,6 +406,7 @@ def periodic_json(orbit: PeriodicOrbit) -> dict:
             "newton_residuals": orbit.residuals.tolist(),
             "multipliers": [[float(z.real), float(z.imag)] for z in orbit.multipliers],
             "stable": orbit.stable, "kind": orbit.kind, "rates": orbit.rates.tolist(),
+            "excursion": orbit.motion.excursion, "turning": orbit.motion.turning,
             "residues": [[float(z.real), float(z.imag)] for z in orbit.residues]}
 
 
@@ -421,7 +432,11 @@ def periodic_text(system: System, orbit: PeriodicOrbit) -> str:
                                                                     orbit.rates}, reverse=True))
                                     + " per unit time."),
              f"Greene's residues R = (2 - mu - 1/mu) / 4, one per pair (0 < R < 1 elliptic): "
-             f"{_residues(orbit)}."]
+             f"{_residues(orbit)}.",
+             f"Checked to be an orbit that moves: it leaves its start by up to "
+             f"{orbit.motion.excursion:.3g} of its size (at least {EXCURSION:.0e} times its "
+             f"return error) and its velocity turns through {orbit.motion.turning:.4g} full "
+             "circles over the period (a closed orbit's turns through at least one)."]
     return "\n".join(lines)
 
 
@@ -438,7 +453,7 @@ def periodic_family_text(system: System, table: dict, family: Family, rows: int 
                 table["rotating"] else "")
              + f": {n} members, " + ("reaching" if family.complete else "not reaching")
              + f" {name} = {table['to']:g}" + ("" if family.complete else
-                                              " (it turns back, or breaks off)")
+                                              f" ({family.ended})")
              + ("" if len(shown) == n else f" (every {n / len(shown):.1f}th shown)") + ".", "",
              f"| {name} | period | rotation | "
              + ("" if name == "energy" else "E | ") + "kind | stability indices (mu + 1/mu)/2 |",
@@ -476,6 +491,12 @@ def family_dataset(table: dict, family: Family, config_text: str):
                               {"long_name": "angular momentum"}),
          "return_error": ("member", [o.return_error for o in members],
                           {"long_name": "relative return error of the converged orbit"}),
+         "excursion": ("member", [o.motion.excursion for o in members],
+                       {"long_name": "how far the orbit leaves its start, relative to its "
+                                     "size (in the frame turning with it)"}),
+         "turning": ("member", [o.motion.turning for o in members],
+                     {"long_name": "full circles its velocity turns through over a period "
+                                   "(at least 1 for a closed orbit)"}),
          "initial_state": (("member", "component"), np.array([o.state for o in members]),
                            {"long_name": "state at t = 0 (positions, then momenta)"}),
          "multiplier_real": (("member", "multiplier"), mu.real,
@@ -499,6 +520,7 @@ def family_dataset(table: dict, family: Family, config_text: str):
                                                       dtype=object))},
         attrs={"title": f"periodic orbits along {table['parameter']}",
                "family": "periodic", "complete": int(family.complete),
+               "ended": family.ended,
                "config": config_text})
     # the parameter labels the members (in energy: the pinned value, not the measured one)
     name = table["parameter"]
@@ -519,7 +541,7 @@ def print_periodic(path, as_json_text: bool = False, output=None,
             print(f"wrote {write_archive(ds, output, command)}")
         print(json.dumps({"family": [periodic_json(o) for o in family.members],
                           table["parameter"]: family.parameters.tolist(),
-                          "complete": family.complete,
+                          "complete": family.complete, "ended": family.ended,
                           "bifurcations": [f._asdict() for f in family.bifurcations]},
                          indent=1) if as_json_text else
               periodic_family_text(system, table, family))
@@ -557,7 +579,7 @@ def write_report(path, folder, draw=None) -> Path:
     figure = None
     if special_table(path) == "equilibria":
         system, table, found = solve_equilibria(path)
-        text = family_text(table, *found) if table["parameter"] else \
+        text = family_text(table, found) if table["parameter"] else \
             equilibria_text(system, table, found)
     else:
         system, table, found = solve_periodic(path)
@@ -728,6 +750,10 @@ def verify_family(path) -> tuple[bool, list[str]]:
     from .archive import machine, open_archive
     with open_archive(path) as ds:
         stored = ds.load()
+    missing = [k for k in ("config", "config_sha256") if k not in stored.attrs]
+    if missing:
+        return False, [f"{path}: a family archive without its {missing[0]} attribute cannot "
+                       "be computed again"]
     text, kind = stored.attrs["config"], stored.attrs["family"]
     if hashlib.sha256(text.encode()).hexdigest() != stored.attrs["config_sha256"]:
         return False, [f"{path}: config_sha256 does not match the stored config text (edited "
@@ -739,32 +765,53 @@ def verify_family(path) -> tuple[bool, list[str]]:
             _, table, family = solve_periodic(config)
             fresh = family_dataset(table, family, text)
         else:
-            _, table, (members, found, _) = solve_equilibria(config)
-            fresh = equilibrium_dataset(table, members, found, text)
+            _, table, family = solve_equilibria(config)
+            fresh = equilibrium_dataset(table, family, text)
     made = f"(made on {stored.attrs.get('machine', 'an unrecorded machine')}, checked on " \
            f"{machine()})"
-    if fresh.sizes["member"] != stored.sizes["member"]:
-        return False, [f"{path}: computed again the family has {fresh.sizes['member']} "
-                       f"members, the archive {stored.sizes['member']} {made}"]
-    lines = []
-    for name, var in fresh.variables.items():
-        if var.dtype.kind != "f" or name not in stored or stored[name].shape != var.shape:
-            continue
-        a, b = stored[name].values, var.values
-        if not np.array_equal(a, b, equal_nan=True):
-            scale = np.nanmax(np.abs(a), initial=0.0) or 1.0
-            worst = float(np.nanmax(np.abs(a - b), initial=0.0)) / scale
-            lines.append(f"{name}: differs by {worst:.1e} of its scale")
-    for name in ("bifurcation_kind", "kind"):
-        if name in fresh and list(fresh[name].values) != list(stored[name].values):
-            lines.append(f"{name}: {list(stored[name].values)} stored, "
-                         f"{list(fresh[name].values)} computed again")
+    lines = _family_differences(stored, fresh)
     if lines:
         return False, [f"{path}: the family computed again differs {made}:"] + \
             [f"  {line}" for line in lines]
     return True, [f"{path}: {stored.sizes['member']} members and "
                   f"{stored.sizes.get('bifurcation', 0)} bifurcations computed again agree "
                   f"bit for bit {made}"]
+
+
+def _family_differences(stored, fresh) -> list[str]:
+    """How a stored family differs from the one computed again: every variable and
+    coordinate (numbers bit for bit, NaN equal to NaN; labels as text), missing or extra
+    ones, and the attributes the computation sets (complete, why it ended, title)."""
+    lines = []
+    if fresh.sizes.get("member") != stored.sizes.get("member"):
+        lines.append(f"computed again the family has {fresh.sizes.get('member')} members, "
+                     f"the archive {stored.sizes.get('member')}")
+    for name in sorted(set(fresh.variables) | set(stored.variables)):
+        if name not in stored.variables:
+            lines.append(f"{name}: missing from the archive")
+            continue
+        if name not in fresh.variables:
+            lines.append(f"{name}: in the archive, not computed again")
+            continue
+        a, b = stored[name].values, fresh[name].values
+        if a.shape != b.shape:
+            lines.append(f"{name}: shape {a.shape} stored, {b.shape} computed again")
+        elif a.dtype.kind in "fc" and b.dtype.kind in "fc":
+            if not np.array_equal(a, b, equal_nan=True):
+                scale = np.nanmax(np.abs(a), initial=0.0) or 1.0
+                worst = float(np.nanmax(np.abs(a - b), initial=0.0)) / scale
+                lines.append(f"{name}: differs by {worst:.1e} of its scale")
+        elif a.dtype.kind in "iub" and b.dtype.kind in "iub":
+            if not np.array_equal(a, b):
+                lines.append(f"{name}: {a.tolist()} stored, {b.tolist()} computed again")
+        elif [str(v) for v in a.ravel()] != [str(v) for v in b.ravel()]:
+            lines.append(f"{name}: {[str(v) for v in a.ravel()]} stored, "
+                         f"{[str(v) for v in b.ravel()]} computed again")
+    for key in ("title", "family", "complete", "ended"):
+        if str(stored.attrs.get(key)) != str(fresh.attrs.get(key)):
+            lines.append(f"attribute {key}: {stored.attrs.get(key)!r} stored, "
+                         f"{fresh.attrs.get(key)!r} computed again")
+    return lines
 
 
 def section_slice(ds) -> dict:

@@ -135,3 +135,57 @@ def test_a_given_energy_is_met_even_from_a_periodic_guess():
     assert float(system.energy(near.state)) == pytest.approx(7.9, rel=1e-12)
     assert near.return_error < 1e-12 and near.period != orbit.period
     assert near.angular_momentum == pytest.approx(orbit.angular_momentum, rel=1e-12)
+
+
+def _eight_config(tmp_path, period):
+    def rows(a):
+        return "[" + ", ".join("[" + ", ".join(repr(float(v)) for v in row) + "]"
+                               for row in a) + "]"
+    cfg = tmp_path / "eight.toml"
+    cfg.write_text(f"""
+[system]
+interactions = [{{kind = "pair", potential = "gravity", params = {{G = 1.0}}}}]
+[initial]
+family = "explicit"
+positions = {rows([X1, -X1, [0.0, 0.0]])}
+velocities = {rows([-V3 / 2, -V3 / 2, V3])}
+[periodic]
+period = {period!r}
+""")
+    return cfg
+
+
+@pytest.mark.parametrize("period", [1e-14, 1e-9, 1e-5])
+def test_a_period_guess_below_the_flows_time_scale_is_refused(tmp_path, capsys, period):
+    """A guess whose period is far below the time the flow takes to turn (the eight's
+    ~0.35) would return to its start to the tolerance before any Newton step: refused as a
+    config error naming the key, before any shooting -- from a regular and from a chaotic
+    start."""
+    assert main(["periodic", str(_eight_config(tmp_path, period))]) == 2
+    err = capsys.readouterr().err
+    assert f"[periodic].period: a period of {period:.3g} is below 1/1000 of the flow's " \
+           "time scale" in err
+    cfg = tmp_path / "chaos.toml"
+    cfg.write_text(f'[initial]\nfamily = "equilateral"\ndelta = 4.5\n[periodic]\n'
+                   f'period = {period!r}\n')
+    assert main(["periodic", str(cfg)]) == 2
+    assert "[periodic].period: a period of" in capsys.readouterr().err
+
+
+def test_a_start_that_does_not_move_is_no_periodic_orbit(monkeypatch, eight):
+    """Past the guess's check, the converged orbit itself must move: a tiny period (which
+    returns to its start to the tolerance at once) and the rotating triangle, a relative
+    equilibrium that returns rotated after any time, are refused for what they are; the
+    figure-eight leaves its start by about its size, and its velocity turns through more
+    than a full circle (Fenchel: at least one for a closed curve)."""
+    from survey.numerics import periodic
+    monkeypatch.setattr(periodic, "SHORTEST", 1e300)
+    for guess, period in ((figure_eight(), 1e-14), (figure_eight(), 1e-8)):
+        with pytest.raises(ValueError, match="not a periodic orbit: it leaves its start by "
+                                             "only"):
+            periodic_orbit(GRAVITY, guess, period)
+    paper = System.create()
+    with pytest.raises(ValueError, match="a start at rest or in rigid rotation"):
+        periodic_orbit(paper, initial_state(paper, "equilateral", delta=0.0), 1.0,
+                       rotating=True)
+    assert 1.5 < eight.motion.excursion < 2.5 and 1.5 < eight.motion.turning < 1.6

@@ -86,20 +86,54 @@ def test_a_potential_parameter_moves_the_breathing_period_as_its_closed_form(tri
         assert member.energy == pytest.approx(orbit.energy, rel=1e-12)
 
 
-def test_the_figure_eight_along_its_energy_keeps_keplers_law():
+@pytest.mark.parametrize("to, steps", [(2.0, 3), (0.5 / 1.287141992, 1)])
+def test_the_figure_eight_along_its_energy_keeps_keplers_law(to, steps):
     """Under gravity (degree -1) a family in energy is one orbit rescaled: T |E|^(3/2) is
-    constant and the multipliers do not move, for every member from E to 2 E."""
+    constant and the multipliers do not move, for every member from E to 2 E, and from E
+    to -0.5 in one nominal step -- where the corrector once landed on a neighbouring
+    family and a bifurcation that cannot exist was reported; a member is at the energy it
+    is labelled with, the last one at the end."""
     gravity = System(np.ones(3), 2, make_potential("gravity", {"G": 1.0}, "pair"))
     x1, v3 = np.array([0.97000436, -0.24308753]), np.array([-0.93240737, -0.86473146])
     start = gravity.state(np.array([x1, -x1, [0.0, 0.0]]), [-v3 / 2, -v3 / 2, v3])
     eight = periodic_orbit(gravity, start, 6.33)
-    family = periodic_family(lambda p: gravity, eight, eight.energy, 2 * eight.energy,
-                             steps=3, pinned="energy")
-    assert family.complete and len(family.members) >= 4
-    for member in family.members:
+    family = periodic_family(lambda p: gravity, eight, eight.energy, to * eight.energy,
+                             steps=steps, pinned="energy")
+    assert family.complete and len(family.members) >= 4 and not family.bifurcations
+    assert family.parameters[-1] == to * eight.energy
+    for p, member in zip(family.parameters, family.members):
+        assert member.energy == pytest.approx(p, rel=1e-10)
         assert member.period * abs(member.energy) ** 1.5 == pytest.approx(
             eight.period * abs(eight.energy) ** 1.5, rel=1e-9)
         np.testing.assert_allclose(member.indices.real, eight.indices.real, atol=1e-7)
+
+
+def test_a_family_parameter_left_at_its_default_reaches_the_system(tmp_path, capsys):
+    """[equilibria]/[periodic] parameter along a term's parameter that [system] leaves at
+    its default: the rotating triangle's Omega = 3 sqrt(c) from c = 1 to 1/4 (1.5 at the
+    end, not 3 at every member), its breathing family's period pi / (3 sqrt c); a name that
+    is no parameter of the terms is refused."""
+    cfg = tmp_path / "triangle.toml"
+    cfg.write_text('[initial]\nfamily = "equilateral"\ndelta = 0.0\n[equilibria]\n'
+                   'parameter = "perimetric_power_coupling"\nto = 0.25\nsteps = 2\n')
+    assert main(["equilibria", str(cfg), "--json"]) == 0
+    found = json.loads(capsys.readouterr().out)
+    assert found["complete"] and found["perimetric_power_coupling"][-1] == 0.25
+    for c, member in zip(found["perimetric_power_coupling"], found["family"]):
+        assert member["rotation_rate"] == pytest.approx(3 * math.sqrt(c), rel=1e-10)
+    cfg.write_text('[initial]\nfamily = "equilateral"\ndelta = 0.0\n[periodic]\nmode = 3\n'
+                   'parameter = "perimetric_power_coupling"\nto = 0.5\nsteps = 2\n')
+    assert main(["periodic", str(cfg), "--json"]) == 0
+    found = json.loads(capsys.readouterr().out)
+    assert found["complete"] and found["perimetric_power_coupling"][-1] == 0.5
+    for c, member in zip(found["perimetric_power_coupling"], found["family"]):
+        assert member["period"] == pytest.approx(math.pi / (3 * math.sqrt(c)), rel=1e-9)
+    from survey.pipeline.build import build_system
+    from survey.pipeline.config import parse_config
+    table = parse_config('[initial]\nfamily = "equilateral"\n').tables["system"]
+    assert build_system(table, {"perimetric_power_coupling": 0.5}).terms[0].params[0] == 0.5
+    with pytest.raises(ValueError, match="'perimetric_power_strength' is no parameter"):
+        build_system(table, {"perimetric_power_strength": 0.5})
 
 
 def test_a_fold_brings_a_pair_through_plus_one_and_a_period_doubling_is_real(triangle):
@@ -173,7 +207,7 @@ def test_families_in_the_angular_momentum_keep_the_closed_forms(triangle):
     at every size, so every member has E = Omega J exactly and the same modes. The breathing
     family's member at E = 110 from J = 36 to 30 (E held): still period pi/3, turning pi."""
     from survey.numerics.continuation import equilibrium_family
-    members, found, complete = equilibrium_family(
+    members, found, complete, _ = equilibrium_family(
         lambda p: PAPER, triangle.positions, 36.0, 72.0, steps=4, angular_momentum=36.0,
         spin_parameter=True)
     assert complete and members[-1][0] == 72.0 and not found

@@ -140,7 +140,7 @@ def test_lagranges_family_loses_stability_where_routh_says():
     def systems(mu):
         return System(np.array([1.0, mu, m3]), 2, make_potential("gravity", {"G": 1.0},
                                                                   "pair"))
-    members, found, complete = equilibrium_family(systems, TRIANGLE, 0.01, 0.06, steps=5,
+    members, found, complete, _ = equilibrium_family(systems, TRIANGLE, 0.01, 0.06, steps=5,
                                                   rotation_rate=1.0)
     assert complete and members[-1][0] == 0.06 and np.all(np.diff([p for p, _ in members]) > 0)
     # 27 (mu + m3 + mu m3) = (1 + mu + m3)^2: mu^2 + (2 (1 + m3) - 27 (1 + m3)) mu
