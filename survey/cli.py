@@ -18,6 +18,11 @@ BENCH_PARTS = ["scan", "cell", "fixed", "integrator", "step", "indicators", "tor
 
 
 def _bench(args):
+    from .catalog.errors import ConfigError
+    for flag, value, low in (("--t-final", args.t_final, 0.0), ("--t-scipy", args.t_scipy, 0.0),
+                             ("--repeats", args.repeats, 0)):
+        if not value > low:         # (NaN fails too)
+            raise ConfigError(flag, f"must be > {low:g}, got {value!r}")
     from . import bench
     t = args.t_final
     parts = {"scan": lambda: bench.scan_vs_heyoka(t_final=t),
@@ -132,15 +137,34 @@ def orbit_workflow(path, folder) -> list:
 
 
 def _plot(args):
+    from .catalog.errors import ConfigError
+    from .catalog.indicators import REGISTRY
+    from .catalog.variables import V
     from .pipeline.archive import open_archive
+    from .pipeline.resources import ensure_folder
     from .pipeline.special import section_slice, special_cells
-    from .presentation import plots
+    known = [V.regime] + [i.headline for i in REGISTRY if i.map is not None]
+    for name in args.var or []:
+        if name not in known:
+            raise ConfigError(f"--var {name}", f"is not a variable plots draw; one of "
+                                               f"{', '.join(known)}")
+    out = ensure_folder(args.out or Path(args.archive).parent, "--out")
     with open_archive(args.archive) as ds:
+        _survey_archive(args.archive, ds, "plot")
+        from .presentation import plots
         figs = plots.figures(ds, args.var or None, special_cells(ds), section_slice(ds))
-        out = Path(args.out or Path(args.archive).parent)
         for path in plots.save(figs, out, Path(args.archive).stem):
             print(f"wrote {path}")
     return 0
+
+
+def _survey_archive(path, ds, command: str):
+    """A family archive (equilibria/periodic --output) is refused by the survey commands."""
+    from .catalog.errors import ArchiveError
+    if "family" in ds.attrs:
+        raise ArchiveError(f"{path}: a family archive; `{command}` reads survey archives "
+                           "(a periodic family's diagram is drawn by `python -m survey "
+                           "reproduce` from its workflow)")
 
 
 def _report(args):
@@ -149,11 +173,14 @@ def _report(args):
     from .pipeline.archive import open_archive
     from .pipeline.special import section_slice, special_cells
     from .presentation import report
+    from .pipeline.resources import ensure_folder
     archive = Path(args.archive)
     check = archive.with_name(f"{archive.stem}_check.nc")    # its [check] run, if any
+    out = ensure_folder(args.out or archive.parent, "--out")
     with open_archive(archive) as ds, contextlib.ExitStack() as stack:
+        _survey_archive(archive, ds, "report")
         other = stack.enter_context(open_archive(check)) if check.exists() else None
-        path = report.write(ds, args.out or archive.parent, archive.stem, check=other,
+        path = report.write(ds, out, archive.stem, check=other,
                             special=special_cells(ds), slice_at=section_slice(ds))
     print(f"wrote {path} and its figures")
     return 0
@@ -171,12 +198,20 @@ def _reproduce(args):
     from .pipeline import orbits, special
     from .pipeline.config import load_config
     from .presentation import plots
-    results = Path(args.results)
-    staging = results / ".staging"
-    staging.mkdir(parents=True, exist_ok=True)
+    from .catalog.errors import ConfigError
+    from .pipeline.resources import ensure_folder
+    if not Path(args.workflows).is_dir():
+        raise ConfigError("--workflows", f"{args.workflows} is not a folder of workflows")
     paths = sorted(Path(args.workflows).glob("*.toml")) + [DEFAULT_CONFIG]
+    unknown = sorted(set(args.only or []) - {p.stem for p in paths})
+    if unknown:
+        raise ConfigError(f"--only {unknown[0]}", "is not a workflow; one of "
+                                                  + ", ".join(p.stem for p in paths))
     if args.only:
         paths = [p for p in paths if p.stem in args.only]
+    results = ensure_folder(args.results, "--results")
+    staging = results / ".staging"
+    staging.mkdir(parents=True, exist_ok=True)
     for path in paths:
         print(f"== {path}")
         if special.special_table(path):
@@ -246,7 +281,7 @@ def _run(args):
     else:
         config = load_config(args.config)
     if args.output:
-        ensure_writable(Path(args.output))
+        ensure_writable(Path(args.output), "--output", [args.config] if args.config else [])
         config.tables["survey"]["output"] = args.output
     _survey(config, command="python -m survey " + " ".join(sys.argv[1:]),
             progress=False if args.no_progress else None, workers=args.workers,
@@ -437,6 +472,10 @@ def main(argv=None):
         again = " -- run the same command to resume" if args.command == "run" else ""
         print(f"interrupted{again}", file=sys.stderr)
         return 130
+    except BrokenPipeError:     # the reader of our output went away (| head): stop quietly
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 141              # 128 + SIGPIPE, as a shell reports a process the pipe ended
 
 
 def entry():

@@ -212,13 +212,19 @@ def on_resonance(ds, th: Thresholds) -> np.ndarray:
             (order <= th.resonance_order)
 
 
-def stored_table(ds, table: str = "tori") -> dict | None:
-    """A table ([tori] by default) of the config stored in an archive, if any."""
+def stored_config(ds) -> dict:
+    """The config stored in an archive as TOML tables ({} where there is none, or it
+    cannot be read: not TOML, or nested deeper than the parser's recursion)."""
     import tomllib
     try:
-        return tomllib.loads(ds.attrs.get("config", "")).get(table)
-    except tomllib.TOMLDecodeError:
-        return None
+        return tomllib.loads(str(ds.attrs.get("config", "")))
+    except (tomllib.TOMLDecodeError, RecursionError):
+        return {}
+
+
+def stored_table(ds, table: str = "tori") -> dict | None:
+    """A table ([tori] by default) of the config stored in an archive, if any."""
+    return stored_config(ds).get(table)
 
 
 def summary(ds, regime=None) -> list[str]:

@@ -109,10 +109,22 @@ def follow(solve: Callable, x0: np.ndarray, to: float, steps: int, tests: dict[s
                 return Branch(members, found, False, problem)
             continue
         members.append(located.pop())
+        again = next((at for at in located if _seen(at, found)), None)
+        if again is not None:
+            return Branch(members, found, False, f"it comes back to the {again.test} it "
+                          "passed before: a closed loop, followed once round")
         found += located
         if last:
             return Branch(members, found, True, "")
         ds = min(nominal / max(abs(members[-1][2][-1]), 1e-3), 0.1, 2 * ds)
+
+
+def _seen(at: Located, found: list[Located]) -> bool:
+    """Whether the same test changed before at the same parameter (to 1e-6 of the span):
+    a family that is a closed loop -- and a loop in one parameter has two folds at least
+    -- would otherwise go round again, reporting them once a lap. (Its members' states
+    cannot tell: they differ by the phase along the orbit.)"""
+    return any(at.test == b.test and abs(at.x[-1] - b.x[-1]) <= 1e-6 for b in found)
 
 
 def _step_problem(previous, got, solve, tests, signature, bisect):

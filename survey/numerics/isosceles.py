@@ -78,7 +78,9 @@ def plane_section(system: System, start, t_final: float, height: float = 0.0,
                   max_passages: int = 1_000_000) -> PlaneSection:
     """The section h = height (crossed upwards) of the orbit of the plane's point `start`
     = (b, h, p_b, p_h): its first `crossings` points or those up to t_final, whichever
-    come first; the pair collision b = 0 passed exactly (see the module's note)."""
+    come first; the pair collision b = 0 passed exactly (see the module's note). An orbit
+    that comes back to b = 0 within 2 LEAD of passing it stays on the collision line (a
+    start at or near the triple collision): it stops there with status COLLISION."""
     if system.n_bodies != 3 or system.dim != 2 or not np.all(system.masses == 1.0):
         raise ValueError("the isosceles plane is of three unit masses in the plane")
     y = plane_state(*start)
@@ -118,6 +120,9 @@ def plane_section(system: System, start, t_final: float, height: float = 0.0,
                 bs.append(crossing[1])
                 pbs.append(crossing[2])
         status = Status.EVENT if hit and out.status == Status.OK else out.status
+        if collided and not hit:    # back at b = 0 within 2 LEAD of the last passage: it
+            status = Status.COLLISION   # slides along the pair collision (or sits at the
+            break                       # triple one), passing it ever faster
         if not collided or status != Status.EVENT or len(ts) >= crossings or \
                 passages >= max_passages:
             break

@@ -32,7 +32,6 @@ exponential round by the CPU). Only the FFT that seeds NAFF's lines comes from n
 """
 from __future__ import annotations
 
-import itertools
 import math
 from functools import lru_cache
 from typing import NamedTuple
@@ -426,10 +425,27 @@ def spectral_lines(z: np.ndarray, dt: float, count: int):
 
 @lru_cache(maxsize=16)
 def integer_vectors(dim: int, order: int) -> np.ndarray:
-    """Integer vectors m with 1 <= |m|_1 <= order, first nonzero entry positive, by order."""
-    out = [m for m in itertools.product(range(-order, order + 1), repeat=dim)
-           if 0 < sum(map(abs, m)) <= order and next(x for x in m if x) > 0]
-    return np.array(sorted(out, key=lambda m: sum(map(abs, m))), dtype=np.int64).reshape(-1, dim)
+    """Integer vectors m with 1 <= |m|_1 <= order, first nonzero entry positive, by order
+    and then lexicographically: built order by order (resonance_count of them), not
+    filtered from the (2 order + 1)^dim vectors of the cube."""
+    def norm(prefix, left, budget, signed):
+        if left == 0:
+            if budget == 0:
+                out.append(prefix)
+            return
+        for v in range(-budget if signed else 0, budget + 1):
+            norm(prefix + (v,), left - 1, budget - abs(v), signed or v != 0)
+    out: list[tuple] = []
+    for n in range(1, order + 1):
+        norm((), dim, n, False)
+    return np.array(out, dtype=np.int64).reshape(-1, dim)
+
+
+def resonance_count(dim: int, order: int) -> int:
+    """How many vectors integer_vectors(dim, order) holds: half the nonzero lattice points
+    of the cross-polytope |m|_1 <= order, sum_k 2^k C(dim, k) C(order, k) / 2."""
+    return sum(2 ** k * math.comb(dim, k) * math.comb(order, k)
+               for k in range(1, min(dim, order) + 1)) // 2
 
 
 def frequency_basis(lines, max_dim: int, order: int, tol: float,

@@ -19,6 +19,7 @@ from ..analysis.classify import classify, stable, stored_table
 from ..analysis.frequencies import labelled
 from ..catalog.errors import ArchiveError
 from ..catalog.regimes import Thresholds
+from ..catalog.status import Status
 from ..catalog.variables import (
     BY_NAME,
     FINISHED,
@@ -369,6 +370,20 @@ def open_archive(path):
         ds.close()
         raise ArchiveError(f"{path}: a NetCDF file but not a survey archive (no stored "
                            "config)")
+    lacking = [name for name in (V.status, V.regime) if name not in ds]
+    if lacking and "family" not in ds.attrs:
+        ds.close()
+        raise ArchiveError(f"{path}: a survey archive without its {lacking[0]} variable, "
+                           "which every survey writes: it was edited or cut short; run the "
+                           "survey again")
+    if "family" not in ds.attrs:
+        codes = np.unique(ds[V.status].values)
+        unknown = codes[~np.isin(codes, [int(s) for s in Status])]
+        if unknown.size:
+            ds.close()
+            raise ArchiveError(f"{path}: status {unknown[0]} is no status survey writes "
+                               f"({', '.join(f'{int(s)} {s.name.lower()}' for s in Status)}): "
+                               "the archive was edited; run the survey again")
     return ds
 
 

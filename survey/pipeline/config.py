@@ -25,9 +25,10 @@ from ..catalog.errors import ConfigError
 from ..catalog.indicators import BY_NAME as INDICATOR
 from ..catalog.indicators import INDICATORS, REGISTRY, TANGENT, IndicatorOptions
 from ..catalog.regimes import Thresholds
-from ..catalog.variables import OBSERVABLES, V
+from ..catalog.variables import OBSERVABLES, V, shape_dof
 from ..numerics.dop853 import RTOL_MIN
 from ..numerics.sections import REDUCED_SURFACES, SURFACES
+from ..numerics.torus import resonance_count
 from ..physics.families import FAMILIES, family_parameters
 from ..physics.system import System
 from ..physics.terms import (
@@ -42,10 +43,6 @@ from .resources import check_address, check_memory, ensure_writable
 
 INT64_MAX = 2 ** 63 - 1
 TERM_KEYS = ("kind", "potential", "params", "mass_weighted")   # an interactions entry
-
-
-# thresholds that only decide the regime when the archive is written, not a cell's result
-CLASSIFICATION_ONLY = {f.name for f in fields(Thresholds)} - {"resonance_order"}
 
 
 _IND = IndicatorOptions()      # one set of defaults: the Python API's and the config's
@@ -73,7 +70,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
     "system": {
         "bodies": Key("int", defaults.BODIES, "number of bodies N", low=3),
         "dim": Key("int", defaults.DIM, "dimension of space", choices=(2, 3)),
-        "masses": Key("floats", None, "masses, one per body (default all 1)", "mass", above=0),
+        "masses": Key("floats", None, "masses, one per body (default all 1)", "mass",
+                      low=1e-100, high=1e100, hint="their products and squares (gravity's "
+                      "m_i m_j, the kinetic energy) must stay finite in double precision"),
         "potential": Key("str", defaults.POTENTIAL, "triplet potential <measure>_<profile> "
                                                     "or axilrod_teller"),
         "params": Key("table", {}, "potential parameters, e.g. {coupling = 1, exponent = 2}; "
@@ -353,10 +352,10 @@ class Config:
         that computes them: checkpoints are reused only under it. [dask] and [survey] do not
         change results and are left out."""
         h = hashlib.sha256()
+        # every [tori] threshold counts: the workers decide with them which cells run again
+        # to a longer horizon, and store their verdicts at T/2 and T
         relevant = {k: v for k, v in self.tables.items()
                     if k not in ("dask", "survey", "check", "check_enabled")}
-        relevant["tori"] = {k: v for k, v in relevant["tori"].items()
-                            if k not in CLASSIFICATION_ONLY}
         h.update(json.dumps(relevant, sort_keys=True, default=_jsonable).encode())
         for axis in self.axes:
             h.update(f"axis {axis.name} {axis.values.size}\n".encode())
@@ -417,13 +416,21 @@ def _decode(data: bytes, where: str) -> str:
                                  "config is a UTF-8 TOML file") from None
 
 
-def parse_config(text: str, where: str = "<text>", check_output: bool = True) -> Config:
-    """A Config from TOML text."""
+def read_toml(text: str, where: str) -> dict:
+    """TOML text as tables; ConfigError naming `where` if it is not TOML, or is nested
+    deeper than the parser can follow (it recurses: 2000 levels of [[[...]]])."""
     try:
-        raw = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(where, f"not valid TOML ({exc}); fix the syntax") from None
-    return validate(raw, text, where, check_output)
+    except RecursionError:
+        raise ConfigError(where, "nests arrays or tables deeper than a config needs (or "
+                                 "the TOML reader can follow); flatten it") from None
+
+
+def parse_config(text: str, where: str = "<text>", check_output: bool = True) -> Config:
+    """A Config from TOML text."""
+    return validate(read_toml(text, where), text, where, check_output)
 
 
 def _plain(value, where):
@@ -641,7 +648,7 @@ def validate(raw: dict, text: str, where: str = "<config>", check_output: bool =
         _validate_refine(tables, axes)
     config = Config(tables=tables, axes=tuple(axes), fixed=fixed, text=text, source=where)
     if check_output:
-        ensure_writable(config.output)
+        ensure_writable(config.output, inputs=[where] if Path(where).is_file() else [])
     return config
 
 
@@ -864,6 +871,37 @@ def _validate_refine(tables: dict, axes: list[Axis]):
                                                 "refines; raise it (or 0: no limit)")
 
 
+RESONANCE_VECTORS = 10 ** 6    # integer vectors the resonance search may compare with
+
+
+def _validate_thresholds(tori: dict, dof: int):
+    """Each line of evidence's regular threshold on its regular side of the chaotic one
+    (inverted, they would relabel cells), the widths positive, and the resonance order
+    within what the search can enumerate for the system's shape frequencies."""
+    for vote in (i.vote for i in REGISTRY if i.vote):
+        name = vote.thresholds
+        regular, chaotic = tori[f"{name}_regular"], tori[f"{name}_chaotic"]
+        if not vote.sign * (regular - chaotic) >= 0:
+            side = "at or above" if vote.sign > 0 else "at or below"
+            raise ConfigError(f"[tori].{name}_regular", f"{regular!r} must be {side} "
+                              f"{name}_chaotic = {chaotic!r}: larger {name} is more "
+                              f"{'regular' if vote.sign > 0 else 'chaotic'}, and the values "
+                              "between the two vote neither way")
+    for key in ("resonance_width", "harmonic_width"):
+        if not tori[key] >= 0:
+            raise ConfigError(f"[tori].{key}", f"must be >= 0, got {tori[key]!r}")
+    order = tori["resonance_order"]
+    if order < 0:
+        raise ConfigError("[tori].resonance_order", f"must be >= 0 (0: no search), got "
+                                                    f"{order}")
+    if resonance_count(dof, order) > RESONANCE_VECTORS:
+        most = max(k for k in range(1, order) if resonance_count(dof, k) <= RESONANCE_VECTORS)
+        raise ConfigError("[tori].resonance_order", f"{order} would compare every orbit with "
+                          f"{resonance_count(dof, order):.3g} integer vectors (|m|_1 <= order "
+                          f"over {dof} shape frequencies); at most {RESONANCE_VECTORS:.0e}: "
+                          f"use at most {most}")
+
+
 def _validate_cross(tables: dict, system: System):
     ind, sec, integ = tables["indicators"], tables["section"], tables["integration"]
     needy = [name for name in ind["which"] if INDICATOR[name].deviations > ind["deviations"]]
@@ -902,6 +940,7 @@ def _validate_cross(tables: dict, system: System):
     if tables["tori"]["analyse"] and not tables["tori"]["observables"]:
         raise ConfigError("[tori].observables", "needs at least one observable (or set "
                                                 "analyse = false)")
+    _validate_thresholds(tables["tori"], shape_dof(system.n_bodies, system.dim))
     if tables["section_enabled"]:
         coord = sec["coordinate"]
         if coord in REDUCED_SURFACES and (system.n_bodies != 3 or system.dim != 2):

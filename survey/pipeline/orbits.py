@@ -65,8 +65,9 @@ from ..physics.geometry import area, sides
 from ..physics.system import System
 from ..physics.terms import PERIMETER, POWER
 from .cells import build_starts
-from .config import Config, load_config
+from .config import Config, load_config, read_toml
 from .progress import COMPILING, notice
+from .resources import check_bytes
 
 MAX_ORBITS = 8          # more cells than this in one orbit set: pick one with --cell
 
@@ -129,6 +130,10 @@ def check(spec: OrbitSpec, where: str = "orbit", cli: bool = False) -> OrbitSpec
         raise ConfigError("--cell" if cli else key_name("params"),
                           f"{config.n_cells} orbits is too many for one orbit set (at most "
                           f"{MAX_ORBITS}); pick cells with --cell K (0..{config.n_cells - 1})")
+    n = config.system().n
+    check_bytes(len(cells) * spec.samples * 8 * (3 * n + 4),   # states, tangents, shapes
+                "--cell" if cli else key_name("params"), f"{len(cells)} orbits of {n} "
+                f"components sampled {spec.samples} times", "integrate fewer bodies")
     bad = [c for c in cells if not 0 <= c < config.n_cells]
     if bad:
         raise ConfigError("--cell", f"{bad[0]} is not a cell of the grid (0.."
@@ -330,6 +335,22 @@ class PlaneSpec:
 PLANE_KEYS = {f for f in PlaneSpec.__dataclass_fields__}
 
 
+# bytes an orbit of the plane holds per section crossing while it runs (its state, time
+# and index in the integrator's event buffer; b, p_b, t as Python floats), and a
+# tolerance looser than an orbit's figures can show
+CROSSING_BYTES = 8 * 15 + 3 * 32
+TOL_MAX = 1e-3
+
+
+def check_name(name, key: str):
+    """A figure's name, which names its files in --plot DIR: a plain file name."""
+    if not isinstance(name, str) or not name.strip() or name in (".", "..") or \
+            any(c in name for c in "/\\") or any(ord(c) < 32 for c in name):
+        raise ConfigError(key, f"{name!r} is not a usable name: it names the figure files "
+                               "in the --plot folder, so no path separators, control "
+                               "characters or '..'; e.g. name = \"sides\"")
+
+
 def _finite(v) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
@@ -343,12 +364,18 @@ def check_plane(table: dict, where: str) -> PlaneSpec:
     for key in ("name", V.energy, "starts"):
         if key not in table:
             raise ConfigError(f"{where}.{key}", "is required")
-    for key, low in ((V.energy, None), ("height", None), ("t_final", 0.0), ("tol", RTOL_MIN)):
+    check_name(table["name"], f"{where}.name")
+    if "system" in table and ({"potential", "potential_params"} & set(table)):
+        raise ConfigError(f"{where}.system", "give either system or potential/"
+                                             "potential_params, not both")
+    for key, low, high in ((V.energy, None, None), ("height", None, None),
+                           ("t_final", 0.0, None), ("tol", RTOL_MIN, TOL_MAX)):
         value = table.get(key, getattr(PlaneSpec, key, None))
         if not _finite(value) or (low is not None and not value >= low) or \
-                (key == "t_final" and value <= 0):
+                (high is not None and not value <= high) or (key == "t_final" and value <= 0):
             raise ConfigError(f"{where}.{key}", f"must be a finite number"
                                                 f"{f' >= {low:.3g}' if low else ''}"
+                                                f"{f' and <= {high:g}' if high else ''}"
                                                 f"{' > 0' if key == 't_final' else ''}, got "
                                                 f"{value!r}")
     crossings = table.get("crossings", PlaneSpec.crossings)
@@ -371,6 +398,10 @@ def check_plane(table: dict, where: str) -> PlaneSpec:
     spec = PlaneSpec(**{**table, "starts": tuple((float(b), float(p)) for b, p in starts),
                         "periodic": tuple((float(x[0]), float(x[1]), int(x[2]) if len(x) > 2
                                            else 1) for x in guesses)})
+    most = max([crossings] + [k for _, _, k in spec.periodic])
+    check_bytes(most * CROSSING_BYTES + crossings * len(starts) * 24,
+                f"{where}.crossings" if most == crossings else f"{where}.periodic",
+                f"{most:,} crossings of the section", "ask for fewer")
     try:
         system = spec.build()
     except ConfigError as exc:
@@ -467,11 +498,7 @@ def describe_periodic(orbit: PlaneOrbit, seen=()) -> str:
 def load_workflow(path) -> list:
     """The [[orbit]] tables (OrbitSpec) and [[plane]] tables (PlaneSpec) of an orbit
     workflow file, checked."""
-    text = Path(path).read_text()
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(str(path), f"not valid TOML ({exc}); fix the syntax") from None
+    raw = read_toml(Path(path).read_text(), str(path))
     tables, planes = raw.get("orbit", []), raw.get("plane", [])
     if not isinstance(tables, list) or not isinstance(planes, list) or not (tables or planes):
         raise ConfigError(str(path), "an orbit workflow needs [[orbit]] or [[plane]] tables")
@@ -483,6 +510,7 @@ def load_workflow(path) -> list:
             raise ConfigError(f"{where}.{extra[0]}", f"unknown key; keys are {', '.join(sorted(KEYS))}")
         if "name" not in table or "family" not in table:
             raise ConfigError(where, "needs a name and a family")
+        check_name(table["name"], f"{where}.name")
         if "cells" in table:
             raise ConfigError(f"{where}.cells", "unknown key; a list parameter makes a set "
                                                 "of orbits")
@@ -494,5 +522,5 @@ def is_orbit_workflow(path) -> bool:
     try:
         raw = tomllib.loads(Path(path).read_text())
         return "orbit" in raw or "plane" in raw
-    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError):
+    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError, RecursionError):
         return False

@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from ..catalog import defaults
 from ..catalog.errors import ConfigError
 from ..catalog.variables import horizon_factors
 
@@ -49,7 +50,6 @@ def memory_needed(n_cells, n, deviations, crossings, store_state, history, chunk
 def check_memory(tables: dict, n_cells: int):
     """Refuse, before anything is allocated, a survey that cannot fit in this machine's
     memory, naming the setting whose reduction would help most."""
-    import psutil
     s, sec, ind, dsk = tables["system"], tables["section"], tables["indicators"], tables["dask"]
     tori = tables["tori"]
     # an extended cell runs to the longest horizon, and the histories span it
@@ -61,10 +61,13 @@ def check_memory(tables: dict, n_cells: int):
                 samples=int(longest * tables["integration"]["t_final"] / tori["sample_interval"])
                 if tori["analyse"] else 0)
     total = memory_needed(**size)
-    machine = psutil.virtual_memory().total
-    if total <= 0.8 * machine:
+    if total <= 0.8 * machine_memory():
         return
-    smaller = {"[initial] (the grid)": dict(n_cells=1), "[system].bodies": dict(n=6),
+    t_final = tables["integration"]["t_final"]
+    smaller = {"[initial] (the grid)": dict(n_cells=1),
+               "[integration].t_final": dict(samples=size["samples"] * min(
+                   1.0, defaults.T_FINAL / t_final), history=ind["history_points"] * longest),
+               "[system].bodies": dict(n=6),
                "[section].max_crossings": dict(crossings=1),
                "[indicators].history_points": dict(history=2),
                "[tori].extend": dict(history=ind["history_points"],
@@ -72,11 +75,27 @@ def check_memory(tables: dict, n_cells: int):
                "[indicators].deviations": dict(deviations=1),
                "[tori].sample_interval": dict(samples=0),
                "[dask].chunk_size": dict(chunk=1), "[dask].workers": dict(workers=1)}
-    key = min(smaller, key=lambda k: memory_needed(**{**size, **smaller[k]}))
+    # the first setting (in this order) whose reduction alone makes it fit, else the one
+    # that helps most
+    key = next((k for k in smaller if memory_needed(**{**size, **smaller[k]})
+                <= 0.8 * machine_memory()),
+               min(smaller, key=lambda k: memory_needed(**{**size, **smaller[k]})))
     what = f"{n_cells:,} cells" if key.startswith("[initial]") else "this survey"
-    raise ConfigError(key.split()[0], f"{what} would need about {_bytes(total)} of memory, "
-                                      f"more than this machine's {_bytes(machine)}: reduce "
-                                      f"{key}, or split the survey")
+    check_bytes(total, key.split()[0], what, f"reduce {key}, or split the survey")
+
+
+def machine_memory() -> int:
+    import psutil
+    return psutil.virtual_memory().total
+
+
+def check_bytes(total: float, key: str, what: str, fix: str):
+    """The one memory check of every command: ConfigError naming `key` where `what` would
+    need more than 80% of this machine's memory, before anything is allocated."""
+    machine = machine_memory()
+    if total > 0.8 * machine:
+        raise ConfigError(key, f"{what} would need about {_bytes(total)} of memory, more "
+                               f"than this machine's {_bytes(machine)}: {fix}")
 
 
 def _bytes(x: float) -> str:
@@ -86,12 +105,17 @@ def _bytes(x: float) -> str:
         x /= 1024
 
 
-def ensure_writable(path: Path):
-    """Refuse an output the survey could not write, or should not: names the file system
-    cannot hold (with the temporary, lock and checkpoint names derived from them), a
-    folder, a device, pipe or socket, a symbolic link (the archive is renamed into place,
-    which would replace the link, not write through it), an unwritable folder."""
-    key = "[survey].output"
+def ensure_writable(path: Path, key: str = "[survey].output", inputs=()):
+    """Refuse an output the survey could not write, or should not: one of the run's
+    `inputs` (the config it reads), names the file system cannot hold (with the temporary,
+    lock and checkpoint names derived from them), a folder, a device, pipe or socket, a
+    symbolic link (the archive is renamed into place, which would replace the link, not
+    write through it), an unwritable folder. `key` names the setting in the message."""
+    path = Path(path)
+    for source in inputs:
+        if same_file(path, source):
+            raise ConfigError(key, f"{path} is this run's input {source}: writing the "
+                                   "output there would replace it; give another file")
     if "\0" in str(path):
         raise ConfigError(key, "contains a NUL character")
     if path.name in ("", ".", ".."):
@@ -128,6 +152,34 @@ def ensure_writable(path: Path):
     except OSError as exc:
         raise ConfigError(key, f"cannot write to {folder} ({exc.strerror}); "
                                "choose a writable path") from None
+
+
+def same_file(a, b) -> bool:
+    """Whether two paths name the same file (the same inode where both exist; else the
+    same absolute path, links resolved)."""
+    try:
+        if Path(a).exists() and Path(b).exists():
+            return os.path.samefile(a, b)
+        return Path(a).resolve() == Path(b).resolve()
+    except (OSError, ValueError):
+        return False
+
+
+def ensure_folder(path, key: str) -> Path:
+    """A folder to write figures or reports into, made if missing; ConfigError naming
+    `key` where it is a file or cannot be made or written."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise ConfigError(key, f"{path} is a file; give a folder")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        probe = path / f".survey-write-test-{os.getpid()}"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        raise ConfigError(key, f"cannot write to {path} ({exc.strerror or exc}); choose a "
+                               "writable folder") from None
+    return path
 
 
 def _exists(path: Path) -> bool:

@@ -8,6 +8,7 @@ member (`family = "explicit"` with `positions` and `velocities` for any start; e
 use its positions only), plus an [equilibria] or a [periodic] table."""
 from __future__ import annotations
 
+import contextlib
 import json
 import tomllib
 from pathlib import Path
@@ -36,7 +37,8 @@ from ..physics.equilibria import (
 from ..physics.system import System
 from .build import build_system
 from .cells import build_starts
-from .config import Key, _decode, check_table, validate
+from .config import Key, _decode, check_table, read_toml, validate
+from .resources import ensure_writable
 
 FAMILY = {      # a family's end, for [equilibria] and [periodic] with a parameter
     "to": Key("float", None, "the parameter's last value"),
@@ -44,11 +46,15 @@ FAMILY = {      # a family's end, for [equilibria] and [periodic] with a paramet
                             "along the parameter (more where it bends)", low=1, high=100000),
 }
 
+SQUARED = dict(low=-1e100, high=1e100, hint="its square must stay finite in double "
+                                            "precision")
 EQUILIBRIA = {
     "angular_momentum": Key("float", None, "angular momentum J of the rotation (in the "
-                                           "plane); default: the [initial] start's"),
+                                           "plane); default: the [initial] start's",
+                            **SQUARED),
     "rotation_rate": Key("float", None, "rotation rate Omega instead of J (an isochronous "
-                                        "potential, P^2/2, fixes Omega for every size)"),
+                                        "potential, P^2/2, fixes Omega for every size)",
+                         **SQUARED),
     "starts": Key("int", 0, "seeded random configurations tried besides the start (the "
                             "start's size, normal about its centre)", low=0, high=10000),
     "seed": Key("int", 0, "seed of those configurations", low=0),
@@ -88,10 +94,7 @@ def _load(path, name: str, keys: dict):
         text = _decode(path.read_bytes(), str(path))
     except OSError as exc:
         raise ConfigError(str(path), f"cannot read it ({exc.strerror or exc})") from None
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(str(path), f"not valid TOML ({exc}); fix the syntax") from None
+    raw = read_toml(text, str(path))
     table = check_table(name, keys, raw.pop(name, {}))
     config = validate(raw, text, str(path), check_output=False)
     if config.n_cells != 1:
@@ -148,6 +151,15 @@ def _family_systems(config_system: dict, parameter: str, table: str = "equilibri
     return float(value), lambda p: build_system(config_system, {parameter: p})
 
 
+def _reachable(systems, to: float, table: str):
+    """The family's end value as a system: ConfigError naming `to` where the parameter
+    cannot take it (a mass <= 0, a term's parameter outside its bounds)."""
+    try:
+        systems(to)
+    except ValueError as exc:
+        raise ConfigError(f"[{table}].to", f"{to:g}: {exc}") from None
+
+
 def solve_equilibria(path):
     """(system, table, found): the relative equilibria from the start and the seeded
     configurations, or with [equilibria] parameter the start's family, (members,
@@ -174,6 +186,7 @@ def _equilibrium_family(path, config, system, start, table):
                                                     "rotation_rate")
     p0, systems = (table["angular_momentum"], lambda p: system) if spin else \
         _family_systems(config.tables["system"], table["parameter"])
+    _reachable(systems, table["to"], "equilibria")
     if table["to"] == p0:
         raise ConfigError("[equilibria].to", f"equals the parameter's start value {p0:g}; "
                                              "give the family's other end")
@@ -248,10 +261,16 @@ def write_archive(ds, path, command: str) -> Path:
     ds = ds.assign_attrs(config_sha256=hashlib.sha256(ds.attrs["config"].encode()).hexdigest(),
                          history=command, git_commit=git_commit(), machine=machine(),
                          **{f"version_{k}": v for k, v in versions().items()})
-    out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(f".{out.name}.partial")
-    ds.to_netcdf(tmp, engine="netcdf4")
-    tmp.replace(out)
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        ds.to_netcdf(tmp, engine="netcdf4")
+        tmp.replace(out)
+    except (OSError, RuntimeError) as exc:     # netCDF4 reports some as RuntimeError
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise SurveyError(f"cannot write {out} ({getattr(exc, 'strerror', None) or exc}); "
+                          "free some space or choose another --output") from None
     return out
 
 
@@ -387,6 +406,7 @@ def _periodic_family(path, config, system, table, orbit) -> Family:
         p0, systems = orbit.angular_momentum, lambda p: system
     else:
         p0, systems = _family_systems(config.tables["system"], name, "periodic")
+        _reachable(systems, table["to"], "periodic")
     if table["to"] == p0:
         raise ConfigError("[periodic].to", f"equals the parameter's start value {p0:g}; "
                                            "give the family's other end")
@@ -552,13 +572,18 @@ def print_periodic(path, as_json_text: bool = False, output=None,
 
 
 def _refuse_output(path, name: str, output) -> None:
-    """--output writes a family: refused before any work where [name] has no parameter."""
+    """--output writes a family: refused before any work where [name] has no parameter,
+    and where it could not be written or is the config itself."""
+    if not output:
+        return
     try:
         wants = bool(tomllib.loads(Path(path).read_text()).get(name, {}).get("parameter"))
-    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError, AttributeError):
+    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError, AttributeError,
+            RecursionError):
         return          # the loader names what is wrong with the file
-    if output and not wants:
+    if not wants:
         raise ConfigError("--output", f"writes a family: give [{name}] parameter and to")
+    ensure_writable(Path(output), "--output", [path])
 
 
 def special_table(path) -> str | None:
@@ -566,7 +591,7 @@ def special_table(path) -> str | None:
     workflow), else None."""
     try:
         raw = tomllib.loads(Path(path).read_text())
-    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError):
+    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError, RecursionError):
         return None
     return next((name for name in ("equilibria", "periodic") if name in raw), None)
 

@@ -195,12 +195,18 @@ def _reach(address: str, timeout: float):
                                               f"{fix}")
 
 
-def _chunks(ids: np.ndarray, size: int):
-    """Strided chunks of about `size` cells: chunk k holds ids k, k + K, k + 2K, ... Grids
-    are ordered by parameter and cost varies smoothly with it (chaotic cells cost more), so
-    contiguous chunks would leave the expensive ones for the end and workers idle."""
-    count = -(-ids.size // size)
-    return [ids[k::count] for k in range(count)]
+def _chunks(ids: np.ndarray, count: int):
+    """`count` strided chunks, alike in size to a cell: chunk k holds ids k, k + count,
+    k + 2 count, ... Grids are ordered by parameter and cost varies smoothly with it
+    (chaotic cells cost more), so contiguous chunks would leave the expensive ones for the
+    end and workers idle."""
+    return [ids[k::count] for k in range(min(count, ids.size))]
+
+
+def _task_count(config: Config, cells: int, counted: int) -> int:
+    """Tasks for `cells`: `counted` unless [dask] chunk_size fixes the cells per task."""
+    size = config.tables["dask"]["chunk_size"]
+    return -(-cells // size) if size else counted
 
 
 def run_survey(source, *, workers: int | None = None, scheduler: str | None = None,
@@ -274,7 +280,8 @@ def _grid(config, key, folder, workers, address, clock, progress) -> dict:
     """Every cell of the grid, from checkpoints where they are, computed where not:
     the checkpoint files and their cells."""
     task = CellTask.of(config)
-    starts = build_starts(config)
+    with notice(f"building the starts of {config.n_cells:,} cells", progress):
+        starts = build_starts(config)
     with contextlib.ExitStack() as stack:
         client = bar = done = None
         for round_ in range(4):     # rounds after the first only if checkpoints vanish
@@ -360,10 +367,10 @@ def _refined(config, key, folder, workers, address, clock, progress):
                         bar = stack.enter_context(tqdm(unit="cell", disable=not progress,
                                                        desc=config.name, smoothing=0.1))
                         queue = as_completed()
-                    size = config.tables["dask"]["chunk_size"] or refined_chunk_size(
+                    count = _task_count(config, todo.size, refined_chunk_count(
                         todo.size, len(client.scheduler_info()["workers"]),
-                        jobs_per_cell(task))
-                    for ids in _chunks(todo, size):
+                        jobs_per_cell(task)))
+                    for ids in _chunks(todo, count):
                         future = client.submit(run_cells, task, ids, starts(ids), pure=False,
                                                key=f"cells-{key}-{ids[0]}-{ids[-1]}-{ids.size}",
                                                retries=config.tables["dask"]["retries"])
@@ -474,30 +481,36 @@ def _head_start(warm, *args):
         pass
 
 
-def chunk_size(cells: int, workers: int, per_cell: int) -> int:
-    """Cells per task: orbits for four rounds of SIMD lanes (4 SIMD_LANES: 64 in 256-bit
-    vectors, 128 in 512-bit ones, where 64 cost a 401-orbit scan 15% more), so that a lane
-    whose orbit ends takes another, where the grid allows every worker a task, else what
-    gives every worker one; on large grids about 64 tasks per worker (a finer spread of
-    cheap and costly cells), at most 256 cells. Fewer than 8 tasks a worker come in a
-    multiple of the workers, alike in size: a last wave of fewer tasks than workers leaves
-    the others idle (300 cells of one orbit in 128-orbit tasks: 3 on 2 workers)."""
+def chunk_count(cells: int, workers: int, per_cell: int) -> int:
+    """Tasks for `cells` (strided chunks, _chunks): each of orbits for four rounds of SIMD
+    lanes (4 SIMD_LANES: 64 in 256-bit vectors, 128 in 512-bit ones, where 64 cost a
+    401-orbit scan 15% more), so that a lane whose orbit ends takes another, where the grid
+    allows every worker a task, else what gives every worker one; on large grids about 64
+    tasks per worker (a finer spread of cheap and costly cells), at most 256 cells each.
+    Fewer than 8 tasks a worker come in a multiple of the workers (for every lane width:
+    the count is rounded, not the size), alike in size: a last wave of fewer tasks than
+    workers leaves the others idle (300 cells of one orbit in 128-orbit tasks: 3 on 2
+    workers)."""
     lanes, workers = -(-4 * SIMD_LANES // per_cell), max(1, workers)  # (all may be restarting)
     size = max(1, min(256, max(lanes, -(-cells // (64 * workers))), -(-cells // workers)))
     tasks = -(-cells // size)
     if tasks < 8 * workers:
-        size = -(-cells // (-(-tasks // workers) * workers))
-    return size
+        tasks = -(-tasks // workers) * workers
+        if tasks > cells:
+            tasks = cells // workers * workers or cells
+    return tasks
 
 
-def refined_chunk_size(cells: int, workers: int, per_cell: int) -> int:
-    """Cells per task of a refinement's batch: about four tasks a worker -- a cell's
-    children are submitted as soon as its task returns, so smaller tasks keep the workers
-    busy across levels -- but not fewer orbits than one round of SIMD lanes (SIMD_LANES)
-    where the batch has them, and at least one task per worker."""
+def refined_chunk_count(cells: int, workers: int, per_cell: int) -> int:
+    """Tasks of a refinement's batch: about four a worker -- a cell's children are
+    submitted as soon as its task returns, so smaller tasks keep the workers busy across
+    levels -- but not fewer orbits a task than one round of SIMD lanes (SIMD_LANES) where
+    the batch has them, and at least one task per worker."""
     lanes, workers = -(-SIMD_LANES // per_cell), max(1, workers)
-    return max(1, min(chunk_size(cells, workers, per_cell),
+    size = max(1, min(-(-cells // chunk_count(cells, workers, per_cell)),
                       max(lanes, -(-cells // (4 * workers))), -(-cells // workers)))
+    # no more tasks than rounds of lanes the batch fills, but one per worker it can feed
+    return max(min(workers, cells), min(-(-cells // size), cells * per_cell // SIMD_LANES))
 
 
 def deal_doubts(held, group, threads, workers, chunks_out, idle, free):
@@ -539,7 +552,7 @@ def _compute(client, task, starts, todo, folder, key, config, bar, round_):
     from dask.distributed import as_completed
     slots = {w: info["nthreads"] for w, info in client.scheduler_info()["workers"].items()}
     per_cell = jobs_per_cell(task)
-    size = config.tables["dask"]["chunk_size"] or chunk_size(todo.size, len(slots), per_cell)
+    count = _task_count(config, todo.size, chunk_count(todo.size, len(slots), per_cell))
     # an extension task holds about one round of SIMD lanes
     group = max(1, -(-SIMD_LANES // per_cell))
     retries = config.tables["dask"]["retries"]
@@ -549,7 +562,7 @@ def _compute(client, task, starts, todo, folder, key, config, bar, round_):
     # a core idle before the end, the same within noise)
     threading.Thread(target=archive.prefetch, name="prefetch", daemon=True).start()
     # a chunk by its first cell: its ids, result rows, extensions pending
-    chunks = {int(ids[0]): [ids, None, 0] for ids in _chunks(todo, size)}
+    chunks = {int(ids[0]): [ids, None, 0] for ids in _chunks(todo, count)}
     # a task's future: the first cell of its chunk, or the (chunk, row) of its extensions
     futures = {client.submit(first_runs, task, ids, starts[ids], pure=False,
                              key=f"cells-{key}-{round_}-{first}",

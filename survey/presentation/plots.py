@@ -20,7 +20,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch, Rectangle
 
-from ..analysis.classify import regular_share, stored_table
+from ..analysis.classify import regular_share, stored_config, stored_table
 from ..analysis.refine import as_grid, painted, refined_axes
 from ..catalog import defaults
 from ..catalog.indicators import OWNER, REGISTRY
@@ -125,11 +125,7 @@ def figures(ds, variables=None, special=(), slice_at=None) -> dict[str, Figure]:
 def survey_title(ds) -> str:
     """What every survey figure is of: the survey, its family and potential, T, and what
     varies over the grid."""
-    import tomllib
-    try:
-        config = tomllib.loads(ds.attrs.get("config", ""))
-    except tomllib.TOMLDecodeError:
-        config = {}
+    config = stored_config(ds)
     name = config.get("survey", {}).get("name", "")
     family = config.get("initial", {}).get("family", "")
     system = config.get("system", {})

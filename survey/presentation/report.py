@@ -3,12 +3,11 @@ written for a reader who has not seen the config."""
 from __future__ import annotations
 
 import json
-import tomllib
 from pathlib import Path
 
 import numpy as np
 
-from ..analysis.classify import evidence_votes, regular_share, stored_table
+from ..analysis.classify import evidence_votes, regular_share, stored_config, stored_table
 from ..analysis.frequencies import twist
 from ..analysis.onset import onset, onset_over_horizons, runs
 from ..analysis.refine import as_grid, boundaries
@@ -53,7 +52,7 @@ def write(ds, folder, stem: str | None = None, figures: bool = True, check=None,
 
 def markdown(ds, figure_names=(), check=None, special=()) -> str:
     ds, check = as_grid(ds), None if check is None else as_grid(check)
-    config = tomllib.loads(ds.attrs.get("config", ""))
+    config = stored_config(ds)
     axes = plots.map_axes(ds)
     regime = ds[V.regime].values
     th = Thresholds(**json.loads(ds[V.regime].attrs["thresholds"])) \
@@ -335,7 +334,7 @@ def _ensembles(ds, regime) -> list[str]:
     and <Y> and the median over cells of their ensembles' sd and 5-95% range."""
     if V.ftle_ensemble not in ds or V.ensemble_orbits not in ds:
         return []
-    config = tomllib.loads(ds.attrs.get("config", ""))
+    config = stored_config(ds)
     size = config.get("indicators", {}).get("perturbation_size", 1e-9)
     orbits = ds[V.ensemble_orbits].values
     finished = orbits > 0
@@ -354,9 +353,11 @@ def _ensembles(ds, regime) -> list[str]:
     if n < ENSEMBLE_MIN:
         out.append(f"**With {n} orbits per cell these spreads are indicative only** (fewer "
                    f"than {ENSEMBLE_MIN}; [indicators] perturbations sets it).")
-    out += ["", "| regime | cells | median FTLE | median sd | median 5-95% range | median <Y> "
-                "| its median 5-95% range |", "| --- | --- | --- | --- | --- | --- | --- |"]
-    f, m = ds[V.ftle_ensemble].values, ds[V.megno_ensemble].values
+    megno = V.megno_ensemble in ds and V.megno in ds      # ([indicators] which may omit it)
+    out += ["", "| regime | cells | median FTLE | median sd | median 5-95% range |"
+            + (" median <Y> | its median 5-95% range |" if megno else ""),
+            "| --- " * (7 if megno else 5) + "|"]
+    f = ds[V.ftle_ensemble].values
     q05, q95, sd = stats.index("q05"), stats.index("q95"), stats.index("sd")
     for r in Regime:
         cells = finished & (regime == r)
@@ -364,9 +365,12 @@ def _ensembles(ds, regime) -> list[str]:
             continue
         med = lambda x: float(np.nanmedian(x[cells])) if np.isfinite(x[cells]).any() \
             else np.nan
-        out.append(f"| {r.name.lower()} | {int(cells.sum())} | {med(ds[V.ftle].values):.3g} | "
-                   f"{med(f[..., sd]):.2g} | {med(f[..., q95] - f[..., q05]):.2g} | "
-                   f"{med(ds[V.megno].values):.3g} | {med(m[..., q95] - m[..., q05]):.2g} |")
+        row = (f"| {r.name.lower()} | {int(cells.sum())} | {med(ds[V.ftle].values):.3g} | "
+               f"{med(f[..., sd]):.2g} | {med(f[..., q95] - f[..., q05]):.2g} |")
+        if megno:
+            m = ds[V.megno_ensemble].values
+            row += f" {med(ds[V.megno].values):.3g} | {med(m[..., q95] - m[..., q05]):.2g} |"
+        out.append(row)
     return out + [""]
 
 
@@ -467,7 +471,7 @@ def _pm(x: float, error: float) -> str:
 
 
 def _seed(ds) -> int:
-    config = tomllib.loads(ds.attrs.get("config", ""))
+    config = stored_config(ds)
     return int(config.get("indicators", {}).get("seed", 0))
 
 

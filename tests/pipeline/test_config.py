@@ -107,6 +107,10 @@ BAD = [
     ("[dask]\nworkers = 0", "[dask].workers: must be >= 1"),
     ("[dask]\nchunk_size = -1", "[dask].chunk_size: must be >= 0"),
     ("[dask]\nchunksize = 4", "[dask].chunksize: unknown key (did you mean 'chunk_size'?)"),
+    ("[tori]\ndigits_regular = 1.0\ndigits_chaotic = 9.0", "[tori].digits_regular: 1.0 must be at or above digits_chaotic = 9.0"),
+    ("[tori]\nmegno_regular = 4.0", "[tori].megno_regular: 4.0 must be at or below megno_chaotic = 3.0"),
+    ("[tori]\nresonance_order = 1000000", "[tori].resonance_order: 1000000 would compare every orbit with 6.67e+17 integer vectors (|m|_1 <= order over 3 shape frequencies); at most 1e+06: use at most 113"),
+    ("[tori]\nresonance_width = -1e-7", "[tori].resonance_width: must be >= 0"),
     ("system = 3", "[system]: must be a table"),
     ("[system\nbodies = 3", "not valid TOML"),
 ]

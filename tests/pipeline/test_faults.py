@@ -121,6 +121,23 @@ def test_an_edited_grid_never_reuses_the_old_grids_checkpoints(tmp_path, monkeyp
     same_data(ds, fresh(tmp_path, cfg))
 
 
+def test_an_edited_threshold_never_reuses_old_checkpoints(tmp_path, monkeypatch):
+    """The [tori] thresholds decide in the workers which cells run again to a longer
+    horizon, and their verdicts at T/2 and T are stored: a survey interrupted, its
+    megno_chaotic edited and run again computes every cell again (the archive is that of a
+    fresh run), not old evidence mixed in."""
+    cfg = grid(tmp_path)
+    interrupt_after(monkeypatch, 2)
+    with pytest.raises(KeyboardInterrupt):
+        run_survey(cfg)
+    monkeypatch.undo()
+    before = load_config(cfg).result_key()
+    cfg.write_text(cfg.read_text() + "\n[tori]\nmegno_chaotic = 2.5\n")
+    assert load_config(cfg).result_key() != before
+    ds = xr.open_dataset(run_survey(cfg))
+    same_data(ds, fresh(tmp_path, cfg))
+
+
 def test_the_result_key_covers_the_grid_and_fixed_parameters(tmp_path):
     keys = {load_config(grid(tmp_path, delta=d)).result_key() for d in (
         "{start = 0.0, stop = 6.0, num = 8}", "{start = 0.0, stop = 5.0, num = 8}",

@@ -158,45 +158,51 @@ def test_seeded_starts_are_not_refined(tmp_path):
         load_config(path, check_output=False)
 
 
+@pytest.mark.parametrize("lanes", [4, 8, 16, 32])
 @pytest.mark.parametrize("cells, workers, per_cell", [(63, 2, 1), (5, 2, 1), (148, 2, 1),
                                                        (7, 2, 17), (1, 2, 17), (400, 8, 3)])
-def test_refinement_batches_keep_every_worker_fed(cells, workers, per_cell):
+def test_refinement_batches_keep_every_worker_fed(monkeypatch, cells, workers, per_cell,
+                                                   lanes):
     """A batch of new cells goes out in at least one task per worker (where it has as many
-    cells), each holding a round of SIMD lanes of orbits where the batch has them."""
-    from survey.physics.system import SIMD_LANES
-    from survey.pipeline.sweep import _chunks, refined_chunk_size
-    size = refined_chunk_size(cells, workers, per_cell)
-    tasks = _chunks(np.arange(cells), size)
+    cells), each holding a round of SIMD lanes of orbits where the batch has them, for
+    every lane width."""
+    from survey.pipeline import sweep
+    monkeypatch.setattr(sweep, "SIMD_LANES", lanes)
+    tasks = sweep._chunks(np.arange(cells), sweep.refined_chunk_count(cells, workers,
+                                                                      per_cell))
     assert len(tasks) >= min(cells, workers)
     assert sum(t.size for t in tasks) == cells
-    if cells * per_cell >= SIMD_LANES * workers:
-        assert size * per_cell >= SIMD_LANES
+    if cells * per_cell >= lanes * workers:
+        assert min(t.size for t in tasks) * per_cell >= lanes
 
 
+@pytest.mark.parametrize("lanes", [4, 8, 16, 32])
 @pytest.mark.parametrize("cells, workers, per_cell", [(300, 2, 1), (401, 2, 1), (1001, 2, 1),
-                                                       (9, 2, 18), (20, 3, 18), (5000, 2, 3)])
-def test_a_grid_goes_out_in_full_waves_of_tasks(cells, workers, per_cell):
-    """A grid of a few tasks a worker goes out in a multiple of the workers, tasks alike in
-    size (no last wave where some workers idle), each of at least two rounds of SIMD lanes
-    of orbits where the grid has four for every worker."""
-    from survey.physics.system import SIMD_LANES
-    from survey.pipeline.sweep import _chunks, chunk_size
-    size = chunk_size(cells, workers, per_cell)
-    tasks = _chunks(np.arange(cells), size)
+                                                       (9, 2, 18), (20, 3, 18), (5000, 2, 3),
+                                                       (5, 4, 1), (3, 2, 18)])
+def test_a_grid_goes_out_in_full_waves_of_tasks(monkeypatch, cells, workers, per_cell, lanes):
+    """A grid of a few tasks a worker goes out in a multiple of the workers (where it has
+    as many cells), tasks alike in size (no last wave where some workers idle), each of at
+    least two rounds of SIMD lanes of orbits where the grid has four for every worker --
+    for every SIMD lane width the code supports (16 lanes once gave 9 cells 3 tasks on 2
+    workers)."""
+    from survey.pipeline import sweep
+    monkeypatch.setattr(sweep, "SIMD_LANES", lanes)
+    tasks = sweep._chunks(np.arange(cells), sweep.chunk_count(cells, workers, per_cell))
     assert sum(t.size for t in tasks) == cells
     assert max(t.size for t in tasks) - min(t.size for t in tasks) <= 1
-    if len(tasks) < 8 * workers:
+    if len(tasks) < 8 * workers and cells >= workers:
         assert len(tasks) % workers == 0
-    if cells * per_cell >= 4 * SIMD_LANES * workers:     # at least two rounds a task
-        assert size * per_cell >= 2 * SIMD_LANES
+    if cells * per_cell >= 4 * lanes * workers:     # at least two rounds a task
+        assert min(t.size for t in tasks) * per_cell >= 2 * lanes
 
 
 def test_a_moment_without_workers_still_chunks():
     """Every worker restarting at once (the scheduler then lists none) is not a division by
     zero: the batch goes out as for one worker."""
-    from survey.pipeline.sweep import chunk_size, refined_chunk_size
-    assert refined_chunk_size(40, 0, 1) == refined_chunk_size(40, 1, 1)
-    assert chunk_size(40, 0, 1) == chunk_size(40, 1, 1)
+    from survey.pipeline.sweep import chunk_count, refined_chunk_count
+    assert refined_chunk_count(40, 0, 1) == refined_chunk_count(40, 1, 1)
+    assert chunk_count(40, 0, 1) == chunk_count(40, 1, 1)
 
 
 def test_a_refined_map_is_written_verified_drawn_and_reported(tmp_path):
