@@ -56,9 +56,11 @@ for name in ("rotating_triangle_breathing", "figure_eight_mass_family"):
     family = solve_periodic(f"{sys.argv[2]}/{name}.toml")[2]
     out[name] = np.concatenate([family.parameters, [b.parameter for b in family.bifurcations]]
                                + [np.concatenate([o.state, [o.period, o.rotation],
-                                                  o.multipliers.real, o.multipliers.imag])
+                                                  o.multipliers.real, o.multipliers.imag,
+                                                  o.motion])
                                   for o in family.members])
-members, found, _ = solve_equilibria(f"{sys.argv[2]}/lagrange_routh_family.toml")[2]
+routh = solve_equilibria(f"{sys.argv[2]}/lagrange_routh_family.toml")[2]
+members, found = routh.members, routh.bifurcations
 out["routh"] = np.concatenate([[b.parameter for b in found]] + [
     np.concatenate([[p], e.positions.ravel(), e.eigenvalues.real, e.eigenvalues.imag])
     for p, e in members])
