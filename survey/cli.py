@@ -472,9 +472,8 @@ def main(argv=None):
         again = " -- run the same command to resume" if args.command == "run" else ""
         print(f"interrupted{again}", file=sys.stderr)
         return 130
-    except BrokenPipeError:     # the reader of our output went away (| head): stop quietly
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
+    except BrokenPipeError:     # the reader of our output went away (| head): stop quietly,
+        sys.stdout = open(os.devnull, "w")      # and flush what is left nowhere
         return 141              # 128 + SIGPIPE, as a shell reports a process the pipe ended
 
 

@@ -834,8 +834,8 @@ def _family_differences(stored, fresh) -> list[str]:
                          f"{[str(v) for v in b.ravel()]} computed again")
     for key in ("title", "family", "complete", "ended"):
         if str(stored.attrs.get(key)) != str(fresh.attrs.get(key)):
-            lines.append(f"attribute {key}: {stored.attrs.get(key)!r} stored, "
-                         f"{fresh.attrs.get(key)!r} computed again")
+            lines.append(f"attribute {key}: {str(stored.attrs.get(key))!r} stored, "
+                         f"{str(fresh.attrs.get(key))!r} computed again")
     return lines
 
 
