@@ -58,7 +58,7 @@ def test_no_output_replaces_the_config_it_was_read_from(tmp_path, capsys, archiv
     """run --output, [survey] output and a family's --output naming the config file are
     refused before any work, and the config is still there."""
     cfg = tmp_path / "grid.toml"
-    text = f'[initial]\nfamily = "equilateral"\ndelta = [1.0]\n'
+    text = '[initial]\nfamily = "equilateral"\ndelta = [1.0]\n'
     cfg.write_text(text)
     assert main(["run", str(cfg), "--output", str(cfg)]) == 2
     assert "--output: " in error(capsys) and cfg.read_text() == text
