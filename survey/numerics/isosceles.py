@@ -31,6 +31,8 @@ from .integrate import integrate
 UX, UY, VX, VY, WX, WY = range(6)
 APART = 1e-150          # half the base at a restart: its square is still a normal number
 LEAD = 1e-8             # the time before a collision the integration hands over to a Taylor step
+SLIDING = 100           # passages of b = 0 in a row with p_b below GRAZING of the momentum:
+GRAZING = 1e-9          # the orbit slides along the collision line
 
 
 def plane_state(b, h, p_b, p_h) -> np.ndarray:
@@ -79,8 +81,9 @@ def plane_section(system: System, start, t_final: float, height: float = 0.0,
     """The section h = height (crossed upwards) of the orbit of the plane's point `start`
     = (b, h, p_b, p_h): its first `crossings` points or those up to t_final, whichever
     come first; the pair collision b = 0 passed exactly (see the module's note). An orbit
-    that comes back to b = 0 within 2 LEAD of passing it stays on the collision line (a
-    start at or near the triple collision): it stops there with status COLLISION."""
+    that meets b = 0 with p_b below GRAZING of its momentum SLIDING times in a row stays
+    on the collision line (a start at the triple collision with p_b = 0): it stops there
+    with status COLLISION."""
     if system.n_bodies != 3 or system.dim != 2 or not np.all(system.masses == 1.0):
         raise ValueError("the isosceles plane is of three unit masses in the plane")
     y = plane_state(*start)
@@ -91,7 +94,7 @@ def plane_section(system: System, start, t_final: float, height: float = 0.0,
     base[WX], base[UX] = 1.0, -1.0
     rise = np.zeros(system.n)
     rise[VY], rise[UY] = 1.0, -1.0
-    t, ts, bs, pbs, passages = 0.0, [], [], [], 0
+    t, ts, bs, pbs, passages, sliding = 0.0, [], [], [], 0, 0
     status = Status.OK
     run = dict(rtol=rtol, atol=atol)
     while True:
@@ -120,9 +123,13 @@ def plane_section(system: System, start, t_final: float, height: float = 0.0,
                 bs.append(crossing[1])
                 pbs.append(crossing[2])
         status = Status.EVENT if hit and out.status == Status.OK else out.status
-        if collided and not hit:    # back at b = 0 within 2 LEAD of the last passage: it
-            status = Status.COLLISION   # slides along the pair collision (or sits at the
-            break                       # triple one), passing it ever faster
+        # meeting b = 0 with p_b ~ 0, again and again: it slides along the pair collision
+        # (or sits at the triple one), passing it ever faster
+        grazing = abs(y[6 + WX] - y[6 + UX]) <= GRAZING * np.sqrt(np.sum(y[6:] * y[6:]))
+        sliding = sliding + 1 if collided and grazing else 0
+        if sliding >= SLIDING:
+            status = Status.COLLISION
+            break
         if not collided or status != Status.EVENT or len(ts) >= crossings or \
                 passages >= max_passages:
             break
