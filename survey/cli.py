@@ -50,6 +50,9 @@ def _orbit(args):
     shape and their closest approaches; with --plot the paper's single-orbit figures."""
     from .catalog.errors import ConfigError
     from .pipeline import orbits
+    from .pipeline.resources import ensure_folder
+    if args.plot:
+        ensure_folder(args.plot, "--plot")
     if args.workflow and orbits.is_orbit_workflow(args.workflow):
         if not args.plot:
             raise ConfigError("--plot", "an orbit workflow draws figures: give --plot DIR")

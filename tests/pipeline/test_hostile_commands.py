@@ -136,6 +136,9 @@ def test_damaged_archives_and_bad_folders_are_one_line(tmp_path, capsys, archive
         for out in (tmp_path / "file", "/proc/x"):
             assert main([command, str(archive), "--out", str(out)]) == 2
             assert "--out: " in error(capsys)
+    for argv in (["--t-final", "1"], [str(archive.parent / "nosuch.toml")]):
+        assert main(["orbit", *argv, "--plot", str(tmp_path / "file")]) == 2
+        assert "--plot: " in error(capsys)
     assert main(["plot", str(archive), "--var", "bogus"]) == 2
     assert "--var bogus: is not a variable plots draw" in error(capsys)
 
