@@ -455,8 +455,8 @@ def periodic_text(system: System, orbit: PeriodicOrbit) -> str:
              f"{_residues(orbit)}.",
              f"Checked to be an orbit that moves: it leaves its start by up to "
              f"{orbit.motion.excursion:.3g} of its size (at least {EXCURSION:.0e} times its "
-             f"return error) and its velocity turns through {orbit.motion.turning:.4g} full "
-             "circles over the period (a closed orbit's turns through at least one)."]
+             f"return error) and its velocity turns through {orbit.motion.turning:.4g} times "
+             "a full circle over the period (a closed orbit's turns through one at least)."]
     return "\n".join(lines)
 
 
