@@ -12,6 +12,7 @@ import numpy as np
 
 from ..catalog.indicators import BY_NAME, REGISTRY, TANGENT
 from ..catalog.regimes import IRREGULAR, REGULAR, Regime, Thresholds
+from .findings import resonant
 from ..catalog.status import Status
 from ..catalog.variables import START_COORDINATES, V
 from .refine import as_grid, refined_axes
@@ -205,11 +206,18 @@ def on_resonance(ds, th: Thresholds) -> np.ndarray:
     """Cells whose nearest resonance of order <= resonance_order holds to resonance_width:
     |m . nu| / (|m| max|nu|) at most that. Tighter than the detuning of small oscillations
     about the rotating triangle from its 1:2 epicyclic degeneracy (~1e-6 at delta = 0.5),
-    looser than what NAFF resolves on a locked orbit at T = 2000."""
+    looser than what NAFF resolves on a locked orbit at T = 2000. And it must pass the
+    findings' gate (findings.resonant): within the frequencies' own drift, and not an n:1
+    relation between two of them (a harmonic taken for a fundamental, or a symmetry's
+    1:1)."""
     order = ds[V.resonance_order].values
     with np.errstate(invalid="ignore"):
-        return (ds[V.resonance_distance].values <= th.resonance_width) & (order > 0) & \
+        near = (ds[V.resonance_distance].values <= th.resonance_width) & (order > 0) & \
             (order <= th.resonance_order)
+    if V.resonance in ds and V.frequency in ds and V.frequency_change in ds:
+        near &= resonant(ds[V.resonance].values, ds[V.frequency].values,
+                         ds[V.frequency_change].values)
+    return near
 
 
 def stored_config(ds) -> dict:

@@ -2,7 +2,8 @@
 the order it found their lines, so one family of tori shows as several branches. Here each
 regular cell's shape frequencies are put in the order that continues its labelled
 neighbours', so that a column of `frequency_labelled` is one frequency followed through
-the grid (the rotation, a reconstruction phase, keeps its column)."""
+the grid (the rotation, a reconstruction phase, keeps its column). Where a labelled
+frequency turns along a family is a finding (analysis.findings.twists)."""
 from __future__ import annotations
 
 from collections import deque
@@ -99,10 +100,3 @@ def _assign(out, flat, cell, cols, reference):
     for i, j in zip(order, slots):
         row[j] = values[i]
     out[cell, cols] = row
-
-
-def twist(x: np.ndarray, nu: np.ndarray) -> np.ndarray:
-    """d nu / dx between consecutive cells of a one-axis grid (..., fundamental): NaN where
-    either cell has no frequency."""
-    with np.errstate(invalid="ignore"):
-        return np.diff(nu, axis=0) / np.diff(x)[:, None]

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..analysis.classify import evidence_votes, regular_share, stored_config, stored_table
-from ..analysis.frequencies import twist
+from ..analysis.findings import twists
 from ..analysis.onset import onset, onset_over_horizons, runs
 from ..analysis.refine import as_grid, boundaries
 from ..catalog import defaults
@@ -623,10 +623,17 @@ def _tori_table(ds, axes, regime, rows: int = 15) -> list[str]:
                    f"{digits[c]:.1f} | {f} | {near} |")
     out.append("")
     if len(axes) == 1:
-        noise = np.nanmax(np.abs(ds[V.frequency_change].values.reshape(-1, len(names))),
+        # each cell's largest drift, for every column: the labelling permutes the columns
+        drift = np.nanmax(np.abs(ds[V.frequency_change].values.reshape(-1, len(names))),
                           axis=1, initial=0.0) if V.frequency_change in ds else \
             np.zeros(len(freq))
-        out += _twist(ds[axes[0]].values, freq, noise, names, axes[0])
+        found = twists(ds[axes[0]].values, freq, np.repeat(drift[:, None], len(names), 1),
+                       regime.ravel(), axes[0], names)
+        if len(found) == 1 and found[0].key == f"twist.{axes[0]}":      # no order
+            out += [f"{found[0].text()}.", ""]
+        elif found:
+            out += [f"Twist along {axes[0]} ({found[0].test}):", ""] + \
+                [f"- {f.text()}." for f in found] + [""]
     return out
 
 
@@ -695,31 +702,6 @@ def _relabel(m, raw, labelled):
             if same.size and np.isfinite(labelled[c, j]):
                 out[c, j] = m[c, same[0]]
     return out
-
-
-def _twist(x, freq, noise, names, axis) -> list[str]:
-    """Where d nu / d(axis) of a labelled shape frequency changes sign between consecutive
-    regular cells: a twistless torus lies there (KAM's twist condition fails). Only steps
-    larger than the two cells' frequency uncertainty (their largest change between the
-    orbit's halves, `noise`) count: a frequency flat to that is not seen to turn."""
-    slope = twist(x, freq)
-    step = np.abs(np.diff(freq, axis=0))
-    found = []
-    for j, name in enumerate(names):
-        if not name.startswith("shape"):
-            continue
-        s = slope[:, j]
-        with np.errstate(invalid="ignore"):
-            ok = np.flatnonzero(np.isfinite(s) & (step[:, j] > noise[:-1] + noise[1:]))
-        for a, b in zip(ok[:-1], ok[1:]):
-            if np.sign(s[a]) != np.sign(s[b]):
-                found.append(f"{name} between {axis} = {x[a + 1]:g} and {x[b]:g}"
-                             if a + 1 < b else f"{name} at {axis} = {x[a + 1]:g}")
-    if not found:
-        return ["Twist: every labelled shape frequency changes monotonically along "
-                f"{axis} over the regular cells (no twistless torus found).", ""]
-    return [f"Twist: d nu / d {axis} changes sign -- a twistless torus, where KAM's twist "
-            f"condition fails -- for {'; '.join(found)}.", ""]
 
 
 def _agreement(ds, th) -> list[str]:

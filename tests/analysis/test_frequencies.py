@@ -1,10 +1,10 @@
 """Frequencies labelled across a grid: each regular cell's shape frequencies, listed in
 whatever order NAFF found them, are put in the order that continues the neighbours', so
-one family is one curve; twist sign changes are found on the labelled curves."""
+one family is one curve."""
 import numpy as np
 import xarray as xr
 
-from survey.analysis.frequencies import labelled, twist
+from survey.analysis.frequencies import labelled
 from survey.catalog.regimes import Regime
 from survey.catalog.variables import V
 
@@ -44,12 +44,3 @@ def test_a_map_over_two_axes_is_labelled_breadth_first():
     curves = np.stack([0.9 + 0.04 * a - 0.02 * b, 0.7 + 0.05 * b, 0.2 - 0.03 * a], axis=-1)
     ds = family((12, 9), curves, np.full((12, 9), Regime.TORUS), rng)
     np.testing.assert_array_equal(labelled(ds)[..., :3], curves)
-
-
-def test_twist_changes_sign_where_a_frequency_turns():
-    x = np.linspace(0.0, 2.0, 21)
-    nu = np.stack([(x - 1.3) ** 2 + 0.5, 0.2 + 0.1 * x], axis=-1)
-    slope = twist(x, nu)
-    turns = np.flatnonzero(np.diff(np.sign(slope[:, 0])))
-    assert x[turns + 1].tolist() == [1.3] or np.isclose(x[turns + 1], 1.3).all()
-    assert np.all(slope[:, 1] > 0)

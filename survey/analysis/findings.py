@@ -1,0 +1,128 @@
+"""Findings: what a report (and results/README.md) may say about an archive. Each is a
+statement with the numbers it rests on, the evidence it used and the test that evidence
+had to pass -- with the test's threshold -- so that a sentence is printed only where its
+evidence holds, and otherwise as "not established" with the reason. The gates here decide
+the words that outran their evidence before: a twist or a twistless torus, a resonance,
+"all" / "none" / "every"."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..catalog.regimes import REGULAR
+
+TWIST_DRIFT = 3.0      # a frequency step counts where it exceeds this times the two cells'
+#                        own drift (their change between the orbit's halves)
+SAME_FREQUENCY = 0.1   # neighbours whose labelled frequency differs by more than this
+#                        fraction are on different fundamentals (a relabelling), not a twist
+NO_ORDER = ("seed",)   # axes along which cells have no order: nothing turns along them
+
+
+@dataclass(frozen=True)
+class Finding:
+    """A claim about an archive: `statement` is printed only if `passed`; otherwise the
+    report says it is not established and why (`reason`). `numbers` are what the text
+    quotes (results/README.md fills its numbers from them), `evidence` what it rests on,
+    `test` the test it had to pass, with its threshold."""
+
+    key: str
+    statement: str
+    passed: bool
+    test: str
+    evidence: str = ""
+    reason: str = ""
+    numbers: dict = field(default_factory=dict)
+
+    def text(self) -> str:
+        return self.statement if self.passed else \
+            f"Not established: {self.statement[0].lower()}{self.statement[1:]} -- {self.reason}"
+
+
+def interval(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """The Wilson score interval of a share k/n (95% by default); (0, 1) for n = 0."""
+    if n == 0:
+        return 0.0, 1.0
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def how_many(k: int, n: int, what: str) -> str:
+    """'all 12 decided cells', 'none of the 12 decided cells' or '7 of the 12 decided
+    cells': "all" and "none" only where the count says so, and always with the count it
+    is over (the caller names what was left out of `n`: unfinished, undecided)."""
+    if n and k == n:
+        return f"all {n} {what}"
+    return f"none of the {n} {what}" if k == 0 else f"{k} of the {n} {what}"
+
+
+def twists(x, nu, drift, regime, axis: str, names) -> list[Finding]:
+    """Where a labelled shape frequency turns along a one-parameter family: d nu / d x
+    changes sign between two consecutive steps of three neighbouring regular cells -- a
+    twistless torus, where KAM's twist condition fails. A step counts only if it exceeds
+    TWIST_DRIFT times the two cells' own drift (below it the frequency is not seen to
+    move) and stays on one fundamental (a jump of more than SAME_FREQUENCY of it is a
+    relabelling); never across a cell of another regime, and never along an axis whose
+    cells have no order (a seed). One Finding per frequency column (`names`: its
+    labels): passed where a turn is found, else the statement that it changes
+    monotonically, with how many steps could be judged."""
+    x = np.asarray(x, dtype=float)
+    nu, drift = np.abs(np.asarray(nu, dtype=float)), np.abs(np.asarray(drift, dtype=float))
+    regular = np.isin(np.asarray(regime), REGULAR)
+    test = (f"|d nu| > {TWIST_DRIFT:g} x the two cells' drift between neighbouring regular "
+            f"cells, on one fundamental (jump < {SAME_FREQUENCY:.0%}), sign changes between "
+            "consecutive such steps")
+    if axis in NO_ORDER:
+        return [Finding(f"twist.{axis}", f"Twist along {axis}: the cells are seeded random "
+                        "starts in no order, and nothing turns along them", True, test)]
+    out = []
+    for j, name in enumerate(names):
+        if not name.startswith("shape"):
+            continue
+        a, b = nu[:-1, j], nu[1:, j]
+        step = b - a
+        with np.errstate(invalid="ignore", divide="ignore"):
+            judged = (regular[:-1] & regular[1:] & np.isfinite(step)
+                      & (np.abs(step) > TWIST_DRIFT * (drift[:-1, j] + drift[1:, j]))
+                      & (np.abs(step) <= SAME_FREQUENCY * np.maximum(a, b)))
+        turns = [k for k in range(step.size - 1)
+                 if judged[k] and judged[k + 1] and np.sign(step[k]) != np.sign(step[k + 1])]
+        where = [f"{axis} = {x[k + 1]:g}" for k in turns]
+        steps = int(judged.sum())
+        numbers = {"turns": len(turns), "steps": steps,
+                   "at": [float(x[k + 1]) for k in turns]}
+        if turns:
+            out.append(Finding(f"twist.{name}", f"{name} turns (d nu / d {axis} changes "
+                               f"sign, a twistless torus) at {', '.join(where)}", True, test,
+                               f"{steps} steps between neighbouring regular cells above "
+                               "their drift", numbers=numbers))
+        elif steps:
+            out.append(Finding(f"twist.{name}", f"{name} changes monotonically along "
+                               f"{axis} over the {steps} steps that could be judged (no "
+                               "twistless torus found)", True, test, numbers=numbers))
+        else:
+            out.append(Finding(f"twist.{name}", f"{name} twists along {axis}", False, test,
+                               reason="no step between neighbouring regular cells exceeds "
+                                      f"{TWIST_DRIFT:g} times their drift on one "
+                                      "fundamental", numbers=numbers))
+    return out
+
+
+def resonant(m, nu, drift) -> np.ndarray:
+    """Where a resonance m . nu = 0 (m: cells' nearest resonance vectors, (..., k)) is one:
+    |m . nu| within the measured drift, sum |m_i| |d nu_i| -- NAFF cannot place the
+    frequencies closer -- and m not an n:1 relation between two frequencies (one a
+    harmonic of the other, or a 1:1 pair a symmetry makes equal): such a "fundamental"
+    is not one, and its relation is no resonance of the orbit's torus."""
+    m = np.asarray(m)
+    nu, drift = np.abs(np.asarray(nu, dtype=float)), np.abs(np.asarray(drift, dtype=float))
+    used = m != 0
+    with np.errstate(invalid="ignore"):
+        value = np.abs(np.sum(np.where(used, m * nu, 0.0), axis=-1))
+        spread = np.sum(np.where(used, np.abs(m) * drift, 0.0), axis=-1)
+        smallest = np.min(np.where(used, np.abs(m), np.iinfo(np.int64).max), axis=-1)
+        relation = (np.sum(used, axis=-1) == 2) & (smallest == 1)
+        return used.any(axis=-1) & (value <= spread) & ~relation

@@ -1,0 +1,76 @@
+"""The gates a claim must pass before a report prints it, on synthetic cases made to pass
+and to fail: a twistless torus only where a frequency turns by more than its own drift
+between neighbouring regular cells on one fundamental, never along seeded starts; a
+resonance only within the frequencies' drift and not an n:1 relation between two of them;
+"all" and "none" only where the count says so."""
+import numpy as np
+import pytest
+
+from survey.analysis.findings import how_many, interval, resonant, twists
+from survey.catalog.regimes import Regime
+
+X = np.linspace(0.0, 2.0, 21)
+NAMES = ["shape_1", "shape_2"]
+
+
+def turning(drift=0.0, regime=None, axis="delta"):
+    """shape_1 turns at x = 1.3 (a minimum), shape_2 grows: one finding each."""
+    nu = np.stack([(X - 1.3) ** 2 + 0.5, 0.2 + 0.1 * X], axis=-1)
+    regime = np.full(X.size, Regime.TORUS) if regime is None else regime
+    return {f.key: f for f in twists(X, nu, np.full(nu.shape, drift), regime, axis, NAMES)}
+
+
+def test_a_frequency_that_turns_above_its_drift_is_a_twistless_torus():
+    found = turning()
+    assert found["twist.shape_1"].passed and found["twist.shape_1"].numbers["at"] == [1.3]
+    assert "turns" in found["twist.shape_1"].text()
+    assert found["twist.shape_2"].passed and found["twist.shape_2"].numbers["turns"] == 0
+    assert "changes monotonically" in found["twist.shape_2"].text()
+
+
+def test_steps_within_the_drift_prove_nothing():
+    """Steps of 1e-2 around the turn against a drift of 1e-2 per cell: not seen to move."""
+    found = turning(drift=1e-2)
+    assert found["twist.shape_1"].numbers["turns"] == 0
+    flat = turning(drift=1.0)["twist.shape_2"]
+    assert not flat.passed and flat.text().startswith("Not established")
+
+
+def test_no_twist_across_a_cell_of_another_regime():
+    regime = np.full(X.size, Regime.TORUS)
+    regime[13] = Regime.CHAOTIC                 # the turn's middle cell
+    assert turning(regime=regime)["twist.shape_1"].numbers["turns"] == 0
+
+
+def test_a_relabelled_fundamental_is_no_twist():
+    """A column that jumps from 4.98 to 1.71 between neighbours (two fundamentals swapped
+    by the labelling) and back is not a frequency turning."""
+    nu = np.stack([np.where(X < 1.0, 4.98 + 0.01 * X, 1.71 - 0.01 * X),
+                   0.2 + 0.1 * X], axis=-1)
+    found = twists(X, nu, np.zeros(nu.shape), np.full(X.size, Regime.TORUS), "delta", NAMES)
+    assert found[0].numbers["turns"] == 0
+
+
+def test_nothing_turns_along_seeded_starts():
+    found = turning(axis="seed")
+    assert len(found) == 1 and "no order" in next(iter(found.values())).text()
+
+
+@pytest.mark.parametrize("m, nu, drift, expected", [
+    ([2, -3, 0], [0.3, 0.2, 0.47], [1e-9, 1e-9, 0.0], True),       # 2:3 within the drift
+    ([2, -3, 0], [0.3, 0.2 + 1e-6, 0.47], [1e-9, 1e-9, 0.0], False),   # off it by more
+    ([1, -2, 0], [0.4, 0.2, 0.47], [1e-9, 1e-9, 0.0], False),      # a harmonic, 2:1
+    ([1, -1, 0], [0.2, 0.2, 0.47], [1e-9, 1e-9, 0.0], False),      # a symmetry's 1:1
+    ([1, 1, -1], [0.1, 0.2, 0.3], [1e-9, 1e-9, 1e-9], True),       # three frequencies
+    ([0, 0, 0], [0.1, 0.2, 0.3], [1e-9, 1e-9, 1e-9], False),       # none searched
+])
+def test_a_resonance_is_within_the_drift_and_no_harmonic(m, nu, drift, expected):
+    assert bool(resonant(np.array(m), np.array(nu), np.array(drift))) is expected
+
+
+def test_counts_say_all_and_none_only_when_they_are():
+    assert how_many(12, 12, "decided cells") == "all 12 decided cells"
+    assert how_many(0, 12, "decided cells") == "none of the 12 decided cells"
+    assert how_many(6, 13, "values of Z").startswith("6 of the 13")
+    low, high = interval(16, 16)
+    assert 0.79 < low < 0.81 and high == 1.0
