@@ -18,6 +18,8 @@ TWIST_DRIFT = 3.0      # a frequency step counts where it exceeds this times the
 SAME_FREQUENCY = 0.1   # neighbours whose labelled frequency differs by more than this
 #                        fraction are on different fundamentals (a relabelling), not a twist
 NO_ORDER = ("seed",)   # axes along which cells have no order: nothing turns along them
+SEPARATE = 0.5         # an ensemble is a sample if its orbits separate within this share of
+#                        the horizon: ln(1 / perturbation_size) / FTLE below it
 
 
 @dataclass(frozen=True)
@@ -126,3 +128,34 @@ def resonant(m, nu, drift) -> np.ndarray:
         smallest = np.min(np.where(used, np.abs(m), np.iinfo(np.int64).max), axis=-1)
         relation = (np.sum(used, axis=-1) == 2) & (smallest == 1)
         return used.any(axis=-1) & (value <= spread) & ~relation
+
+
+def decorrelated(ftle, horizon, size: float, irregular) -> Finding:
+    """Whether the ensembles of the irregular cells are samples: orbits started `size`
+    (relative) apart separate to the orbit's own scale after about ln(1/size) / FTLE; where
+    that exceeds the cell's horizon the perturbed orbits are still one orbit at the end,
+    and their spread measures nothing but that. The finding lists how many such cells
+    there are and the worst ratio."""
+    ftle, horizon = np.asarray(ftle, dtype=float), np.asarray(horizon, dtype=float)
+    cells = np.asarray(irregular, dtype=bool) & np.isfinite(ftle) & np.isfinite(horizon)
+    test = f"ln(1 / perturbation_size) / FTLE below {SEPARATE:g} of the cell's horizon"
+    if not cells.any():
+        return Finding("ensembles.decorrelate", "No irregular cell has an ensemble to judge",
+                       True, test, numbers={"cells": 0, "slow": 0})
+    with np.errstate(divide="ignore"):
+        ratio = np.log(1.0 / size) / np.maximum(ftle[cells], 0.0) / horizon[cells]
+    slow = int(np.sum(ratio >= SEPARATE))
+    numbers = {"cells": int(cells.sum()), "slow": slow, "worst": float(np.max(ratio)),
+               "median": float(np.median(ratio))}
+    if slow:
+        return Finding("ensembles.decorrelate", f"The ensembles of the irregular cells are "
+                       "samples of nearby orbits", False, test, reason=(
+                           f"in {slow} of the {int(cells.sum())} irregular cells orbits "
+                           f"started {size:g} apart need more than {SEPARATE:g} of the "
+                           f"horizon to separate (ln(1/{size:g}) / FTLE up to "
+                           f"{np.max(ratio):.3g} times it): their spread is not that of "
+                           "independent orbits"), numbers=numbers)
+    return Finding("ensembles.decorrelate", f"The ensembles of all {int(cells.sum())} "
+                   f"irregular cells separate early in their horizon (ln(1/{size:g}) / FTLE "
+                   f"at most {np.max(ratio):.2g} of it): their spreads are samples", True,
+                   test, numbers=numbers)

@@ -106,6 +106,8 @@ class IndicatorOptions:
     project_flow: bool = False     # project deviations off the flow and grad H at t = 0
     perturbations: int = 16        # extra orbits started perturbation_size away
     perturbation_size: float = 1e-9
+    nudge: float = 0.0             # the nominal start moved this far (relative, seeded): the
+    #                                same survey with other last bits ([check] runs)
 
     def __post_init__(self):
         if self.deviations < 1:
@@ -114,3 +116,5 @@ class IndicatorOptions:
             raise ValueError("history_points must be >= 2")
         if self.perturbations < 0 or not self.perturbation_size > 0:
             raise ValueError("perturbations must be >= 0 and perturbation_size > 0")
+        if not self.nudge >= 0:
+            raise ValueError("nudge must be >= 0")

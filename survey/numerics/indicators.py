@@ -141,6 +141,9 @@ def conservation_errors(system: System, y0, states):
             float(np.max(vnorm(dJ)) / max(float(vnorm(np.reshape(J0, -1))), 1.0)))
 
 
+NUDGE_STREAM = 2 ** 32 - 1      # the random stream of the nominal start's nudge
+
+
 class Ensemble(NamedTuple):
     """The orbits a cell's indicators come from, as jobs of one batch (`integrate_batch`):
     first the nominal orbit -- once per deviation vector, each copy giving the bits the
@@ -156,11 +159,15 @@ class Ensemble(NamedTuple):
 def ensemble(system: System, y0, options: IndicatorOptions,
              control_tangents: bool = False) -> Ensemble:
     """The jobs of a cell: deviation vectors and perturbed starts seeded by (seed, y0), so
-    a cell's jobs are the same in any grid and whatever the chunk it travels in. The first
+    a cell's jobs are the same in any grid and whatever the chunk it travels in; with a
+    `nudge`, the nominal start itself moved by that (relative, seeded) first. The first
     nominal job records crossings, samples and the fine samples; the other nominal copies
     samples (the histories of their vectors); the perturbed orbits nothing."""
     o = options
     y0 = np.asarray(y0, dtype=float)
+    if o.nudge:         # the nominal orbit itself elsewhere by a few last bits
+        y0 = y0 + o.nudge * float(vnorm(y0)) * deviation_vectors(
+            system, y0, 1, o.seed, stream=NUDGE_STREAM)[0]
     w0 = deviation_vectors(system, y0, o.deviations, o.seed, o.project_flow)
     per_job = o.deviations if control_tangents else 1
     nominal = 1 if control_tangents else o.deviations

@@ -136,6 +136,10 @@ SCHEMA: dict[str, dict[str, Key]] = {
                                    "like 1/sqrt(n)"),
         "perturbation_size": Key("float", _IND.perturbation_size, "relative size of those "
                                                                   "perturbations", above=0),
+        "nudge": Key("float", _IND.nudge, "relative size of a seeded displacement of each "
+                                          "cell's nominal start: the same survey with "
+                                          "other last bits (a [check] run's; 0: none)",
+                     low=0, high=1e-6),
     },
     "section": {
         "coordinate": Key("str", "phi", "surface coordinate = value", choices=SURFACES),
@@ -179,6 +183,11 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "perturbations": Key("int", -1, "perturbed orbits per cell of that second run (-1: "
                                         "twice [indicators].perturbations, at least 8)",
                              low=-1, high=1000),
+        "nudge": Key("float", 1e-13, "relative size of the displacement of each cell's "
+                                     "nominal start in that second run ([indicators] "
+                                     "nudge): its orbits take other last bits, so every "
+                                     "line of evidence can move, not only the ensemble's",
+                     low=0, high=1e-6),
     },
     "refine": {
         "max_level": Key("int", 4, "refinement steps after the grid: each halves the spacing "
@@ -334,7 +343,8 @@ class Config:
         raw.pop("check")
         raw.setdefault("indicators", {}).update(
             seed=self.tables["check"]["seed"],
-            perturbations=self.tables["check"]["perturbations"])
+            perturbations=self.tables["check"]["perturbations"],
+            nudge=self.tables["check"]["nudge"])
         survey = raw.setdefault("survey", {})
         survey["name"] = f"{self.name}_check"
         if survey.get("output"):        # the text names the file its own output implies
@@ -934,9 +944,11 @@ def _validate_cross(tables: dict, system: System):
             check["seed"] = ind["seed"] + 1
         if check["perturbations"] < 0:
             check["perturbations"] = max(8, 2 * ind["perturbations"])
-        if (check["seed"], check["perturbations"]) == (ind["seed"], ind["perturbations"]):
-            raise ConfigError("[check]", "the same seed and perturbations as [indicators] "
-                                         "would repeat the survey bit for bit; change either")
+        if (check["seed"], check["perturbations"], check["nudge"]) == \
+                (ind["seed"], ind["perturbations"], ind["nudge"]):
+            raise ConfigError("[check]", "the same seed, perturbations and nudge as "
+                                         "[indicators] would repeat the survey bit for bit; "
+                                         "change one")
     if tables["tori"]["analyse"] and not tables["tori"]["observables"]:
         raise ConfigError("[tori].observables", "needs at least one observable (or set "
                                                 "analyse = false)")

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..analysis.classify import evidence_votes, regular_share, stored_config, stored_table
-from ..analysis.findings import twists
+from ..analysis.findings import decorrelated, twists
 from ..analysis.onset import onset, onset_over_horizons, runs
 from ..analysis.refine import as_grid, boundaries
 from ..catalog import defaults
@@ -371,7 +371,12 @@ def _ensembles(ds, regime) -> list[str]:
             m = ds[V.megno_ensemble].values
             row += f" {med(ds[V.megno].values):.3g} | {med(m[..., q95] - m[..., q05]):.2g} |"
         out.append(row)
-    return out + [""]
+    horizon = ds[V.regime_horizon].values if V.regime_horizon in ds else \
+        np.full(regime.shape, float(config.get("integration", {}).get("t_final",
+                                                                     defaults.T_FINAL)))
+    found = decorrelated(ds[V.ftle].values, horizon, size,
+                         finished & np.isin(regime, IRREGULAR))
+    return out + ["", f"{found.text()}.", ""]
 
 
 def _why_no_onset(ds, axis) -> str:
@@ -550,11 +555,17 @@ def _second_run(ds, check, regime) -> list[str]:
     orbits = [int(np.max(x[V.ensemble_orbits].values, initial=0)) if V.ensemble_orbits in x
               else 1 for x in (ds, check)]
     other = check[V.regime].values
+    nudge = float(stored_config(check).get("indicators", {}).get("nudge", 0.0))
+    nominal = (f", and each cell's nominal orbit started {nudge:g} (relative) away -- other "
+               "last bits, so that every line of evidence can move, the Birkhoff digits and "
+               "frequencies too" if nudge else ", the same nominal orbits (only the deviation "
+               "vectors and the ensemble differ: the Birkhoff digits and frequencies cannot "
+               "move)")
     out = ["## The same survey with another seed and ensemble", "",
            f"Every cell run again with seed {_seed(check)} (here {_seed(ds)}) and {orbits[1]} "
            f"orbits per cell (here {orbits[0]}): its own deviation vectors and perturbed "
-           f"starts, the same {'base ' if shared else ''}grid, thresholds and horizons."
-           + shared, "",
+           f"starts{nominal}; the same {'base ' if shared else ''}grid, thresholds and "
+           "horizons." + shared, "",
            "| regime | cells here | cells there |", "| --- | --- | --- |"]
     for r in Regime:
         a, b = int(np.sum(regime == r)), int(np.sum(other == r))

@@ -6,7 +6,7 @@ resonance only within the frequencies' drift and not an n:1 relation between two
 import numpy as np
 import pytest
 
-from survey.analysis.findings import how_many, interval, resonant, twists
+from survey.analysis.findings import decorrelated, how_many, interval, resonant, twists
 from survey.catalog.regimes import Regime
 
 X = np.linspace(0.0, 2.0, 21)
@@ -74,3 +74,14 @@ def test_counts_say_all_and_none_only_when_they_are():
     assert how_many(6, 13, "values of Z").startswith("6 of the 13")
     low, high = interval(16, 16)
     assert 0.79 < low < 0.81 and high == 1.0
+
+
+def test_an_ensemble_that_cannot_separate_by_its_horizon_is_no_sample():
+    """ln(1e9) = 20.7: at FTLE 0.1 orbits 1e-9 apart separate by t ~ 207, within half of
+    T = 2000; at FTLE 0.004 by ~5200, past it: that cell's spread is flagged."""
+    irregular = np.array([True, True, False])
+    fast = decorrelated([0.1, 0.2, 0.0], [2000.0] * 3, 1e-9, irregular)
+    assert fast.passed and fast.numbers["slow"] == 0
+    slow = decorrelated([0.1, 0.004, 0.0], [2000.0] * 3, 1e-9, irregular)
+    assert not slow.passed and slow.numbers["slow"] == 1
+    assert "not that of independent orbits" in slow.text()

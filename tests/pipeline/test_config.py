@@ -26,7 +26,7 @@ coordinate = "phi"
 
 # (what to change, expected fragment of the error: always the key)
 BAD = [
-    ("[check]\nseed = 0\nperturbations = 16", "[check]: the same seed and perturbations as [indicators] would repeat the survey"),
+    ("[check]\nseed = 0\nperturbations = 16\nnudge = 0.0", "[check]: the same seed, perturbations and nudge as [indicators] would repeat the survey"),
     ("[check]\nperturbations = -2", "[check].perturbations: must be >= -1"),
     ("[check]\nsed = 1", "[check].sed: unknown key (did you mean 'seed'?)"),
     ("[indicators]\nwhich = []\n[check]", "[check]: compares the indicators of two ensembles"),
