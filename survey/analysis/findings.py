@@ -148,7 +148,7 @@ def decorrelated(ftle, horizon, size: float, irregular) -> Finding:
     numbers = {"cells": int(cells.sum()), "slow": slow, "worst": float(np.max(ratio)),
                "median": float(np.median(ratio))}
     if slow:
-        return Finding("ensembles.decorrelate", f"The ensembles of the irregular cells are "
+        return Finding("ensembles.decorrelate", "The ensembles of the irregular cells are "
                        "samples of nearby orbits", False, test, reason=(
                            f"in {slow} of the {int(cells.sum())} irregular cells orbits "
                            f"started {size:g} apart need more than {SEPARATE:g} of the "
