@@ -20,7 +20,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch, Rectangle
 
-from ..analysis.classify import regular_share, stored_config, stored_table
+from ..analysis.classify import horizon, regular_share, stored_config, stored_table
 from ..analysis.refine import as_grid, painted, refined_axes
 from ..catalog import defaults
 from ..catalog.indicators import OWNER, REGISTRY
@@ -465,14 +465,30 @@ def scan(ds, names, special=()) -> Figure:
             for i in np.flatnonzero(doubt):
                 ax.axvspan(edges[i], edges[i + 1], **UNCONFIRMED, alpha=0.35)
         y = np.where(_unfinished(ds), np.nan, ds[name].values.astype(float))
-        ax.plot(x, y, "o-", ms=2.5, lw=0.8, color="k")
+        common = _at_common_horizon(ds, name)
+        longer = np.zeros(y.shape, dtype=bool)
+        if common is not None:      # like with like: every cell at T, the longer runs apart
+            at_T, T, longer = common
+            final = np.where(longer, y, np.nan)
+            y = np.where(_unfinished(ds), np.nan, at_T)
+        ax.plot(x, y, "o-", ms=2.5, lw=0.8, color="k", label=None if common is None else
+                f"every cell at T = {T:g}" if np.isfinite(y[longer]).all() else
+                f"the cells run to T = {T:g}")
         for (i,), marker, _ in _special_marks(special):
             ax.plot(x[i], y[i], marker, ms=10, mfc="none", mec="k", mew=1.3, zorder=4)
         band = _ensemble_range(ds, name)
         if band is not None:
             low, high, note = band
-            ax.vlines(x, low, high, color="0.4", lw=0.7, label=note)
-        for level, style, text in _reference_lines(ds, name):
+            ax.vlines(x[~longer], low[~longer], high[~longer], color="0.4", lw=0.7,
+                      label=note)
+            if longer.any():
+                ax.vlines(x[longer], low[longer], high[longer], color="tab:orange", lw=0.7)
+        if longer.any():
+            factors = np.unique(np.round(horizon(ds)[longer] / T, 6))
+            ax.plot(x[longer], final[longer], "^", ms=4, color="tab:orange", zorder=3,
+                    label=f"cells run longer, at {', '.join(f'{f:g}' for f in factors)} T "
+                          f"({int(longer.sum())})")
+        for level, style, text in _reference_lines(ds, name, common is not None):
             if np.ndim(level):        # per cell: each at its own horizon
                 ax.plot(x, level, color="0.3", ls=style, lw=0.8, label=text,
                         drawstyle="steps-mid")
@@ -525,10 +541,32 @@ def _ensemble_range(ds, name):
     return low, high, note
 
 
-def _reference_lines(ds, name):
+def _at_common_horizon(ds, name):
+    """(every cell's value at the archive's first horizon T -- from its history, which a
+    cell run longer carries from the same start; NaN for those where the indicator keeps
+    no history --, T, the cells run longer), or None where no cell ran longer."""
+    if V.regime_horizon not in ds:
+        return None
+    reached = horizon(ds)
+    if not np.isfinite(reached).any():
+        return None
+    T = float(np.nanmin(reached))
+    longer = np.isfinite(reached) & (reached > T * (1 + 1e-9))
+    if not longer.any():
+        return None
+    history = f"{name}_history"
+    if history not in ds:
+        return np.where(longer, np.nan, ds[name].values.astype(float)), T, longer
+    times = ds["history_time"].values
+    k = int(np.argmin(np.abs(times - T)))
+    return ds[history].values[..., k].astype(float), T, longer
+
+
+def _reference_lines(ds, name, common: bool = False):
     """Where the indicator's votes change (dashed: regular side, dotted: chaotic side):
     (level, line style, legend text). A level in units of ln(T)/T is per cell, at the time
-    each reached, where those differ (cells decided at a longer horizon)."""
+    each reached, where those differ (cells decided at a longer horizon) -- unless every
+    cell is drawn at the first horizon (`common`), where it is one."""
     th = Thresholds.from_table(stored_table(ds))
     for indicator in REGISTRY:
         vote = indicator.vote
@@ -540,6 +578,8 @@ def _reference_lines(ds, name):
             if V.t_end not in ds:
                 return []
             t = ds[V.t_end].values.astype(float)
+            if common:
+                t = np.where(np.isfinite(t), np.nanmin(horizon(ds)), np.nan)
             T = float(np.nanmax(t)) if np.isfinite(t).any() else np.nan
             if not T > 0:
                 return []

@@ -87,6 +87,26 @@ def test_scan_shades_each_cell_by_regime_with_error_bars(grid1):
     assert bars and bars[0].get_label() == "5-95% of 2 orbits (indicative)"   # the ensemble
 
 
+def test_a_scan_compares_every_cell_at_one_horizon(grid1):
+    """A cell run to 4 T is drawn at T from its history on the line of the others, and its
+    value at 4 T apart, as a marker the legend names -- not a spike on the same line."""
+    longer = grid1.copy(deep=True)
+    horizon = longer["regime_horizon"].values
+    T = float(horizon.min())
+    i = int(np.flatnonzero(horizon == T)[0])
+    horizon[i] = 4 * T
+    longer["fli"].values[i] = 1e6                        # what the longer run reached
+    ax = plots.scan(longer, ["fli"]).axes[0]
+    texts = legend_texts(ax)
+    assert f"every cell at T = {T:g}" in texts
+    assert f"cells run longer, at 4 T ({int(np.sum(horizon > T))})" in texts
+    line = next(l for l in ax.get_lines() if l.get_label().startswith("every cell"))
+    k = int(np.argmin(np.abs(longer["history_time"].values - T)))
+    assert line.get_ydata()[i] == longer["fli_history"].values[i, k] != 1e6
+    marker = next(l for l in ax.get_lines() if l.get_label().startswith("cells run longer"))
+    assert 1e6 in list(marker.get_ydata())
+
+
 def test_section_convergence_and_frequency_map(grid1):
     figs = plots.figures(grid1)
     # nine deltas, nine energy shells: one panel each, titled by its shell, never overlaid
