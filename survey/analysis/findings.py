@@ -159,3 +159,52 @@ def decorrelated(ftle, horizon, size: float, irregular) -> Finding:
                    f"irregular cells separate early in their horizon (ln(1/{size:g}) / FTLE "
                    f"at most {np.max(ratio):.2g} of it): their spreads are samples", True,
                    test, numbers=numbers)
+
+
+def family_stability(p, index_real, index_imag, stable, name: str,
+                     tol: float = 1e-6) -> list[Finding]:
+    """Each stretch of consecutive linearly stable members of a family (parameter p,
+    stability indices b = (mu + 1/mu)/2 per member and pair, the members' `stable` flag)
+    as a finding "linearly stable for name from a to b": established only where between
+    every two neighbouring members each real index stays farther from +-1 than it moves
+    (the rule numerics.continuation.unresolved refines the steps by) -- else it may have
+    left the band and come back between them unseen, and the stretch is not established,
+    with where."""
+    p = np.asarray(p, dtype=float)
+    real, imag = np.asarray(index_real, dtype=float), np.asarray(index_imag, dtype=float)
+    margin = np.where(np.abs(imag) <= tol, 1.0 - np.abs(real), np.nan)
+    stable = np.asarray(stable, dtype=bool)
+    test = ("between neighbouring members every stability index farther from +-1 than it "
+            "moves")
+    out = []
+    k = 0
+    while k < p.size:
+        if not stable[k]:
+            k += 1
+            continue
+        end = k
+        while end + 1 < p.size and stable[end + 1]:
+            end += 1
+        close = []
+        for i in range(k, end):
+            with np.errstate(invalid="ignore"):
+                near = np.minimum(margin[i], margin[i + 1])
+                gap = np.abs(margin[i] - margin[i + 1])
+                bad = (near >= 0) & (near < gap)
+            if bad.any():
+                close.append((p[i], p[i + 1], float(np.nanmin(near[bad]))))
+        lo, hi = sorted((p[k], p[end]))
+        statement = (f"linearly stable for {name} from {lo:.10g} to {hi:.10g} "
+                     f"({end - k + 1} member{'s' * (end > k)})")
+        numbers = {"from": float(lo), "to": float(hi), "members": end - k + 1,
+                   "unresolved": len(close)}
+        reason = "" if not close else (
+            f"between {len(close)} pair{'s' * (len(close) > 1)} of neighbouring members an "
+            "index comes nearer +-1 than it moves (" + "; ".join(
+                f"{a:.8g} to {b:.8g}, within {m:.1e}" for a, b, m in close[:4])
+            + ("; ..." if len(close) > 4 else "") + "): it may leave the band and return "
+            "between them unseen")
+        out.append(Finding(f"family.stable.{len(out)}", statement[0].upper() + statement[1:],
+                           not close, test, reason=reason, numbers=numbers))
+        k = end + 1
+    return out

@@ -50,6 +50,7 @@ class Branch(NamedTuple):
 
 
 SMALLEST = 1e-6     # the smallest step, relative to the nominal one: below it the family ends
+EDGE_FLOOR = 1e-3   # the smallest step refined where a stability index nears its band's edge
 
 
 def on_row(row: np.ndarray, x: np.ndarray, target: float) -> bool:
@@ -66,7 +67,7 @@ def tangent(A: np.ndarray, previous: np.ndarray) -> np.ndarray:
 
 def follow(solve: Callable, x0: np.ndarray, to: float, steps: int, tests: dict[str, Callable],
            signature: Callable | None = None, bisect: float = 1e-9,
-           max_members: int = 1000) -> Branch:
+           max_members: int = 1000, margin: Callable | None = None) -> Branch:
     """The family from scaled x0 (its parameter held at x0[-1]) to the scaled parameter
     value `to`. The step advances the parameter by 1/steps where the family runs along it
     (the state by at most 0.1) and is halved where a step fails a check: the corrector
@@ -78,7 +79,12 @@ def follow(solve: Callable, x0: np.ndarray, to: float, steps: int, tests: dict[s
     gap between two branches rather than a bifurcation on one. A step that fails at the
     smallest size (SMALLEST of the nominal) ends the family there, unreported: nothing
     past a failed check is a member. Also ends at `to` (a last member solved there), at
-    max_members, or where it has turned back and run twice the span past its start."""
+    max_members, or where it has turned back and run twice the span past its start.
+    `margin(member)`: how far each stability index is inside its band (1 - |b|, NaN off
+    the real line); a step along which one comes nearer its edge than it moves is halved
+    too, down to EDGE_FLOOR of the nominal step, so that an index does not leave the band
+    and come back between members unseen (findings.family_stability says where it still
+    might)."""
     direction = np.zeros(x0.size)
     direction[-1] = np.sign(to - x0[-1])
     first = solve(x0, direction, linalg.dot(direction, x0))
@@ -108,6 +114,10 @@ def follow(solve: Callable, x0: np.ndarray, to: float, steps: int, tests: dict[s
             if ds < SMALLEST * nominal:
                 return Branch(members, found, False, problem)
             continue
+        if margin is not None and len(located) == 1 and ds > EDGE_FLOOR * nominal and \
+                unresolved(margin(members[-1][0]), margin(located[0][0])):
+            ds /= 2
+            continue
         members.append(located.pop())
         again = next((at for at in located if _seen(at, found)), None)
         if again is not None:
@@ -117,6 +127,15 @@ def follow(solve: Callable, x0: np.ndarray, to: float, steps: int, tests: dict[s
         if last:
             return Branch(members, found, True, "")
         ds = min(nominal / max(abs(members[-1][2][-1]), 1e-3), 0.1, 2 * ds)
+
+
+def unresolved(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether between two members with index margins a and b (1 - |b| per index; NaN
+    off the real line) an index comes nearer its band's edge than it moves: there it may
+    cross and come back between them unseen."""
+    with np.errstate(invalid="ignore"):
+        near = np.minimum(a, b)
+        return bool(np.any((near >= 0) & (near < np.abs(a - b))))
 
 
 def _seen(at: Located, found: list[Located]) -> bool:

@@ -486,7 +486,7 @@ def periodic_family(systems: Callable[[float], System], orbit: PeriodicOrbit, p0
 
     tests = {"fold": lambda o, t: bool(t[-1] > 0), "circle": lambda o, t: o.on_circle}
     branch = follow(solve, pack(orbit, p0), to / scale[-1], steps, tests, lambda o: o.indices,
-                    bisect, max_members)
+                    bisect, max_members, margin=index_margins)
 
     def held(p, o):
         """What the member labelled p must have: the energy (p, or the start's) and, for a
@@ -502,6 +502,13 @@ def periodic_family(systems: Callable[[float], System], orbit: PeriodicOrbit, p0
              for at in branch.found]
     return Family(values, [o for o, _, _ in branch.members], found, branch.complete,
                   branch.ended)
+
+
+def index_margins(orbit: PeriodicOrbit) -> np.ndarray:
+    """How far each stability index of an orbit lies inside the band |b| <= 1: 1 - |b| for
+    a real index (negative outside), NaN for a complex one (a quartet off the circle)."""
+    b = orbit.indices
+    return np.where(np.abs(b.imag) <= UNIT_CIRCLE, 1.0 - np.abs(b.real), np.nan)
 
 
 def _crossing(a: PeriodicOrbit, b: PeriodicOrbit) -> str:

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..analysis.findings import family_stability
 from ..analysis.refine import as_grid, cell_label, cell_values
 from ..catalog.errors import ConfigError, SurveyError
 from ..numerics.integrate import integrate
@@ -488,6 +489,12 @@ def periodic_family_text(system: System, table: dict, family: Family, rows: int 
     lines += [""] + ([f"At {name} = {b.parameter:.10g}: {b.kind}." for b in
                       family.bifurcations] or ["No fold, and no multiplier leaves or joins the "
                                                "unit circle between members."])
+    indices = np.array([o.indices for o in family.members])
+    stretches = family_stability(family.parameters, indices.real, indices.imag,
+                                 [o.stable for o in family.members], name)
+    if stretches:
+        lines += ["", f"Stable stretches ({stretches[0].test}):"] + \
+            [f"- {f.text()}." for f in stretches]
     return "\n".join(lines)
 
 

@@ -136,27 +136,32 @@ def test_a_family_parameter_left_at_its_default_reaches_the_system(tmp_path, cap
         build_system(table, {"perimetric_power_strength": 0.5})
 
 
-def test_a_fold_brings_a_pair_through_plus_one_and_a_period_doubling_is_real(triangle):
-    """Mode 1 (Krein sign -) runs down in energy, folds at E ~ 103.6 and returns unstable.
-    A fold in energy at fixed J puts a pair of multipliers at +1: both are found at the same
-    energy, which is the family's lowest. Its period doubling, found by bisection, is
-    confirmed by shooting independently of the continuation at E* -+ 0.3: the smallest
-    stability index is above -1 below E* and below -1 above it."""
+def test_a_fold_brings_a_pair_through_plus_one_and_is_a_fold(triangle):
+    """Mode 1 (Krein sign -) runs down in energy, its indices swinging to +-1 and back
+    (the steps refined there), folds at E ~ 105.0 and returns unstable. A fold in energy
+    at fixed J puts a pair of multipliers at +1: both are found at the same energy, the
+    family's lowest. Shot independently at 0.05 above the fold from the members either
+    side of its lowest, two orbits: an elliptic and a hyperbolic one, their periods either
+    side of the lowest member's -- the two branches that meet there. (Steps that crossed
+    an index's edge unrefined once landed on a neighbouring family and reported its fold
+    at 103.6.)"""
     orbit = lyapunov(triangle, 1)
     family = periodic_family(lambda p: PAPER, orbit, orbit.energy, 90.0, steps=20,
                              rotating=True, pinned="energy")
     kinds = {b.kind: b for b in family.bifurcations}
-    fold, plus, doubling = kinds["fold"], kinds["through +1"], \
-        kinds["period doubling (through -1)"]
+    fold, plus = kinds["fold"], kinds["through +1"]
     assert fold.parameter == pytest.approx(plus.parameter, abs=1e-6)
-    assert 103.0 < fold.parameter < 104.5 and not family.complete
+    assert 104.5 < fold.parameter < 105.5 and not family.complete
     assert family.parameters.min() >= fold.parameter - 1e-6
     assert family.parameters.min() == pytest.approx(fold.parameter, abs=0.05)
-    assert family.members[0].stable and not family.members[-1].stable
-    near = family.members[int(np.argmin(np.abs(family.parameters - doubling.parameter)))]
-    sides = [periodic_orbit(PAPER, near.state, near.period, rotating=True,
-                            energy=doubling.parameter + d) for d in (-0.3, 0.3)]
-    assert sides[0].indices.real.min() > -1.0 > sides[1].indices.real.min()
+    low = int(np.argmin(family.parameters))
+    assert family.members[0].stable and not family.members[low + 1].stable
+    sides = [periodic_orbit(PAPER, family.members[k].state, family.members[k].period,
+                            rotating=True, energy=fold.parameter + 0.05)
+             for k in (low - 1, low + 1)]
+    assert sorted(o.kind for o in sides) == ["elliptic", "hyperbolic"]
+    periods = sorted(o.period for o in sides)
+    assert periods[0] < family.members[low].period < periods[1]
 
 
 def test_periodic_family_command(tmp_path, capsys):
