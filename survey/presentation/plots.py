@@ -470,7 +470,7 @@ def scan(ds, names, special=()) -> Figure:
         if common is not None:      # like with like: every cell at T, the longer runs apart
             at_T, T, longer = common
             final = np.where(longer, y, np.nan)
-            y = np.where(_unfinished(ds), np.nan, at_T)
+            y = np.where(longer, at_T, y)
         ax.plot(x, y, "o-", ms=2.5, lw=0.8, color="k", label=None if common is None else
                 f"every cell at T = {T:g}" if np.isfinite(y[longer]).all() else
                 f"the cells run to T = {T:g}")
@@ -496,7 +496,7 @@ def scan(ds, names, special=()) -> Figure:
                 ax.axhline(level, color="0.3", ls=style, lw=0.8, label=text)
         if name in (V.ftle, V.megno) and _positive(y):
             ax.set_yscale("log")
-            _below_log_axis(ax, x, y)
+            _below_log_axis(ax, x, y, *([final] if longer.any() else []))
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize="x-small", loc="upper left", bbox_to_anchor=(1.0, 1.0),
                       frameon=False)
@@ -542,9 +542,9 @@ def _ensemble_range(ds, name):
 
 
 def _at_common_horizon(ds, name):
-    """(every cell's value at the archive's first horizon T -- from its history, which a
-    cell run longer carries from the same start; NaN for those where the indicator keeps
-    no history --, T, the cells run longer), or None where no cell ran longer."""
+    """(the value at the archive's first horizon T of the cells run longer -- from their
+    history, which the longer run carries from the same start; NaN where the indicator
+    keeps none --, T, the cells run longer), or None where no cell ran longer."""
     if V.regime_horizon not in ds:
         return None
     reached = horizon(ds)
@@ -556,7 +556,7 @@ def _at_common_horizon(ds, name):
         return None
     history = f"{name}_history"
     if history not in ds:
-        return np.where(longer, np.nan, ds[name].values.astype(float)), T, longer
+        return np.full(longer.shape, np.nan), T, longer
     times = ds["history_time"].values
     k = int(np.argmin(np.abs(times - T)))
     return ds[history].values[..., k].astype(float), T, longer
@@ -597,10 +597,12 @@ def _reference_lines(ds, name, common: bool = False):
     return []
 
 
-def _below_log_axis(ax, x, y):
+def _below_log_axis(ax, x, *ys):
     """Values a log axis cannot show (<= 0, e.g. a FTLE that shrank) marked at its bottom
-    edge, counted in the legend, instead of silently falling off."""
-    off = np.isfinite(y) & (y <= 0)
+    edge, counted in the legend, instead of silently falling off (ys: the values drawn
+    at x, the line's and the longer runs')."""
+    with np.errstate(invalid="ignore"):
+        off = np.any([np.isfinite(y) & (y <= 0) for y in ys], axis=0)
     if off.any():
         ax.plot(x[off], np.full(off.sum(), 0.0), "v", color="tab:purple", ms=4,
                 transform=ax.get_xaxis_transform(), clip_on=False,

@@ -119,10 +119,11 @@ def test_the_equilateral_familys_frequencies_are_three_continuous_curves(tmp_pat
 
 def test_a_check_run_states_the_claims_at_another_seed_and_ensemble(tmp_path, capsys):
     """`run` with a [check] table runs the survey again with the next seed and twice the
-    ensemble into <output>_check.nc: the same orbits (their energy errors agree bit for
-    bit), other deviation vectors and perturbed starts (other FTLEs); the report gives the
-    onset at both seeds and the regimes side by side, and `report` finds the check run
-    again beside its archive."""
+    ensemble into <output>_check.nc: other deviation vectors and perturbed starts (other
+    FTLEs), and the nominal orbits nudged by 1e-13 (other last bits: their energy errors
+    and Birkhoff digits move too, where before they were the same bits); the report gives
+    the onset at both seeds and the regimes side by side, says the nominal orbits moved,
+    and `report` finds the check run again beside its archive."""
     import xarray as xr
 
     from survey.cli import main
@@ -145,13 +146,16 @@ workers = 1
     assert main(["run", str(cfg), "--no-progress"]) == 0
     assert "seed 1 and 8 perturbed orbits" in capsys.readouterr().out
     with xr.open_dataset(tmp_path / "c.nc") as a, xr.open_dataset(tmp_path / "c_check.nc") as b:
-        np.testing.assert_array_equal(a[V.energy_error].values, b[V.energy_error].values)
+        assert np.all(a[V.energy_error].values != b[V.energy_error].values)
+        assert np.any(a[V.birkhoff_digits].values != b[V.birkhoff_digits].values)
+        np.testing.assert_array_equal(a[V.initial_state].values, b[V.initial_state].values)
         assert np.all(a[V.ftle].values != b[V.ftle].values)
         assert (int(a[V.ensemble_orbits].max()), int(b[V.ensemble_orbits].max())) == (3, 9)
         counts = [(r, int(np.sum(a[V.regime].values == r)), int(np.sum(b[V.regime].values == r)))
                   for r in np.unique(np.r_[a[V.regime].values, b[V.regime].values])]
     report = (tmp_path / "c_report.md").read_text()
     assert "## The same survey with another seed and ensemble" in report
+    assert "each cell's nominal orbit started 1e-13 (relative) away" in report
     assert "With seed 1: onset" in report or "With seed 1 the regime does not change" in report
     from survey.catalog.regimes import Regime
     for r, here, there in counts:
