@@ -3,10 +3,9 @@ statement with the numbers it rests on, the evidence it used and the test that e
 had to pass -- with the test's threshold -- so that a sentence is printed only where its
 evidence holds, and otherwise as "not established" with the reason. The gates here decide
 the words that outran their evidence before: a twist or a twistless torus, a resonance,
-"all" / "none" / "every"."""
+a stable stretch of a family, a spread over nearby orbits."""
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -40,25 +39,6 @@ class Finding:
     def text(self) -> str:
         return self.statement if self.passed else \
             f"Not established: {self.statement[0].lower()}{self.statement[1:]} -- {self.reason}"
-
-
-def interval(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
-    """The Wilson score interval of a share k/n (95% by default); (0, 1) for n = 0."""
-    if n == 0:
-        return 0.0, 1.0
-    p = k / n
-    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return max(0.0, centre - half), min(1.0, centre + half)
-
-
-def how_many(k: int, n: int, what: str) -> str:
-    """'all 12 decided cells', 'none of the 12 decided cells' or '7 of the 12 decided
-    cells': "all" and "none" only where the count says so, and always with the count it
-    is over (the caller names what was left out of `n`: unfinished, undecided)."""
-    if n and k == n:
-        return f"all {n} {what}"
-    return f"none of the {n} {what}" if k == 0 else f"{k} of the {n} {what}"
 
 
 def twists(x, nu, drift, regime, axis: str, names) -> list[Finding]:

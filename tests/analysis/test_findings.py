@@ -2,11 +2,12 @@
 and to fail: a twistless torus only where a frequency turns by more than its own drift
 between neighbouring regular cells on one fundamental, never along seeded starts; a
 resonance only within the frequencies' drift and not an n:1 relation between two of them;
-"all" and "none" only where the count says so."""
+a spread only where the ensemble's orbits separate; a family's stable stretch only where
+no index nears +-1 faster than it moves between members."""
 import numpy as np
 import pytest
 
-from survey.analysis.findings import decorrelated, how_many, interval, resonant, twists
+from survey.analysis.findings import decorrelated, family_stability, resonant, twists
 from survey.catalog.regimes import Regime
 
 X = np.linspace(0.0, 2.0, 21)
@@ -68,14 +69,6 @@ def test_a_resonance_is_within_the_drift_and_no_harmonic(m, nu, drift, expected)
     assert bool(resonant(np.array(m), np.array(nu), np.array(drift))) is expected
 
 
-def test_counts_say_all_and_none_only_when_they_are():
-    assert how_many(12, 12, "decided cells") == "all 12 decided cells"
-    assert how_many(0, 12, "decided cells") == "none of the 12 decided cells"
-    assert how_many(6, 13, "values of Z").startswith("6 of the 13")
-    low, high = interval(16, 16)
-    assert 0.79 < low < 0.81 and high == 1.0
-
-
 def test_an_ensemble_that_cannot_separate_by_its_horizon_is_no_sample():
     """ln(1e9) = 20.7: at FTLE 0.1 orbits 1e-9 apart separate by t ~ 207, within half of
     T = 2000; at FTLE 0.004 by ~5200, past it: that cell's spread is flagged."""
@@ -85,3 +78,17 @@ def test_an_ensemble_that_cannot_separate_by_its_horizon_is_no_sample():
     slow = decorrelated([0.1, 0.004, 0.0], [2000.0] * 3, 1e-9, irregular)
     assert not slow.passed and slow.numbers["slow"] == 1
     assert "not that of independent orbits" in slow.text()
+
+
+def test_a_stable_stretch_is_established_only_where_the_members_resolve_it():
+    """Two stable stretches split by an unstable member; in the first, one index goes
+    from 0.9 to 0.999 between members (nearer +-1 than it moves: it may leave the band and
+    come back unseen), in the second every index stays well inside."""
+    p = np.arange(7.0)
+    real = np.array([[0.5, 0.8], [0.5, 0.9], [0.5, 0.999], [0.5, 1.2], [0.1, 0.3],
+                     [0.12, 0.31], [0.14, 0.32]])
+    stable = np.all(np.abs(real) <= 1, axis=1)
+    first, second = family_stability(p, real, np.zeros(real.shape), stable, "energy")
+    assert not first.passed and first.numbers["members"] == 3
+    assert "between 1 pair of neighbouring members" in first.text()
+    assert second.passed and second.text() == "Linearly stable for energy from 4 to 6 (3 members)"
