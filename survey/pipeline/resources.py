@@ -144,14 +144,7 @@ def ensure_writable(path: Path, key: str = "[survey].output", inputs=()):
         kind = "a folder; give a file name" if path.is_dir() else \
             "not a regular file (a device, pipe or socket); give a file path"
         raise ConfigError(key, f"{path} is {kind}")
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-        probe = folder / f".survey-write-test-{os.getpid()}"
-        probe.write_bytes(b"")
-        probe.unlink()
-    except OSError as exc:
-        raise ConfigError(key, f"cannot write to {folder} ({exc.strerror}); "
-                               "choose a writable path") from None
+    ensure_folder(folder, key)
 
 
 def same_file(a, b) -> bool:

@@ -100,20 +100,7 @@ def test_the_areal_homographic_orbit_is_unstable_at_the_rate_its_neighbours_leav
 def test_periodic_command(tmp_path, capsys):
     """`python -m survey periodic` shoots from a config's [initial] start ([periodic]
     period is required) and prints the orbit and its multipliers, or JSON."""
-    def rows(a):
-        return "[" + ", ".join("[" + ", ".join(repr(float(v)) for v in row) + "]"
-                               for row in a) + "]"
-    cfg = tmp_path / "eight.toml"
-    cfg.write_text(f"""
-[system]
-interactions = [{{kind = "pair", potential = "gravity", params = {{G = 1.0}}}}]
-[initial]
-family = "explicit"
-positions = {rows([X1, -X1, [0.0, 0.0]])}
-velocities = {rows([-V3 / 2, -V3 / 2, V3])}
-[periodic]
-period = 6.33
-""")
+    cfg = _eight_config(tmp_path, 6.33)
     assert main(["periodic", str(cfg), "--json"]) == 0
     found = json.loads(capsys.readouterr().out)
     assert found["period"] == pytest.approx(PERIOD, rel=1e-8) and found["stable"]
