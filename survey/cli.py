@@ -173,17 +173,16 @@ def _survey_archive(path, ds, command: str):
 def _report(args):
     import contextlib
 
-    from .pipeline.archive import open_archive
+    from .pipeline.archive import check_archives, open_archive
     from .pipeline.special import section_slice, special_cells
     from .presentation import report
     from .pipeline.resources import ensure_folder
     archive = Path(args.archive)
-    check = archive.with_name(f"{archive.stem}_check.nc")    # its [check] run, if any
     out = ensure_folder(args.out or archive.parent, "--out")
     with open_archive(archive) as ds, contextlib.ExitStack() as stack:
         _survey_archive(archive, ds, "report")
-        other = stack.enter_context(open_archive(check)) if check.exists() else None
-        path = report.write(ds, out, archive.stem, check=other,
+        checks = {v: stack.enter_context(open_archive(f)) for v, f in check_archives(archive)}
+        path = report.write(ds, out, archive.stem, checks=checks,
                             special=special_cells(ds), slice_at=section_slice(ds))
     print(f"wrote {path} and its figures")
     return 0
@@ -293,8 +292,8 @@ def _run(args):
 
 
 def _survey(config, command, summary=False, write_report=True, **kw) -> Path:
-    """Run a survey -- and its [check] run, the same survey with another seed and ensemble
-    size, if it has one -- then write its report beside the archive."""
+    """Run a survey -- and its [check] runs, the same survey with one thing changed each,
+    if it has them -- then write its report beside the archive."""
     import contextlib
 
     from .analysis.classify import summary as summarise
@@ -307,28 +306,35 @@ def _survey(config, command, summary=False, write_report=True, **kw) -> Path:
             refined = f", {int((ds['level'] > 0).sum())} of them added by refinement" \
                 if "level" in ds.coords else ""
             print(f"wrote {path} ({ds[V.status].size} cells{refined})")
-    second = config.check()
-    check = None
-    if second is not None:
-        ind = second.tables["indicators"]
-        print(f"checking: the same survey with seed {ind['seed']} and {ind['perturbations']} "
-              "perturbed orbits per cell")
-        check = run_survey(second, command=f"{command} [check]", **kw)
+    checks = {}
+    for variant, second in config.checks().items():
+        print(f"checking: the same survey with {_changed(variant, second)}")
+        checks[variant] = run_survey(second, command=f"{command} [check] {variant}", **kw)
         if summary:
-            print(f"wrote {check}")
+            print(f"wrote {checks[variant]}")
     with contextlib.ExitStack() as stack:
         ds = stack.enter_context(xr.open_dataset(path))
-        other = stack.enter_context(xr.open_dataset(check)) if check else None
+        others = {k: stack.enter_context(xr.open_dataset(v)) for k, v in checks.items()}
         if summary:
             print("\n".join(summarise(ds)))
         if write_report:      # imported here: matplotlib alone takes 0.3 s to import
             from .pipeline.special import section_slice, special_cells
             from .presentation import report
-            written = report.write(ds, path.parent, path.stem, check=other,
+            written = report.write(ds, path.parent, path.stem, checks=others,
                                    special=special_cells(ds), slice_at=section_slice(ds))
             if summary:
                 print(f"report and figures: {written} (and {path.stem}_*.png beside it)")
     return path
+
+
+def _changed(variant: str, second) -> str:
+    """What a [check] variant's run changes, in words with its values."""
+    ind, integ = second.tables["indicators"], second.tables["integration"]
+    return {"seed": f"seed {ind['seed']} and {ind['perturbations']} perturbed orbits per "
+                    f"cell, the nominal starts {ind['nudge']:g} away",
+            "rounding": f"the nominal starts {ind['nudge']:g} (relative) away",
+            "horizon": f"t_final = {integ['t_final']:g}",
+            "tolerance": f"rtol = {integ['rtol']:g}, atol = {integ['atol']:g}"}[variant]
 
 
 def _special(args):

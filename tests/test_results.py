@@ -16,8 +16,14 @@ RESULTS = ROOT / "results"
 ARCHIVES = sorted(RESULTS.glob("*.nc"))
 
 
+def check_variant(archive: Path) -> str | None:
+    """The [check] variant an archive is the run of, or None for a workflow's own."""
+    stem, _, variant = archive.stem.rpartition("_check_")
+    return variant if stem else None
+
+
 def workflow_of(archive: Path) -> Path:
-    stem = archive.stem.removesuffix("_check")
+    stem = archive.stem.rpartition("_check_")[0] or archive.stem
     return ROOT / "survey" / "default.toml" if stem == "default" \
         else ROOT / "workflows" / f"{stem}.toml"
 
@@ -26,8 +32,8 @@ def stored_text(archive: Path) -> str:
     """The config text an archive must store: its workflow's, or for the [check] run of a
     workflow the text that run derives from it."""
     text = workflow_of(archive).read_text()
-    if archive.stem.endswith("_check"):
-        return parse_config(text, check_output=False).check().text
+    if check_variant(archive):
+        return parse_config(text, check_output=False).checks()[check_variant(archive)].text
     return text
 
 
@@ -44,8 +50,8 @@ def test_every_survey_workflow_has_its_archive_report_and_figures():
                 assert list(RESULTS.glob(f"{spec.name}_*.png")), spec.name
             continue
         assert (RESULTS / f"{path.stem}.nc").exists(), path.stem
-        if parse_config(path.read_text(), check_output=False).tables["check_enabled"]:
-            assert (RESULTS / f"{path.stem}_check.nc").exists(), path.stem
+        for variant in parse_config(path.read_text(), check_output=False).checks():
+            assert (RESULTS / f"{path.stem}_check_{variant}.nc").exists(), path.stem
         assert (RESULTS / f"{path.stem}_report.md").exists(), path.stem
         assert list(RESULTS.glob(f"{path.stem}_*.png")), path.stem
         assert f"{path.stem}" in (RESULTS / "README.md").read_text()

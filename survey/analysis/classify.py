@@ -59,13 +59,9 @@ def at_half_horizon(ds, name: str) -> tuple[np.ndarray, np.ndarray]:
     return np.where(np.isfinite(half), values, np.nan), times[index]
 
 
-def evidence_votes(ds, th: Thresholds, half: bool = False) -> dict[str, np.ndarray]:
-    """Each line of evidence present in the archive as votes: +1 regular, -1 chaotic, 0 no
-    vote (between the thresholds), NaN where the evidence is missing. The FTLE is measured
-    in units of ln(T)/T, a torus's FTLE at the time reached. With `half`, the evidence at
-    half each cell's horizon (Vote.half: its history there, or the variable stored for it);
-    a line with none has no vote."""
-    votes = {}
+def _evidence(ds, half: bool):
+    """(key, Vote, values) of each line of evidence present in the archive, as its vote
+    reads them (the FTLE in units of ln(T)/T; at half each cell's horizon with `half`)."""
     for key, vote in EVIDENCE:
         name = vote.half if half else vote.variable
         if not name or name not in ds:
@@ -78,6 +74,17 @@ def evidence_votes(ds, th: Thresholds, half: bool = False) -> dict[str, np.ndarr
         if vote.per_torus_rate:
             with np.errstate(invalid="ignore", divide="ignore"):
                 x = x / (np.log(t) / t)
+        yield key, vote, x
+
+
+def evidence_votes(ds, th: Thresholds, half: bool = False) -> dict[str, np.ndarray]:
+    """Each line of evidence present in the archive as votes: +1 regular, -1 chaotic, 0 no
+    vote (between the thresholds), NaN where the evidence is missing. The FTLE is measured
+    in units of ln(T)/T, a torus's FTLE at the time reached. With `half`, the evidence at
+    half each cell's horizon (Vote.half: its history there, or the variable stored for it);
+    a line with none has no vote."""
+    votes = {}
+    for key, vote, x in _evidence(ds, half):
         regular, chaotic = (vote.sign * getattr(th, f"{vote.thresholds}_{side}")
                             for side in ("regular", "chaotic"))
         with np.errstate(invalid="ignore"):
@@ -85,6 +92,18 @@ def evidence_votes(ds, th: Thresholds, half: bool = False) -> dict[str, np.ndarr
                             np.where(vote.sign * x <= chaotic, -1.0, 0.0))
         votes[key] = np.where(np.isfinite(x), cast, np.nan)
     return votes
+
+
+def threshold_margins(ds, th: Thresholds) -> dict[str, np.ndarray]:
+    """Each line of evidence's distance to the nearer of its two thresholds, relative to
+    that threshold (NaN where missing): a vote within a small margin would change with a
+    small change of the evidence, so a verdict resting on it is named as such."""
+    out = {}
+    for key, vote, x in _evidence(ds, False):
+        ends = [getattr(th, f"{vote.thresholds}_{side}") for side in ("regular", "chaotic")]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out[key] = np.min([np.abs(x - e) / max(abs(e), 1e-300) for e in ends], axis=0)
+    return out
 
 
 def classify(ds, thresholds: Thresholds | None = None, half: bool = False):

@@ -1,6 +1,8 @@
 """Where a one-parameter family leaves the tori, and the runs of equal regimes along it."""
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from ..catalog.regimes import IRREGULAR, REGULAR
@@ -61,3 +63,25 @@ def runs(values) -> list[tuple[int, int]]:
     starts = np.concatenate([[0], edges])
     ends = np.concatenate([edges - 1, [len(values) - 1]])
     return list(zip(starts.tolist(), ends.tolist()))
+
+
+class Budget(NamedTuple):
+    """An onset's uncertainty, contribution by contribution: `parts` (what, its size, the
+    onset that variant found or None) -- the grid's half-step or the bisection's last
+    half-interval, then each [check] variant's shift of the estimate -- and `total`, their
+    root sum of squares (independent sources); infinite where a variant finds no onset at
+    all, for then the onset itself is not established."""
+    estimate: float
+    parts: list
+    total: float
+
+
+def budget(found: dict, variants: dict) -> Budget:
+    """The Budget of an onset `found` (onset or onset_over_horizons) against the onsets
+    its [check] variants found, by name (None: that run has no onset)."""
+    parts = [("step", found["error"], None)]
+    for name, other in variants.items():
+        shift = np.inf if other is None else abs(other["estimate"] - found["estimate"])
+        parts.append((name, shift, None if other is None else other["estimate"]))
+    total = float(np.sqrt(sum(p[1] ** 2 for p in parts)))
+    return Budget(found["estimate"], parts, total)

@@ -14,3 +14,12 @@ SAMPLE_INTERVAL = 0.1       # time between the orbit samples of the torus analys
 NAFF_LINES = 5              # NAFF lines per shape signal and half orbit
 EXTEND = 4                  # a verdict in doubt at T is decided again at EXTEND * T ...
 EXTEND_ROUNDS = 1           # ... up to this many times
+
+# what each [check] variant changes: together with the grid's own step they make up an
+# onset's uncertainty (report: the budget)
+CHECK_VARIANTS = {
+    "seed": "another seed and ensemble size, the nominal starts nudged",
+    "rounding": "the nominal starts nudged alone: other last bits of the same arithmetic",
+    "horizon": "twice t_final",
+    "tolerance": "rtol and atol times [check].tolerance",
+}

@@ -17,6 +17,7 @@ import numpy as np
 
 from ..analysis.classify import classify, stable, stored_table
 from ..analysis.frequencies import labelled
+from ..catalog import defaults
 from ..catalog.errors import ArchiveError
 from ..catalog.regimes import Thresholds
 from ..catalog.status import Status
@@ -350,6 +351,13 @@ def derive(ds) -> dict:
 def partial_path(out: Path) -> Path:
     """Where an archive is written before it is renamed into place."""
     return out.with_name(f".{out.name}.partial-{os.getpid()}")
+
+
+def check_archives(archive) -> list[tuple[str, Path]]:
+    """(variant, path) of each [check] run's archive found beside a survey archive."""
+    archive = Path(archive)
+    return [(v, f) for v in defaults.CHECK_VARIANTS
+            if (f := archive.with_name(f"{archive.stem}_check_{v}.nc")).exists()]
 
 
 def open_archive(path):

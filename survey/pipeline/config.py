@@ -176,18 +176,23 @@ SCHEMA: dict[str, dict[str, Key]] = {
                        f.metadata["doc"]) for f in fields(Thresholds)},
     },
     "check": {
-        "seed": Key("int", -1, "seed of a second run of the same survey, with another ensemble "
-                               "(-1: [indicators].seed + 1); with a [check] table the survey is "
-                               "run again into <output>_check.nc and the report states every "
-                               "claim at both seeds and ensemble sizes", low=-1),
-        "perturbations": Key("int", -1, "perturbed orbits per cell of that second run (-1: "
+        "variants": Key("strs", list(defaults.CHECK_VARIANTS), "what each second run of the same "
+                        "survey changes, one archive <output>_check_<variant>.nc each: "
+                        + "; ".join(f"{k}: {v}" for k, v in defaults.CHECK_VARIANTS.items())
+                        + "; the report gives each one's onset shift and their total",
+                        choices=tuple(defaults.CHECK_VARIANTS)),
+        "seed": Key("int", -1, "seed of the seed variant, with another ensemble "
+                               "(-1: [indicators].seed + 1)", low=-1),
+        "perturbations": Key("int", -1, "perturbed orbits per cell of the seed variant (-1: "
                                         "twice [indicators].perturbations, at least 8)",
                              low=-1, high=1000),
         "nudge": Key("float", 1e-13, "relative size of the displacement of each cell's "
-                                     "nominal start in that second run ([indicators] "
-                                     "nudge): its orbits take other last bits, so every "
-                                     "line of evidence can move, not only the ensemble's",
-                     low=0, high=1e-6),
+                                     "nominal start in the seed and rounding variants "
+                                     "([indicators] nudge): their orbits take other last "
+                                     "bits, so every line of evidence can move, not only "
+                                     "the ensemble's", low=0, high=1e-6),
+        "tolerance": Key("float", 100.0, "factor on rtol and atol of the tolerance variant",
+                         low=2.0, high=1e6),
     },
     "refine": {
         "max_level": Key("int", 4, "refinement steps after the grid: each halves the spacing "
@@ -333,28 +338,42 @@ class Config:
         return {a.name: float(a.values[i]) for a, i in zip(self.axes, at)
                 if (a.term >= 0) == terms}
 
-    def check(self) -> "Config | None":
-        """The survey again with the [check] table's seed and ensemble size, into
-        <output>_check.nc (its own archive, with its own config text), or None without
-        [check]: what the report compares the claims with."""
+    def checks(self) -> dict[str, "Config"]:
+        """The [check] table's variants, each the survey again with one thing changed
+        (defaults.CHECK_VARIANTS), by name, into <output>_check_<variant>.nc (its own archive, with
+        its own config text); {} without [check]: what the report measures its claims
+        against."""
         if not self.tables["check_enabled"]:
-            return None
-        raw = tomllib.loads(self.text)
-        raw.pop("check")
-        raw.setdefault("indicators", {}).update(
-            seed=self.tables["check"]["seed"],
-            perturbations=self.tables["check"]["perturbations"],
-            nudge=self.tables["check"]["nudge"])
-        survey = raw.setdefault("survey", {})
-        survey["name"] = f"{self.name}_check"
-        if survey.get("output"):        # the text names the file its own output implies
-            path = Path(survey["output"])
-            survey["output"] = str(path.with_name(f"{path.stem}_check.nc"))
-        check = validate(raw, _to_toml(raw), f"{self.source} [check]", check_output=False)
-        check.tables["survey"]["output"] = str(self.output.with_name(
-            f"{self.output.stem}_check.nc"))
-        ensure_writable(check.output)
-        return check
+            return {}
+        check = self.tables["check"]
+        out = {}
+        for variant in check["variants"]:
+            raw = tomllib.loads(self.text)
+            raw.pop("check")
+            ind, integ = raw.setdefault("indicators", {}), raw.setdefault("integration", {})
+            mine = self.tables["integration"]
+            if variant == "seed":
+                ind.update(seed=check["seed"], perturbations=check["perturbations"],
+                           nudge=check["nudge"])
+            elif variant == "rounding":
+                ind["nudge"] = check["nudge"]
+            elif variant == "horizon":
+                integ["t_final"] = 2.0 * mine["t_final"]
+            else:
+                integ.update(rtol=check["tolerance"] * mine["rtol"],
+                             atol=check["tolerance"] * mine["atol"])
+            survey = raw.setdefault("survey", {})
+            survey["name"] = f"{self.name}_check_{variant}"
+            if survey.get("output"):    # the text names the file its own output implies
+                path = Path(survey["output"])
+                survey["output"] = str(path.with_name(f"{path.stem}_check_{variant}.nc"))
+            second = validate(raw, _to_toml(raw), f"{self.source} [check] {variant}",
+                              check_output=False)
+            second.tables["survey"]["output"] = str(self.output.with_name(
+                f"{self.output.stem}_check_{variant}.nc"))
+            ensure_writable(second.output)
+            out[variant] = second
+        return out
 
     def result_key(self) -> str:
         """Hash of everything that determines the cells' results -- the result tables, the
@@ -944,11 +963,20 @@ def _validate_cross(tables: dict, system: System):
             check["seed"] = ind["seed"] + 1
         if check["perturbations"] < 0:
             check["perturbations"] = max(8, 2 * ind["perturbations"])
-        if (check["seed"], check["perturbations"], check["nudge"]) == \
+        if not check["variants"] or len(set(check["variants"])) < len(check["variants"]):
+            raise ConfigError("[check].variants", "names each variant once and at least "
+                                                  f"one of {', '.join(defaults.CHECK_VARIANTS)}; "
+                                                  "or drop [check]")
+        if "seed" in check["variants"] and (check["seed"], check["perturbations"],
+                                            check["nudge"]) == \
                 (ind["seed"], ind["perturbations"], ind["nudge"]):
             raise ConfigError("[check]", "the same seed, perturbations and nudge as "
                                          "[indicators] would repeat the survey bit for bit; "
                                          "change one")
+        if "rounding" in check["variants"] and check["nudge"] == ind["nudge"]:
+            raise ConfigError("[check].nudge", "equals [indicators].nudge, so the rounding "
+                                               "variant would repeat the survey bit for bit; "
+                                               "give it another value (1e-13 is usual)")
     if tables["tori"]["analyse"] and not tables["tori"]["observables"]:
         raise ConfigError("[tori].observables", "needs at least one observable (or set "
                                                 "analyse = false)")

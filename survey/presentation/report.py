@@ -7,9 +7,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analysis.classify import evidence_votes, regular_share, stored_config, stored_table
+from ..analysis.classify import (evidence_votes, regular_share, stored_config, stored_table,
+                                 threshold_margins)
 from ..analysis.findings import decorrelated, twists
-from ..analysis.onset import onset, onset_over_horizons, runs
+from ..analysis.onset import budget, onset, onset_over_horizons, runs
 from ..analysis.refine import as_grid, boundaries
 from ..catalog import defaults
 from ..catalog.indicators import INDICATORS
@@ -29,20 +30,21 @@ def without_provenance(text: str) -> str:
                      if not line.startswith(PROVENANCE_LINE))
 
 
-def write(ds, folder, stem: str | None = None, figures: bool = True, check=None,
+def write(ds, folder, stem: str | None = None, figures: bool = True, checks=None,
           special=(), slice_at=None) -> Path:
     """Write STEM_report.md and its figures into `folder`; returns the report's path.
-    check: the archive of the survey's [check] run (another seed and ensemble size), whose
-    claims the report states beside its own. special: the special solutions its cells
+    checks: the archives of the survey's [check] runs by variant (defaults.CHECK_VARIANTS);
+    the report states the claims of the seed run beside its own, and every run's share in
+    an onset's uncertainty. special: the special solutions its cells
     start on (pipeline.special.special_cells), set beside the family; slice_at: the
     section coordinates a section grid fixes (pipeline.special.section_slice)."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     stem = stem or Path(ds.encoding.get("source", "survey")).stem
-    ds, check = as_grid(ds), None if check is None else as_grid(check)
+    ds = as_grid(ds)
     figs = plots.save(plots.figures(ds, special=special, slice_at=slice_at), folder,
                       stem) if figures else []
-    text = markdown(ds, [p.name for p in figs], check, special)
+    text = markdown(ds, [p.name for p in figs], checks, special)
     path = folder / f"{stem}_report.md"
     tmp = path.with_name(f".{path.name}.tmp")
     tmp.write_text(text)
@@ -50,8 +52,9 @@ def write(ds, folder, stem: str | None = None, figures: bool = True, check=None,
     return path
 
 
-def markdown(ds, figure_names=(), check=None, special=()) -> str:
-    ds, check = as_grid(ds), None if check is None else as_grid(check)
+def markdown(ds, figure_names=(), checks=None, special=()) -> str:
+    ds, checks = as_grid(ds), {k: as_grid(c) for k, c in (checks or {}).items()}
+    check = checks.get("seed")          # the second run whose claims are set beside ours
     config = stored_config(ds)
     axes = plots.map_axes(ds)
     regime = ds[V.regime].values
@@ -113,7 +116,7 @@ def markdown(ds, figure_names=(), check=None, special=()) -> str:
     out += _ensembles(ds, regime)
     out += _refinement(ds, config, regime, check)
     out += _shares(ds, axes, regime)
-    out += _onsets(ds, axes, regime, check)
+    out += _onsets(ds, axes, regime, checks, th)
     out += _second_run(ds, check, regime)
     out += _tori_table(ds, axes, regime)
     out += _special(ds, special, regime)
@@ -393,8 +396,10 @@ def _why_no_onset(ds, axis) -> str:
     return ""
 
 
-def _onsets(ds, axes, regime, check=None) -> list[str]:
+def _onsets(ds, axes, regime, checks=None, th=None) -> list[str]:
     out = []
+    checks = checks or {}
+    check = checks.get("seed")
     meaningful = [a for a in axes if not _why_no_onset(ds, a)]
     skipped = [f"No onset is given along {a}: {_why_no_onset(ds, a)}." for a in axes
                if a not in meaningful]
@@ -424,11 +429,8 @@ def _onsets(ds, axes, regime, check=None) -> list[str]:
             out.append(f"The regime does not change from regular to chaotic along {axes[0]}.")
         else:
             out.append(f"Along {axes[0]} the orbits are regular up to {found['last_regular']:g}; "
-                       f"the first irregular cell is at {found['first_irregular']:g}: onset "
-                       f"{axes[0]} = {_pm(found['estimate'], found['error'])} (half the "
-                       + ("interval the bisection ended with)." if "level" in ds.coords else
-                          "grid step)."))
-            out += _onset_horizons(ds, x, regime, axes[0], check)
+                       f"the first irregular cell is at {found['first_irregular']:g}.")
+            out += _onset_budget(ds, x, found, axes[0], checks, th)
             if found["all_irregular_from"] is not None:
                 mixed = found["all_irregular_from"] > found["first_irregular"]
                 out.append(f"Every cell is irregular from {axes[0]} = "
@@ -503,36 +505,70 @@ def _onset_1d(ds, x):
                                [float(f) for f in ds["horizon_factor"].values])
 
 
-def _onset_horizons(ds, x, regime, axis, check=None) -> list[str]:
-    """How the onset moved with the horizon of the verdicts and with the seed, and the
-    uncertainty that covers both."""
-    if V.regime_history not in ds:
-        return []
-    found = _onset_1d(ds, x)
-    if found is None:
-        return []
-    T = float(ds[V.regime_horizon].min())
-    moved = "; ".join(f"at {f:g} T = {f * T:g}: " + (
-        "none" if e is None else _pm(e, found["error"]).split(" +-")[0])
-        for f, e in found["by_horizon"])
-    out = [f"The onset from each cell's verdict at each horizon ({moved}). With its shift "
-           f"over the last step of the horizon: onset {axis} = "
-           f"{_pm(found['estimate'], found['error'])}."]
-    other = None if check is None else _onset_1d(check, check[axis].values)
-    if check is None:
-        out[-1] += (" How the onset varies with the seed (the deviation vectors) is not in "
-                    "this uncertainty: a [check] run would measure it.")
-    elif other is None:
-        out[-1] += (f" With seed {_seed(check)} the regime does not change from regular to "
-                    f"chaotic along {axis}: the onset does not survive another seed.")
+def _onset_budget(ds, x, found, axis, checks, th) -> list[str]:
+    """The onset with its uncertainty contribution by contribution (analysis.onset.budget):
+    the step the grid or bisection left, and each [check] variant's shift; the cells on
+    either side of it whose votes lie near a threshold; how it moved over the horizons of
+    the verdicts."""
+    out = []
+    if V.regime_history in ds:
+        over = _onset_1d(ds, x)
+        T = float(ds[V.regime_horizon].min())
+        out.append("The onset from each cell's verdict at each of its horizons: " + "; ".join(
+            f"at {f:g} T = {f * T:g}: " + ("none" if e is None else f"{e:.6g}")
+            for f, e in over["by_horizon"]) + ".")
+    found_by = {k: _onset_1d(c, c[axis].values) for k, c in checks.items()}
+    b = budget(found, found_by)
+    step = ("half the interval the bisection ended with" if "level" in ds.coords
+            else "half the grid step")
+    what = {"step": step, **{k: _variant_words(k, c) for k, c in checks.items()}}
+    out += ["", "| contribution | onset | shift |", "| --- | --- | --- |"]
+    for name, size, there in b.parts:
+        out.append(f"| {what[name]} | {'—' if name == 'step' else 'none' if there is None else f'{there:.6g}'} | "
+                   f"{'no onset' if not np.isfinite(size) else f'{size:.2g}'} |")
+    if np.isfinite(b.total):
+        out += ["", f"Onset {axis} = {_pm(b.estimate, b.total)} (the root sum of squares "
+                    "of the contributions above)."]
     else:
-        shift = abs(other["estimate"] - found["estimate"])
-        out[-1] += (f" With seed {_seed(check)}: onset "
-                    f"{_pm(other['estimate'], other['error'])}; the seed moves it by "
-                    f"{shift:.2g}, so onset {axis} = "
-                    f"{_pm(found['estimate'], max(found['error'], other['error'], shift))} "
-                    "over both.")
+        lost = [what[n] for n, size, _ in b.parts if not np.isfinite(size)]
+        out += ["", f"Onset {axis} = {b.estimate:.6g} is **not established**: with "
+                    f"{' and with '.join(lost)} the regime does not change from regular to "
+                    f"chaotic along {axis}."]
+    missing = [f"{k} ({v})" for k, v in defaults.CHECK_VARIANTS.items() if k not in checks]
+    if missing:
+        out.append("Not measured, so not in this uncertainty: " + "; ".join(missing)
+                   + " -- [check] variants would measure them.")
+    if th is not None:
+        out += _near_thresholds(ds, x, [found["last_regular"], found["first_irregular"]],
+                                axis, th)
     return out
+
+
+NEAR = 0.1      # a vote this close to its threshold (relative) is named beside an onset
+
+
+def _near_thresholds(ds, x, where, axis, th) -> list[str]:
+    """The cells at `where` whose votes lie within NEAR (relative) of a threshold: their
+    verdict would change with a small change of their evidence."""
+    margins = threshold_margins(ds, th)
+    out = []
+    for value in where:
+        i = int(np.argmin(np.abs(x - value)))
+        close = [f"{k} ({margins[k][i]:.2g})" for k in margins if margins[k][i] < NEAR]
+        if close:
+            out.append(f"The cell at {axis} = {value:g} votes within {NEAR:g} (relative) of "
+                       f"a threshold: {', '.join(close)}.")
+    return [" ".join(out)] if out else []
+
+
+def _variant_words(variant: str, ds) -> str:
+    """A [check] run's change, with its values, for the budget table."""
+    config = stored_config(ds)
+    ind, integ = config.get("indicators", {}), config.get("integration", {})
+    return {"seed": f"seed {ind.get('seed', 0)}, {ind.get('perturbations', 0)} orbits a cell",
+            "rounding": f"nominal starts {ind.get('nudge', 0.0):g} away (other last bits)",
+            "horizon": f"t_final = {integ.get('t_final', defaults.T_FINAL):g}",
+            "tolerance": f"rtol = {integ.get('rtol', defaults.RTOL):g}"}[variant]
 
 
 def _second_run(ds, check, regime) -> list[str]:

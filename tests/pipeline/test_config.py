@@ -26,10 +26,15 @@ coordinate = "phi"
 
 # (what to change, expected fragment of the error: always the key)
 BAD = [
-    ("[check]\nseed = 0\nperturbations = 16\nnudge = 0.0", "[check]: the same seed, perturbations and nudge as [indicators] would repeat the survey"),
+    ("[check]\nseed = 0\nperturbations = 16\nnudge = 0.0\nvariants = [\"seed\"]", "[check]: the same seed, perturbations and nudge as [indicators] would repeat the survey"),
     ("[check]\nperturbations = -2", "[check].perturbations: must be >= -1"),
     ("[check]\nsed = 1", "[check].sed: unknown key (did you mean 'seed'?)"),
     ("[indicators]\nwhich = []\n[check]", "[check]: compares the indicators of two ensembles"),
+    ("[check]\nvariants = []", "[check].variants: names each variant once and at least one of seed"),
+    ("[check]\nvariants = [\"seed\", \"seed\"]", "[check].variants: names each variant once"),
+    ("[check]\nvariants = [\"sed\"]", "[check].variants"),
+    ("[check]\nvariants = [\"rounding\"]\nnudge = 0.0", "[check].nudge: equals [indicators].nudge, so the rounding variant"),
+    ("[check]\ntolerance = 1.0", "[check].tolerance: must be >= 2"),
     ("[periodic]\nperiod = 6.0", "[periodic]: is read by `python -m survey periodic`, not by a survey"),
     ("[tori]\nextend = 1", "[tori].extend: 1 would decide a verdict in doubt again at the same horizon"),
     ("[tori]\nextend = -2", "[tori].extend: must be >= 0"),
@@ -229,26 +234,47 @@ def test_more_local_workers_than_the_machine_can_run_are_refused_before_work_sta
         run_survey({"initial": {"family": "equilateral", "delta": [1.0]}}, workers=too_many)
 
 
-def test_check_is_the_same_survey_with_another_seed_and_ensemble(tmp_path):
-    """[check] defaults to the next seed and twice the ensemble (at least 8); its config
-    text is the workflow's with those two keys, its name and output suffixed _check (the
-    output a --output override gives too); it does not change the survey's own result key."""
+def test_check_variants_are_the_same_survey_with_one_thing_changed(tmp_path):
+    """[check] runs four variants by default, each its own config text and archive
+    <output>_check_<variant>.nc (the output a --output override gives too), none changing
+    the survey's own result key: seed -- the next seed, twice the ensemble (at least 8),
+    the nominal starts nudged; rounding -- the nudge alone; horizon -- twice t_final;
+    tolerance -- rtol and atol times 100."""
     text = GOOD.format(out=tmp_path / "x.nc")
     plain = parse_config(text)
     config = parse_config(text + "[check]\n")
     assert config.result_key() == plain.result_key()
-    check = config.check()
-    ind = check.tables["indicators"]
-    assert (ind["seed"], ind["perturbations"]) == (1, 32)
-    assert check.name == "t_check" and check.output == tmp_path / "x_check.nc"
-    assert check.check() is None and plain.check() is None
-    assert parse_config(check.text).result_key() == check.result_key()
-    assert check.result_key() != config.result_key()
+    checks = config.checks()
+    assert list(checks) == ["seed", "rounding", "horizon", "tolerance"]
+    ind = {k: c.tables["indicators"] for k, c in checks.items()}
+    integ = {k: c.tables["integration"] for k, c in checks.items()}
+    mine_ind, mine = plain.tables["indicators"], plain.tables["integration"]
+    assert (ind["seed"]["seed"], ind["seed"]["perturbations"], ind["seed"]["nudge"]) \
+        == (1, 32, 1e-13)
+    assert (ind["rounding"]["seed"], ind["rounding"]["perturbations"],
+            ind["rounding"]["nudge"]) == (0, 16, 1e-13)
+    assert integ["horizon"]["t_final"] == 2 * mine["t_final"]
+    assert (integ["tolerance"]["rtol"], integ["tolerance"]["atol"]) == \
+        (100 * mine["rtol"], 100 * mine["atol"])
+    for k in ("seed", "rounding"):
+        assert integ[k] == mine
+    for k in ("horizon", "tolerance"):
+        assert ind[k] == mine_ind
+    keys = {config.result_key()}
+    for variant, check in checks.items():
+        assert check.name == f"t_check_{variant}"
+        assert check.output == tmp_path / f"x_check_{variant}.nc"
+        assert check.checks() == {}
+        assert parse_config(check.text).result_key() == check.result_key()
+        keys.add(check.result_key())
+    assert len(keys) == 5 and plain.checks() == {}
     config.tables["survey"]["output"] = str(tmp_path / "elsewhere" / "y.nc")
-    moved = config.check()
-    assert moved.output == tmp_path / "elsewhere" / "y_check.nc"
-    assert moved.text == check.text         # the text names the workflow's own output
+    moved = config.checks()["seed"]
+    assert moved.output == tmp_path / "elsewhere" / "y_check_seed.nc"
+    assert moved.text == checks["seed"].text   # the text names the workflow's own output
     small = parse_config(text.replace("[integration]", "[indicators]\nperturbations = 2\n"
-                                      "[integration]") + "[check]\nseed = 7\n").check()
-    assert (small.tables["indicators"]["seed"], small.tables["indicators"]["perturbations"]) \
-        == (7, 8)
+                                      "[integration]") + "[check]\nseed = 7\n"
+                         "variants = [\"seed\"]\n").checks()
+    assert list(small) == ["seed"]
+    assert (small["seed"].tables["indicators"]["seed"],
+            small["seed"].tables["indicators"]["perturbations"]) == (7, 8)

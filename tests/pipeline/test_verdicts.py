@@ -117,13 +117,15 @@ def test_the_equilateral_familys_frequencies_are_three_continuous_curves(tmp_pat
     np.testing.assert_allclose(eq.frequencies, np.sort(modes), rtol=1e-10)
 
 
-def test_a_check_run_states_the_claims_at_another_seed_and_ensemble(tmp_path, capsys):
-    """`run` with a [check] table runs the survey again with the next seed and twice the
-    ensemble into <output>_check.nc: other deviation vectors and perturbed starts (other
-    FTLEs), and the nominal orbits nudged by 1e-13 (other last bits: their energy errors
-    and Birkhoff digits move too, where before they were the same bits); the report gives
-    the onset at both seeds and the regimes side by side, says the nominal orbits moved,
-    and `report` finds the check run again beside its archive."""
+def test_check_runs_state_the_claims_at_another_seed_and_budget_the_onset(tmp_path, capsys):
+    """`run` with a [check] table runs the survey again once per variant into
+    <output>_check_<variant>.nc. The seed run: other deviation vectors and perturbed
+    starts (other FTLEs), and the nominal orbits nudged by 1e-13 (other last bits: their
+    energy errors and Birkhoff digits move too, where before they were the same bits); the
+    tolerance run: other orbits altogether. The report gives the regimes of the seed run
+    side by side, says the nominal orbits moved, and lists the onset's uncertainty by
+    contribution (the step, each run's shift, the two not run named as not measured);
+    `report` finds the check runs again beside the archive."""
     import xarray as xr
 
     from survey.cli import main
@@ -140,26 +142,37 @@ t_final = 200.0
 [indicators]
 perturbations = 2
 [check]
+variants = ["seed", "tolerance"]
 [dask]
 workers = 1
 """)
     assert main(["run", str(cfg), "--no-progress"]) == 0
-    assert "seed 1 and 8 perturbed orbits" in capsys.readouterr().out
-    with xr.open_dataset(tmp_path / "c.nc") as a, xr.open_dataset(tmp_path / "c_check.nc") as b:
+    out = capsys.readouterr().out
+    assert "seed 1 and 8 perturbed orbits" in out and "rtol = 1e-10, atol = 1e-10" in out
+    with xr.open_dataset(tmp_path / "c.nc") as a, \
+            xr.open_dataset(tmp_path / "c_check_seed.nc") as b, \
+            xr.open_dataset(tmp_path / "c_check_tolerance.nc") as c:
         assert np.all(a[V.energy_error].values != b[V.energy_error].values)
         assert np.any(a[V.birkhoff_digits].values != b[V.birkhoff_digits].values)
         np.testing.assert_array_equal(a[V.initial_state].values, b[V.initial_state].values)
         assert np.all(a[V.ftle].values != b[V.ftle].values)
+        assert np.all(a[V.energy_error].values != c[V.energy_error].values)
         assert (int(a[V.ensemble_orbits].max()), int(b[V.ensemble_orbits].max())) == (3, 9)
         counts = [(r, int(np.sum(a[V.regime].values == r)), int(np.sum(b[V.regime].values == r)))
                   for r in np.unique(np.r_[a[V.regime].values, b[V.regime].values])]
+    assert not (tmp_path / "c_check_rounding.nc").exists()
     report = (tmp_path / "c_report.md").read_text()
     assert "## The same survey with another seed and ensemble" in report
     assert "each cell's nominal orbit started 1e-13 (relative) away" in report
-    assert "With seed 1: onset" in report or "With seed 1 the regime does not change" in report
     from survey.catalog.regimes import Regime
     for r, here, there in counts:
         assert f"| {Regime(r).name.lower()} | {here} | {there} |" in report
+    if "## Where chaos sets in\n\nAlong delta the orbits are regular up to" in report:
+        assert "| seed 1, 8 orbits a cell |" in report and "| rtol = 1e-10 |" in report
+        assert "| half the grid step | — |" in report
+        assert "Not measured, so not in this uncertainty: rounding" in report
+        assert "horizon (twice t_final)" in report
     (tmp_path / "c_report.md").unlink()
     assert main(["report", str(tmp_path / "c.nc")]) == 0
-    assert "## The same survey with another seed" in (tmp_path / "c_report.md").read_text()
+    again = (tmp_path / "c_report.md").read_text()
+    assert "## The same survey with another seed" in again and "| rtol = 1e-10 |" in again

@@ -429,7 +429,9 @@ def test_onsets_only_along_axes_where_they_mean_something():
     assert "Where chaos sets in" not in text and "coordinate of the starts" in text
     text = "\n".join(report._onsets(axis("delta", "initial-condition parameter delta"),
                                     ["delta"], line))
-    assert "onset delta = 0.375 +- 0.12" in text
+    assert "Onset delta = 0.375 +- 0.12 (the root sum of squares" in text
+    assert "| half the grid step | — | 0.12 |" in text
+    assert "Not measured, so not in this uncertainty: seed" in text
     energy = np.array([1.0, 2.0, 3.0])
     ds = xr.Dataset(coords={
         "axilrod_teller_strength": ("axilrod_teller_strength", x, {
