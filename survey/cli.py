@@ -228,6 +228,7 @@ def _reproduce(args):
         made = _survey(config, command=f"python -m survey reproduce ({path.name})",
                        progress=False if args.no_progress else None)
         print(f"made {made}, its report and figures")
+    _render_readme(Path(args.workflows) / "results_readme.md", staging, results)
     changed = []
     for new in sorted(p for p in staging.iterdir() if p.is_file()):
         old = results / new.name
@@ -245,6 +246,22 @@ def _reproduce(args):
               f"nothing changed in {results}")
     shutil.rmtree(staging, ignore_errors=True)
     return 1 if args.check and changed else 0
+
+
+def _render_readme(template: Path, staging: Path, results: Path):
+    """results/README.md from its template, filled from the files just made (staging) over
+    those already in results/; not rendered, with the reason, where a file it quotes is
+    in neither (a --only run into a new folder)."""
+    from .presentation.results_text import render
+    if not template.exists():
+        return
+    try:
+        text = render(template.read_text(), staging, results)
+    except FileNotFoundError as missing:
+        print(f"{results / 'README.md'} not rendered: {missing}")
+        return
+    (staging / "README.md").write_text(text)
+    print(f"made {staging / 'README.md'} from {template}")
 
 
 def _differs(old, new) -> str:

@@ -1,5 +1,6 @@
 """results/ is what a reviewer reads first: every archive in it was written by the current
 code from the workflow file whose text it stores, with its report and figures beside it."""
+import re
 import tomllib
 from pathlib import Path
 
@@ -10,6 +11,7 @@ from survey.pipeline import orbits
 from survey.pipeline.config import parse_config
 from survey.pipeline.special import special_table
 from survey.pipeline.sweep import verify
+from survey.presentation.results_text import PLACEHOLDER, render
 
 ROOT = Path(__file__).parents[1]
 RESULTS = ROOT / "results"
@@ -93,3 +95,92 @@ def test_reproduce_replaces_only_what_changed_and_check_names_it(tmp_path, capsy
     assert without_provenance(report.read_text()) == without_provenance(made)
     assert figure.exists() and (tmp_path / "default.nc").read_bytes() == archive
     assert not (tmp_path / ".staging").exists()
+
+
+NUMBER = re.compile(r"(?<![\w.^/-])-?\d+(?:\.\d+)?(?:e[-+]?\d+)?(?![\w.])")
+
+
+def typed_numbers(text: str) -> list[str]:
+    """The numbers typed in a text, outside its placeholders, code spans, file names and
+    citations' years (Meiss 2023)."""
+    text = PLACEHOLDER.sub(" ", text)
+    text = re.sub(r"`[^`]*`", " ", text)
+    text = re.sub(r"[A-Z][\w'-]+,? (?:19|20)\d\d\b", " ", text)
+    return NUMBER.findall(text)
+
+
+def unsourced(text: str, sources: str) -> list[str]:
+    found = set(re.findall(r"\d+(?:\.\d+)?(?:e[-+]?\d+)?", sources))
+    return sorted({n for n in typed_numbers(text) if n.lstrip("-") not in found})
+
+
+def number_sources() -> str:
+    """Where a typed number may come from: the paper, the workflows, the embedded default
+    and the configuration reference (SCHEMA's defaults)."""
+    from survey.pipeline.config import markdown_tables
+    texts = [(ROOT / "tests" / "data" / "triplet-interactions.tex").read_text(),
+             (ROOT / "survey" / "default.toml").read_text(), markdown_tables()]
+    texts += [p.read_text() for p in sorted((ROOT / "workflows").glob("*.toml"))]
+    return "\n".join(texts)
+
+
+def test_results_readme_is_what_reproduce_renders_and_every_number_has_a_source():
+    """results/README.md is its template rendered from the archives and generated files in
+    results/ (no number typed by hand), and every number typed in the template is the
+    paper's, a workflow's or a default's: a number with no source fails."""
+    template = (ROOT / "workflows" / "results_readme.md").read_text()
+    assert (RESULTS / "README.md").read_text() == render(template, RESULTS)
+    missing = unsourced(template, number_sources())
+    assert not missing, f"numbers typed in workflows/results_readme.md with no source: " \
+                        f"{missing}"
+
+
+SCIENCE = ("Chaos indicators and sections", "Tori, resonances and chaos", "Special solutions",
+           "Notes on the paper")
+
+
+def test_the_readme_science_types_no_number_without_a_source():
+    """The README's science sections describe methods; what survey finds is in
+    results/README.md. A number they type must be the paper's, a workflow's, a default's
+    or a constant's of the code, one a test asserts, or one a generated file in results/
+    quotes -- so a measurement typed by hand and since changed fails."""
+    sections = re.split(r"(?m)^## ", (ROOT / "README.md").read_text())
+    science = [s for s in sections if s.startswith(SCIENCE)]
+    assert len(science) == len(SCIENCE)
+    sources = "\n".join([number_sources()] + [p.read_text() for p in sorted(
+        [*RESULTS.glob("*.md"), *(ROOT / "tests").rglob("*.py"),
+         *(ROOT / "survey").rglob("*.py")])])
+    for section in science:
+        missing = unsourced(section, sources)
+        assert not missing, f"README, {section.splitlines()[0]!r}: {missing}"
+
+
+def test_the_number_source_test_can_fail():
+    """A measured number typed into the prose is found; placeholders and code are not."""
+    assert typed_numbers("an FTLE of 0.34 where {{cell a | ftle | delta=0}} says `x_0.2` "
+                         "(Sander & Meiss 2025)") == ["0.34"]
+    assert "0.34" not in re.findall(r"\d+(?:\.\d+)?(?:e[-+]?\d+)?", number_sources())
+
+
+@pytest.mark.parametrize("archive", [a for a in ARCHIVES if check_variant(a)],
+                         ids=lambda a: a.stem)
+def test_every_check_run_moves_the_orbits_not_only_the_ensembles(archive):
+    """A [check] run that integrated the same nominal orbits bit for bit could not move the
+    Birkhoff digits or the frequencies: in every run they differ at some chaotic cell the
+    two runs share."""
+    import numpy as np
+
+    from survey.analysis.refine import as_grid
+    from survey.catalog.regimes import Regime
+    from survey.catalog.variables import V
+    own = RESULTS / f"{workflow_of(archive).stem}.nc"
+    with xr.open_dataset(own) as a, xr.open_dataset(archive) as b:
+        a, b = as_grid(a), as_grid(b)
+        (axis,) = a[V.status].dims
+        common = np.intersect1d(a[axis].values, b[axis].values)
+        a, b = a.sel({axis: common}), b.sel({axis: common})
+        chaotic = a[V.regime].values == Regime.CHAOTIC
+        assert chaotic.any()
+        assert np.any(a[V.birkhoff_digits].values[chaotic] != b[V.birkhoff_digits].values[chaotic])
+        assert np.any(np.any(a[V.frequency].values[chaotic] != b[V.frequency].values[chaotic],
+                             axis=-1))

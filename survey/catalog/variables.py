@@ -43,6 +43,7 @@ class CellResult(NamedTuple):
     energy: Any = np.nan
     angular_momentum: Any = np.nan
     scale_free_energy: float = np.nan     # E |J|^(-2k/(k+2)) of a potential of degree k
+    start_potential: float = np.nan       # U at t = 0: E minus it is the start's kinetic energy
     energy_error: float = np.nan
     angular_momentum_error: float = np.nan
     indicators: Any = None                 # numerics.indicators.ChaosIndicators
@@ -157,6 +158,12 @@ VARIABLES = [
                              "on (q -> s q, p -> s^(k/2) p, t -> s^(1-k/2) t)",
         lambda r: r.scale_free_energy, when=lambda c: c.system().homogeneity not in (None, -2.0),
         symbol=r"$E\,|J|^{-2k/(k+2)}$"),
+    Var("start_potential", "potential energy U of the start: E minus it is the start's "
+                           "kinetic energy, and for starts at an equilibrium (the "
+                           "equilibrium family, displacement 0) the height of E above that "
+                           "equilibrium, E - E_min: the energy axis of a map over a "
+                           "parameter that moves the minimum",
+        lambda r: r.start_potential, symbol="$U_0$"),
     Var("energy_error", "max |E(t)/E(0) - 1| over the history times and the end",
         lambda r: r.energy_error, symbol=r"$|\Delta E/E|$"),
     Var("angular_momentum_error", "max |J(t) - J(0)| / max(|J(0)|, 1) over the same times",

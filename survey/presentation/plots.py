@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import itertools
 import textwrap
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -91,6 +92,8 @@ def figures(ds, variables=None, special=(), slice_at=None) -> dict[str, Figure]:
             if np.isfinite(ds[name].values).any():
                 out[f"map_{name}"] = indicator_map(ds, name, style.cmap, style.clip,
                                                    style.log)
+        if _height_axis(ds) is not None:
+            out["map_regime_height"] = regime_height_map(ds)
         if all(f"crossing_{a}" in ds for a in map_axes(ds)) and V.megno in ds \
                 and np.isfinite(ds[V.megno].values).any():
             style = OWNER[V.megno].map
@@ -207,13 +210,7 @@ def _hatch_cells(ax, x, y, mask):
     from matplotlib.collections import PatchCollection
     from matplotlib.patches import Rectangle
 
-    def edges(c):
-        c = np.asarray(c, dtype=float)
-        if c.size == 1:
-            return np.array([c[0] - 0.5, c[0] + 0.5])
-        mid = (c[1:] + c[:-1]) / 2
-        return np.concatenate([[2 * c[0] - mid[0]], mid, [2 * c[-1] - mid[-1]]])
-    ex, ey = edges(x), edges(y)
+    ex, ey = _edges(x), _edges(y)
     boxes = [Rectangle((ex[i], ey[j]), ex[i + 1] - ex[i], ey[j + 1] - ey[j])
              for i, j in zip(*np.nonzero(mask))]
     if boxes:
@@ -294,6 +291,72 @@ def regime_map(ds, special=()) -> Figure:
     if not refined_axes(ds):
         ax.set_title("regime of each cell", fontsize="medium")
     return fig
+
+
+def _height_axis(ds):
+    """For a map over the energy and a parameter whose starts' potential energy U_0 is one
+    number per parameter value (starts at that system's equilibrium) and moves with it:
+    (the parameter, U_0 per value of it); else None. The energy's meaning then changes
+    across the map, and the height above U_0 is the axis that compares like with like."""
+    if V.start_potential not in ds or refined_axes(ds) or "energy" not in grid_axes(ds) \
+            or len(grid_axes(ds)) != 2:
+        return None
+    other = next(a for a in grid_axes(ds) if a != "energy")
+    u = ds[V.start_potential].transpose(other, "energy").values
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)      # all-NaN rows: inaccessible
+        low, high = np.nanmin(u, axis=1), np.nanmax(u, axis=1)
+    scale = np.nanmax(np.abs(u)) if np.isfinite(u).any() else 0.0
+    known = np.isfinite(low)
+    if known.sum() < 2 or np.any(high[known] - low[known] > 1e-9 * max(scale, 1.0)) or \
+            np.ptp(low[known]) <= 1e-9 * max(scale, 1.0):
+        return None
+    return other, low
+
+
+def regime_height_map(ds) -> Figure:
+    """The regime map over the parameter and the height of E above the starts' potential
+    energy U_0 (_height_axis): each column shifted down by its own U_0, so that a band
+    just above each system's minimum lines up across the parameter."""
+    other, u0 = _height_axis(ds)
+    fig = Figure(figsize=(9.0, 5.0), layout="constrained")
+    ax = fig.add_subplot()
+    x, energy = ds[other].values, ds["energy"].values
+    regime = ds[V.regime].transpose(other, "energy").values
+    shade = confidence_shade(ds.transpose(other, "energy", ...))
+    cmap = ListedColormap([REGIME_COLOURS[r] for r in Regime])
+    norm = BoundaryNorm(np.arange(len(Regime) + 1) - 0.5, len(Regime))
+    half = 0.5 * np.diff(x).min() if x.size > 1 else 0.5
+    for i in np.flatnonzero(np.isfinite(u0)):
+        rgba = cmap(norm(regime[i]))
+        rgba[:, :3] = 1.0 - shade[i][:, None] * (1.0 - rgba[:, :3])
+        up = energy - u0[i] >= 0               # below U_0 no start exists
+        ax.pcolormesh([x[i] - half, x[i] + half], _edges(energy[up] - u0[i]),
+                      rgba[up][:, None, :], shading="flat")
+    counts = [(r, int(np.sum(regime == r))) for r in Regime if r != Regime.INACCESSIBLE]
+    handles = [Patch(color=REGIME_COLOURS[r], label=f"{r.name.lower()} ({n})")
+               for r, n in counts if n]
+    below = int(np.sum(regime == Regime.INACCESSIBLE))
+    if below:
+        handles.append(Patch(color="none", label=f"{below} inaccessible cells\n(E < U_0), "
+                                                 "not drawn"))
+    ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.02, 1),
+              fontsize="small", title="regime (cells)")
+    ax.set_xlabel(label(other))
+    ax.set_ylabel("E - U_0: height of the energy above the starts' potential energy\n"
+                  "(E - E_min for starts at the equilibrium)")
+    ax.set_title("regime against the height above each system's start: the same map with "
+                 "each column lowered by its own U_0", fontsize="small")
+    return fig
+
+
+def _edges(c) -> np.ndarray:
+    """Cell edges halfway between centres (and as far beyond the ends)."""
+    c = np.asarray(c, dtype=float)
+    if c.size == 1:
+        return np.array([c[0] - 0.5, c[0] + 0.5])
+    mid = (c[1:] + c[:-1]) / 2
+    return np.concatenate([[2 * c[0] - mid[0]], mid, [2 * c[-1] - mid[-1]]])
 
 
 def regular_share_figure(ds) -> Figure:

@@ -9,7 +9,7 @@ import numpy as np
 
 from ..analysis.classify import (evidence_votes, regular_share, stored_config, stored_table,
                                  threshold_margins)
-from ..analysis.findings import decorrelated, twists
+from ..analysis.findings import decorrelated, how_many, islands, regions, twists
 from ..analysis.onset import budget, onset, onset_over_horizons, runs
 from ..analysis.refine import as_grid, boundaries
 from ..catalog import defaults
@@ -117,6 +117,7 @@ def markdown(ds, figure_names=(), checks=None, special=()) -> str:
     out += _refinement(ds, config, regime, check)
     out += _shares(ds, axes, regime)
     out += _onsets(ds, axes, regime, checks, th)
+    out += _islands(axes, regime)
     out += _second_run(ds, check, regime)
     out += _tori_table(ds, axes, regime)
     out += _special(ds, special, regime)
@@ -430,13 +431,9 @@ def _onsets(ds, axes, regime, checks=None, th=None) -> list[str]:
         else:
             out.append(f"Along {axes[0]} the orbits are regular up to {found['last_regular']:g}; "
                        f"the first irregular cell is at {found['first_irregular']:g}.")
-            out += _onset_budget(ds, x, found, axes[0], checks, th)
+            out += _onset_budget(ds, x, regime, found, axes[0], checks, th)
             if found["all_irregular_from"] is not None:
-                mixed = found["all_irregular_from"] > found["first_irregular"]
-                out.append(f"Every cell is irregular from {axes[0]} = "
-                           f"{found['all_irregular_from']:g} on" + (
-                               "; in between regular islands and sticky or weakly chaotic "
-                               "cells alternate." if mixed else "."))
+                out.append(_irregular_from(x, regime, found, axes[0]))
         out.append("")
     elif len(axes) == 2:
         a, b = axes
@@ -450,7 +447,7 @@ def _onsets(ds, axes, regime, checks=None, th=None) -> list[str]:
         for yb, line in _lines(ds, a, b):
             col = line[V.regime].values
             where = ["none" if found is None else
-                     _pm(found['estimate'], found['error'])
+                     plus_minus(found['estimate'], found['error'])
                      for found in [_onset_1d(other, other[a].values) for other in
                                    [line] + ([theirs[yb]] if yb in theirs else [])]]
             if check is not None and yb not in theirs:
@@ -468,7 +465,15 @@ def _onsets(ds, axes, regime, checks=None, th=None) -> list[str]:
     return out
 
 
-def _pm(x: float, error: float) -> str:
+def _islands(axes, regime) -> list[str]:
+    """A map's regular regions that the grid encloses (analysis.findings.islands): the
+    only ones a report calls islands. Not along seeded starts, which have no order."""
+    if len(axes) != 2 or "seed" in axes or regime.ndim != 2:
+        return []
+    return ["## Regular islands", "", islands(regime).text() + ".", ""]
+
+
+def plus_minus(x: float, error: float) -> str:
     """'4.175 +- 0.025': a value with its uncertainty, to 4 digits or as many as the
     uncertainty needs (a bisection's 4.17312 +- 0.00062)."""
     digits = 4
@@ -505,7 +510,24 @@ def _onset_1d(ds, x):
                                [float(f) for f in ds["horizon_factor"].values])
 
 
-def _onset_budget(ds, x, found, axis, checks, th) -> list[str]:
+def onset_budget(ds, axis, checks, regime=None):
+    """The Budget (analysis.onset.budget) of the onset along a one-axis archive: the step,
+    the shift from the verdicts at the horizon before the last (where cells in doubt were
+    decided again longer), and each [check] run's shift (`checks`: archives by variant).
+    None where the regime does not change from regular to chaotic. `regime`: the cells'
+    regimes where the caller has them, else the archive's."""
+    found = onset(ds[axis].values, ds[V.regime].values if regime is None else regime)
+    if found is None:
+        return None
+    others = {k: _onset_1d(c, c[axis].values) for k, c in checks.items()}
+    if V.regime_history in ds:
+        by = _onset_1d(ds, ds[axis].values)["by_horizon"]
+        if len(by) > 1 and by[-2][1] is not None:
+            others = {"extension": {"estimate": by[-2][1]}, **others}
+    return budget(found, others)
+
+
+def _onset_budget(ds, x, regime, found, axis, checks, th) -> list[str]:
     """The onset with its uncertainty contribution by contribution (analysis.onset.budget):
     the step the grid or bisection left, and each [check] variant's shift; the cells on
     either side of it whose votes lie near a threshold; how it moved over the horizons of
@@ -517,17 +539,18 @@ def _onset_budget(ds, x, found, axis, checks, th) -> list[str]:
         out.append("The onset from each cell's verdict at each of its horizons: " + "; ".join(
             f"at {f:g} T = {f * T:g}: " + ("none" if e is None else f"{e:.6g}")
             for f, e in over["by_horizon"]) + ".")
-    found_by = {k: _onset_1d(c, c[axis].values) for k, c in checks.items()}
-    b = budget(found, found_by)
+    b = onset_budget(ds, axis, checks, regime)
     step = ("half the interval the bisection ended with" if "level" in ds.coords
             else "half the grid step")
-    what = {"step": step, **{k: _variant_words(k, c) for k, c in checks.items()}}
+    what = {"step": step, "extension": "the verdicts at the horizon before the last "
+                                       "(cells in doubt were decided again longer)",
+            **{k: _variant_words(k, c) for k, c in checks.items()}}
     out += ["", "| contribution | onset | shift |", "| --- | --- | --- |"]
     for name, size, there in b.parts:
         out.append(f"| {what[name]} | {'—' if name == 'step' else 'none' if there is None else f'{there:.6g}'} | "
                    f"{'no onset' if not np.isfinite(size) else f'{size:.2g}'} |")
     if np.isfinite(b.total):
-        out += ["", f"Onset {axis} = {_pm(b.estimate, b.total)} (the root sum of squares "
+        out += ["", f"Onset {axis} = {plus_minus(b.estimate, b.total)} (the root sum of squares "
                     "of the contributions above)."]
     else:
         lost = [what[n] for n, size, _ in b.parts if not np.isfinite(size)]
@@ -542,6 +565,28 @@ def _onset_budget(ds, x, found, axis, checks, th) -> list[str]:
         out += _near_thresholds(ds, x, [found["last_regular"], found["first_irregular"]],
                                 axis, th)
     return out
+
+
+def _irregular_from(x, regime, found, axis) -> str:
+    """From where on every cell is irregular, with the count, and what lies between the
+    first irregular cell and there: the regular runs bounded by other regimes on both
+    sides (islands along the axis), and the other cells by regime."""
+    tail = x >= found["all_irregular_from"]
+    text = (f"From {axis} = {found['all_irregular_from']:g} on, "
+            f"{how_many(int(np.isin(regime[tail], IRREGULAR).sum()), int(tail.sum()))} cells "
+            "are irregular.")
+    between = (x > found["first_irregular"]) & (x < found["all_irregular_from"])
+    if between.any():
+        runs_inside = regions(between & np.isin(regime, REGULAR))
+        others = ", ".join(f"{int(np.sum(between & (regime == r)))} {r.name.lower()}"
+                           for r in Regime if r not in REGULAR and
+                           np.any(between & (regime == r)))
+        text += f" Between {found['first_irregular']:g} and {found['all_irregular_from']:g}: "
+        text += (f"{len(runs_inside)} run{'s' * (len(runs_inside) != 1)} of regular cells "
+                 f"({int(np.sum(between & np.isin(regime, REGULAR)))} cells), each bounded "
+                 f"by other regimes on both sides -- islands along {axis} -- and {others}."
+                 if runs_inside else f"no regular cell; {others}.")
+    return text
 
 
 NEAR = 0.1      # a vote this close to its threshold (relative) is named beside an onset

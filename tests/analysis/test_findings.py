@@ -3,11 +3,14 @@ and to fail: a twistless torus only where a frequency turns by more than its own
 between neighbouring regular cells on one fundamental, never along seeded starts; a
 resonance only within the frequencies' drift and not an n:1 relation between two of them;
 a spread only where the ensemble's orbits separate; a family's stable stretch only where
-no index nears +-1 faster than it moves between members."""
+no index nears +-1 faster than it moves between members; all and none only by the count;
+an island only where the grid encloses it; an onset's uncertainty from its parts."""
 import numpy as np
 import pytest
 
-from survey.analysis.findings import decorrelated, family_stability, resonant, twists
+from survey.analysis.findings import (decorrelated, family_stability, how_many, islands, regions,
+                                     resonant, twists)
+from survey.analysis.onset import budget
 from survey.catalog.regimes import Regime
 
 X = np.linspace(0.0, 2.0, 21)
@@ -92,3 +95,41 @@ def test_a_stable_stretch_is_established_only_where_the_members_resolve_it():
     assert not first.passed and first.numbers["members"] == 3
     assert "between 1 pair of neighbouring members" in first.text()
     assert second.passed and second.text() == "Linearly stable for energy from 4 to 6 (3 members)"
+
+
+def test_all_and_none_only_where_the_count_supports_them():
+    assert how_many(51, 51) == "all 51" and how_many(0, 51) == "none of 51"
+    assert how_many(50, 51) == "50 of 51" and how_many(0, 0) == "0 of 0"
+    assert how_many(49, 49, "2 failed") == "all 49 (2 failed left out)"
+
+
+def test_an_island_is_a_regular_region_the_grid_encloses():
+    """A regular block ringed by chaos is an island; the same block moved to the grid's
+    edge is not (it may go on beyond the grid), nor is a region touching the edge by one
+    cell; regions are connected along the axes, not diagonally."""
+    C, T = Regime.CHAOTIC, Regime.TORUS
+    grid = np.full((6, 7), C)
+    grid[2:4, 2:5] = T                          # enclosed: 6 cells
+    grid[0, 0] = T                              # a corner: cut by the edge
+    found = islands(grid)
+    assert found.passed and found.numbers == {"islands": 1, "edge": 1, "sizes": [6]}
+    grid[2:4, 2:5] = C
+    grid[1:3, 4:7] = T                          # reaches the right edge
+    found = islands(grid)
+    assert not found.passed and "touches its edge" in found.text()
+    assert not islands(np.full((3, 3), C)).passed
+    diagonal = np.full((5, 5), C)
+    diagonal[1, 1] = diagonal[2, 2] = diagonal[3, 3] = T
+    assert islands(diagonal).numbers["sizes"] == [1, 1, 1]
+    line = np.array([T, C, T, T, C, T])         # along one axis: the middle run only
+    assert [(list(c), e) for c, e in regions(line == T)] == \
+        [([0], False), ([2, 3], True), ([5], False)]
+
+
+def test_an_onset_budget_adds_its_contributions_and_fails_without_an_onset():
+    found = {"estimate": 4.17, "error": 0.0003}
+    b = budget(found, {"seed": {"estimate": 4.1704}, "rounding": {"estimate": 4.17}})
+    assert [p[0] for p in b.parts] == ["step", "seed", "rounding"]
+    assert b.total == pytest.approx(np.hypot(0.0003, 0.0004))
+    lost = budget(found, {"horizon": None})
+    assert lost.parts[1][1] == np.inf and lost.total == np.inf

@@ -12,6 +12,8 @@ from matplotlib.collections import PolyQuadMesh, QuadMesh
 from survey.analysis.onset import onset
 from survey.catalog.errors import ConfigError
 from survey.catalog.regimes import Regime
+from survey.catalog.status import Status
+from survey.catalog.variables import V
 from survey.cli import main, orbit_workflow
 from survey.pipeline import orbits
 from survey.pipeline.special import special_table
@@ -667,3 +669,37 @@ def test_a_legend_covers_lines_before_it_covers_points():
         px, py = ax.transData.transform(cell.get_offsets()[0])
         covered.append(x0 <= px <= x0 + w and y0 <= py <= y0 + h)
     assert covered == [True, False]         # matplotlib's "best", then ours
+
+
+def height_map(u0_of=lambda z, e: -3.0 + 0.5 * z):
+    """A (strength, energy) map whose starts sit at each system's minimum U_0(Z) = -3 +
+    Z/2: regular within 0.3 above it, chaotic higher, inaccessible below."""
+    z, e = np.linspace(0.0, 3.0, 7), np.linspace(-2.9, -1.0, 12)
+    u0 = u0_of(z[:, None], e[None, :]) + 0.0 * e
+    h = e[None, :] - u0
+    regime = np.where(h < 0, Regime.INACCESSIBLE, np.where(h < 0.3, Regime.TORUS,
+                                                            Regime.CHAOTIC)).astype("i1")
+    dims = ("axilrod_teller_strength", "energy")
+    return xr.Dataset({V.status: (dims, np.where(h < 0, Status.INACCESSIBLE, Status.OK)
+                                  .astype("i1")),
+                       V.regime: (dims, regime),
+                       V.start_potential: (dims, np.where(h < 0, np.nan, u0))},
+                      coords={dims[0]: z, dims[1]: e})
+
+
+def test_a_map_over_a_parameter_that_moves_the_minimum_is_drawn_above_it_too():
+    """Starts at each system's equilibrium (U_0 one number per parameter value, moving
+    with it): a second regime map over E - U_0, each column lowered by its own U_0, so
+    the band above the minimum lines up; not where U_0 stays put along the parameter, nor
+    where it changes along the energy (starts displaced from the equilibrium)."""
+    ds = height_map()
+    other, u0 = plots._height_axis(ds)
+    assert other == "axilrod_teller_strength"
+    np.testing.assert_allclose(u0, -3.0 + 0.5 * ds[other].values)
+    figs = plots.figures(ds)
+    assert "map_regime_height" in figs and "map_regime" in figs
+    ax = figs["map_regime_height"].axes[0]
+    low, high = ax.get_ylim()
+    assert -0.2 < low < 0.05 and high < 2.2        # heights, not energies
+    assert plots._height_axis(height_map(lambda z, e: -3.0 + 0.0 * z)) is None
+    assert plots._height_axis(height_map(lambda z, e: -3.0 + 0.5 * z + 0.01 * e)) is None
