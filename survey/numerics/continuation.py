@@ -28,6 +28,9 @@ from ..physics.equilibria import (
 TURN_DEGREES = 10.0         # a step whose tangent or chord turns more is halved
 TURN = 0.984807753012208    # its cosine
 GAP = 1e-6                  # scaled distance beyond which a bisection's ends are two branches
+# the changes named by their test alone: a fold, and a branch point (where the orientation
+# of the family changes: another family crosses it)
+NAMED = ("fold", "branch point")
 
 
 class Located(NamedTuple):
@@ -92,6 +95,7 @@ def follow(solve: Callable, x0: np.ndarray, to: float, steps: int, tests: dict[s
         raise ValueError("the start does not converge as a member of the family")
     member, x, A = first
     members = [(member, x, tangent(A, direction))]
+    jacobian = A                # the last member's, for the orientation test
     found: list[Located] = []
     start = x[-1]
     ds = nominal = 1.0 / steps
@@ -108,7 +112,8 @@ def follow(solve: Callable, x0: np.ndarray, to: float, steps: int, tests: dict[s
             row[-1] = 1.0
             got = solve(x + (to - x[-1]) / t[-1] * t if abs(t[-1]) > 0.1 else got[1], row, to)
             last = True
-        problem, located = _step_problem(members[-1], got, solve, tests, signature, bisect)
+        problem, located = _step_problem(members[-1], jacobian, got, solve, tests,
+                                         signature, bisect)
         if problem:
             ds /= 2
             if ds < SMALLEST * nominal:
@@ -119,6 +124,7 @@ def follow(solve: Callable, x0: np.ndarray, to: float, steps: int, tests: dict[s
             ds /= 2
             continue
         members.append(located.pop())
+        jacobian = got[2]
         again = next((at for at in located if _seen(at, found)), None)
         if again is not None:
             return Branch(members, found, False, f"it comes back to the {again.test} it "
@@ -146,7 +152,7 @@ def _seen(at: Located, found: list[Located]) -> bool:
     return any(at.test == b.test and abs(at.x[-1] - b.x[-1]) <= 1e-6 for b in found)
 
 
-def _step_problem(previous, got, solve, tests, signature, bisect):
+def _step_problem(previous, jacobian, got, solve, tests, signature, bisect):
     """(why the step to `got` fails its checks or '', [where tests change..., the new
     member (member, x, t)])."""
     if got is None:
@@ -164,8 +170,10 @@ def _step_problem(previous, got, solve, tests, signature, bisect):
         if moved > 0.1:
             return f"the stability indices jump by {moved:.2g}", []
     located = []
-    for name, test in tests.items():
-        if test(member, t) == test(member2, t2):
+    checks = {name: (lambda m, t, A, test=test: test(m, t)) for name, test in tests.items()}
+    checks["branch point"] = _orientation_against(jacobian)
+    for name, test in checks.items():
+        if test(member, t, None) == test(member2, t2, A2):
             continue
         at, gap = _bisect(previous, x2, solve, name, test, bisect)
         if gap:
@@ -174,6 +182,25 @@ def _step_problem(previous, got, solve, tests, signature, bisect):
                     "branch, not a bifurcation on one", [])
         located.append(Located(name, member, member2, at))
     return "", located + [(member2, x2, t2)]
+
+
+def _orientation_against(A1):
+    """The test that a member lies on the branch of `previous` as its orientation, the
+    sign of det [W A; t] (A the equations' Jacobian, t the tangent, W the row space of the
+    previous member's A1, fixed for the step): constant along a branch of regular points,
+    folds included, and it changes sign at a branch point, where another family crosses
+    -- or across a jump to a nearby branch (an imperfect crossing), which the tangent's
+    turn does not see when the other branch runs straight on. A1: the previous member's
+    A; called with A = None for that member itself."""
+    s, Vt = linalg.svd(A1)
+    r = Vt.shape[0] - 1
+    W = linalg.dot(A1, Vt[:r].T) / s[:r]       # A1's left singular vectors
+
+    def positive(m, t, A):
+        B = linalg.dot(W.T, A1 if A is None else A)
+        lam = linalg.eigvals(np.vstack([B, t]))
+        return bool(np.cos(np.sum(linalg.argument(lam))) > 0)
+    return positive
 
 
 def _bisect(previous, xb, solve, name, test, bisect):
@@ -190,7 +217,7 @@ def _bisect(previous, xb, solve, name, test, bisect):
         got = solve(xa + mid * ta, ta, linalg.dot(ta, xa) + mid)
         if got is None:
             return 0.5 * (ends[0] + ends[1]), max(linalg.norm(ends[1] - ends[0]), GAP)
-        side = int(test(got[0], tangent(got[2], ta)) != test(a, ta))
+        side = int(test(got[0], tangent(got[2], ta), got[2]) != test(a, ta, None))
         ends[side] = got[1]
         lo, hi = (mid, hi) if side == 0 else (lo, mid)
     apart = linalg.norm(ends[1] - ends[0])
@@ -266,8 +293,8 @@ def equilibrium_family(systems: Callable, start, p0: float, to: float, steps: in
     found = []
     for at in branch.found:
         p_at = float(at.x[-1] * scale[-1])
-        if at.test == "fold":
-            found.append(Bifurcation(p_at, "fold"))
+        if at.test in NAMED:
+            found.append(Bifurcation(p_at, at.test))
             continue
         off = min((at.before, at.after), key=lambda e: e.on_axis)
         lam = off.eigenvalues

@@ -31,7 +31,7 @@ from ..physics.equilibria import (
     nontrivial_subspace,
 )
 from ..physics.system import System, rhs
-from .continuation import at_labels, follow, on_row
+from .continuation import NAMED, at_labels, follow, on_row
 from .integrate import integrate
 
 UNIT_CIRCLE = 1e-6          # ||mu| - 1| below which a multiplier is on the unit circle
@@ -383,7 +383,10 @@ def lyapunov_start(system: System, eq: RelativeEquilibrium, mode: int,
     state displaced along the mode's eigenvector by `amplitude` times its size, and the
     mode's period in the rotating frame. The linearisation is that of H - Omega L in the
     frame rotating with it, which coincides with the inertial one at t = 0; the mode is
-    symplectically orthogonal to the rotation, so J moves only at second order."""
+    symplectically orthogonal to the rotation, so J moves only at second order -- and that
+    second order is taken back by a rigid rotation of the velocities (J changes by its rate
+    times I, nothing else of the shape's motion does), so the family runs at the
+    equilibrium's J exactly, not at a J the amplitude shifted."""
     f = eq.frequencies
     if not 1 <= mode <= f.size:
         raise ValueError(f"mode {mode}: the equilibrium has {f.size} normal modes on the "
@@ -404,7 +407,15 @@ def lyapunov_start(system: System, eq: RelativeEquilibrium, mode: int,
     v = v.real * c.real + v.imag * c.imag     # Re(v conj(c)): phased so that c is real
     size = np.max(np.linalg.norm(q - q.mean(axis=0), axis=1))
     v *= amplitude * size / np.max(np.abs(v[:nq]))
-    return eq.state(system) + v, 1.0 / f[mode - 1]
+    y = eq.state(system) + v
+    if d == 2:
+        q, p = system.split(y)
+        r = q - (system.masses @ q) / system.masses.sum()
+        rate = float(system.angular_momentum(eq.state(system)) - system.angular_momentum(y)) \
+            / float(np.sum(system.masses * np.sum(r * r, axis=1)))
+        y = system.state(q, p + rate * system.masses[:, None] * np.stack([-r[:, 1], r[:, 0]],
+                                                                         axis=1))
+    return y, 1.0 / f[mode - 1]
 
 
 class Family(NamedTuple):
@@ -497,7 +508,7 @@ def periodic_family(systems: Callable[[float], System], orbit: PeriodicOrbit, p0
                         p if pinned == "angular_momentum" else orbit.angular_momentum))
         return out
     values, branch = at_labels(branch, scale[-1], to, held, 1e4 * tol)
-    found = [Bifurcation(float(at.x[-1] * scale[-1]), "fold" if at.test == "fold" else
+    found = [Bifurcation(float(at.x[-1] * scale[-1]), at.test if at.test in NAMED else
                          _crossing(at.before, at.after), float(at.x[n] * scale[n]))
              for at in branch.found]
     return Family(values, [o for o, _, _ in branch.members], found, branch.complete,

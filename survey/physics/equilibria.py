@@ -142,6 +142,8 @@ class RelativeEquilibrium(NamedTuple):
     #                           member (+1, -1), 0 for any other eigenvalue
     stable: bool              # spectrally stable: every reduced eigenvalue on the imaginary axis
     residual: float           # |gradient of the amended potential| relative to its terms
+    morse: int = -1           # the amended potential's Morse index there (its descent
+    #                           directions, rotations aside): 0 at a minimum
 
     @property
     def frequencies(self) -> np.ndarray:
@@ -281,9 +283,13 @@ def relative_equilibrium(system: System, start, angular_momentum: float | None =
         raise ValueError("bodies drifted apart: no bound relative equilibrium from these "
                          "positions")
     lam, krein = linear_stability(system, q, omega)
+    R = rotations(xi, d)
+    P = np.eye(xi.size) - linalg.dot(R.T, R)
+    curvature = symmetric_eigen(linalg.chain(P, hess, P))[0]
+    morse = int(np.sum(curvature < -1e-8 * np.max(np.abs(curvature))))
     found = RelativeEquilibrium(q, float(omega), 0.0, float(omega * r2), lam, krein,
                                 bool(np.all(np.abs(lam.real) <= AXIS_TOLERANCE * _size(lam))),
-                                residual)
+                                residual, morse)
     return found._replace(energy=float(system.energy(found.state(system))))
 
 
@@ -374,28 +380,141 @@ def nontrivial_subspace(N: np.ndarray, known, form: np.ndarray | None = None) ->
     return v2[np.sum(s2 > 1e-10 * s2[0]):].T
 
 
+SHAPES = 64     # points of the shape sphere a planar three-body search starts from
+
+
+class Search(NamedTuple):
+    """The distinct relative equilibria a search found (lowest energy first), how many of
+    its tries reached each, and what it tried: the start, `shapes` points of the shape
+    sphere (planar three bodies: each by Newton and by descent) and `seeded` random
+    configurations."""
+
+    equilibria: list
+    hits: list[int]
+    tries: int
+    shapes: int
+    seeded: int
+
+    @property
+    def missed(self) -> float:
+        """An estimate of how many equilibria no try reached, from how many were reached
+        once (f1) and twice (f2): Chao's f1^2 / (2 f2) (f1 (f1 - 1) / 2 without a pair),
+        the species-richness estimator -- 0 when every one was reached at least twice."""
+        f1, f2 = self.hits.count(1), self.hits.count(2)
+        return f1 * f1 / (2.0 * f2) if f2 else f1 * (f1 - 1) / 2.0
+
+
 def relative_equilibria(system: System, start, angular_momentum: float | None = None,
                         rotation_rate: float | None = None, starts: int = 0,
-                        seed: int = 0) -> list[RelativeEquilibrium]:
-    """The distinct relative equilibria reached from `start` and from `starts` seeded
-    random configurations of the same size (positions normal about the centre with the
-    start's radius of gyration), by lowest energy first. Two are the same up to rotations,
+                        seed: int = 0, shapes: int = SHAPES) -> Search:
+    """The distinct relative equilibria reached from `start`, from `shapes` points of the
+    shape sphere (three bodies in the plane: a deterministic cover of every triangle,
+    each tried by Newton's method, which converges to saddles as readily as to minima,
+    and by descent on the amended potential, which reaches its minima) and from `starts`
+    seeded random configurations (positions normal about the centre with the start's
+    radius of gyration), all at the start's size. Two are the same up to rotations,
     reflections and permutations of the bodies when their energies and sorted mutual
     distances agree to 1e-7."""
     q0 = np.asarray(start, dtype=float).reshape(system.n_bodies, system.dim)
     q0 = q0 - centre_of_mass(system.masses, q0)
     radius = np.sqrt(np.sum(system.masses[:, None] * q0 ** 2) / system.masses.sum())
     rng = np.random.default_rng(seed)
-    guesses = [q0] + [rng.normal(0.0, radius, q0.shape) for _ in range(starts)]
+    planar3 = system.n_bodies == 3 and system.dim == 2
+    covered = [shape_configuration(system.masses, w, radius) for w in
+               shape_sphere(shapes)] if planar3 else []
+    guesses = [(q0, False)] + [(q, descend) for q in covered for descend in (False, True)] \
+        + [(rng.normal(0.0, radius, q0.shape), False) for _ in range(starts)]
     found: list[RelativeEquilibrium] = []
-    for guess in guesses:
+    hits: list[int] = []
+    for guess, descend in guesses:
         try:
+            if descend:
+                guess = _descend(system, guess, angular_momentum, rotation_rate)
             eq = relative_equilibrium(system, guess, angular_momentum, rotation_rate)
-        except (ValueError, np.linalg.LinAlgError):
+        except (ValueError, np.linalg.LinAlgError, FloatingPointError):
             continue
-        if not any(_same(eq, other) for other in found):
+        same = next((k for k, other in enumerate(found) if _same(eq, other)), None)
+        if same is None:
             found.append(eq)
-    return sorted(found, key=lambda e: e.energy)
+            hits.append(1)
+        else:
+            hits[same] += 1
+    order = np.argsort([e.energy for e in found], kind="stable")
+    return Search([found[k] for k in order], [hits[k] for k in order], len(guesses),
+                  len(covered), starts)
+
+
+def shape_sphere(n: int) -> np.ndarray:
+    """n points spread evenly over the unit sphere (a Fibonacci lattice): deterministic,
+    so a search gives the same list on every run."""
+    k = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * k / n
+    phi = np.pi * (1.0 + np.sqrt(5.0)) * k
+    r = np.sqrt(1.0 - z * z)
+    return np.stack([z, r * np.cos(phi), r * np.sin(phi)], axis=1)
+
+
+def shape_configuration(masses: np.ndarray, w: np.ndarray, radius: float) -> np.ndarray:
+    """Three positions in the plane (centre of mass at the origin, radius of gyration
+    `radius`) whose triangle is the point w of the shape sphere: with mass-weighted Jacobi
+    vectors z1, z2 as complex numbers, w = (|z1|^2 - |z2|^2, 2 z1 conj(z2)) / (|z1|^2 +
+    |z2|^2) -- every triangle up to rotation and size once, reflections as mirror points."""
+    m0, m1, m2 = masses
+    M = masses.sum()
+    mu1, mu2 = m0 * m1 / (m0 + m1), (m0 + m1) * m2 / M
+    R2 = M * radius * radius
+    a2, b2 = R2 * (1.0 + w[0]) / 2.0, R2 * (1.0 - w[0]) / 2.0
+    c = R2 * complex(w[1], w[2]) / 2.0             # z1 conj(z2)
+    if a2 >= b2:
+        z1 = complex(np.sqrt(a2), 0.0)
+        z2 = np.conj(c / z1)
+    else:
+        z2 = complex(np.sqrt(b2), 0.0)
+        z1 = c / z2
+    x1 = np.array([z1.real, z1.imag]) / np.sqrt(mu1)        # q1 - q0
+    x2 = np.array([z2.real, z2.imag]) / np.sqrt(mu2)        # q2 - centre of q0, q1
+    pair = -x2 * m2 / M
+    return np.array([pair - x1 * m1 / (m0 + m1), pair + x1 * m0 / (m0 + m1),
+                     x2 * (m0 + m1) / M])
+
+
+def _descend(system: System, start, angular_momentum, rotation_rate, max_iter: int = 200):
+    """Positions moved downhill on the amended potential from `start` (Newton's step with
+    the Hessian's eigenvalues taken by magnitude, the rotations held, halved until the
+    potential falls): towards a minimum, where Newton alone is drawn to saddles. Newton
+    then polishes whatever it reaches."""
+    T, w = frame(system.masses, system.dim)
+    q = np.asarray(start, dtype=float).reshape(system.n_bodies, system.dim)
+    xi = linalg.dot(T.T, (q - centre_of_mass(system.masses, q)).ravel() / w)
+
+    def value(xi):
+        q = (w * linalg.dot(T, xi)).reshape(system.n_bodies, system.dim)
+        u = float(system.potential_energy(system.state(q, np.zeros_like(q))))
+        r2 = linalg.dot(xi, xi)
+        return u + (angular_momentum ** 2 / (2.0 * r2) if angular_momentum is not None
+                    else -0.5 * (rotation_rate or 0.0) ** 2 * r2)
+
+    here = value(xi)
+    for _ in range(max_iter):
+        grad, hess, scale = amended(system, T, w, xi, angular_momentum, rotation_rate)
+        if not (np.isfinite(here) and np.all(np.isfinite(hess))):
+            raise ValueError("the descent ran into a collision")
+        if linalg.norm(grad) <= 1e-8 * scale:
+            break
+        R = rotations(xi, system.dim)
+        P = np.eye(xi.size) - linalg.dot(R.T, R)
+        lam, V = linalg.symmetric_eigen(linalg.chain(P, hess, P))
+        lam = np.maximum(np.abs(lam), 1e-6 * np.max(np.abs(lam)))
+        step = -linalg.dot(V, linalg.dot(V.T, linalg.dot(P, grad)) / lam)
+        for _ in range(40):
+            there = value(xi + step)
+            if np.isfinite(there) and there < here:
+                break
+            step = 0.5 * step
+        else:
+            break
+        xi, here = xi + step, there
+    return (w * linalg.dot(T, xi)).reshape(system.n_bodies, system.dim)
 
 
 def _distances(q):

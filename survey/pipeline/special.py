@@ -275,22 +275,41 @@ def write_archive(ds, path, command: str) -> Path:
     return out
 
 
-def equilibria_json(found: list[RelativeEquilibrium]) -> dict:
-    return {"equilibria": [{
+def equilibria_json(found: list[RelativeEquilibrium], search=None) -> dict:
+    """The equilibria as JSON; with their `search` (physics.equilibria.Search) how it
+    covered the configurations: tries, shape-sphere points, seeded starts, how many times
+    each was reached and an estimate of how many none reached."""
+    cover = {} if search is None else {"search": {
+        "tries": search.tries, "shape_sphere_points": search.shapes,
+        "seeded": search.seeded, "missed_estimate": search.missed}}
+    hits = [None] * len(found) if search is None else search.hits
+    return {**cover, "equilibria": [{
         "positions": e.positions.tolist(), "rotation_rate": e.rotation_rate,
         "energy": e.energy, "angular_momentum": e.angular_momentum,
         "eigenvalues": [[float(z.real), float(z.imag)] for z in e.eigenvalues],
         "frequencies": e.frequencies.tolist(),
         "krein": [int(k) for k, z in zip(e.krein, e.eigenvalues) if k],
-        "stable": e.stable, "residual": e.residual} for e in found]}
+        "stable": e.stable, "residual": e.residual, "morse_index": e.morse,
+        **({} if h is None else {"reached": h})} for e, h in zip(found, hits)]}
 
 
-def equilibria_text(system: System, table: dict, found: list[RelativeEquilibrium]) -> str:
+def equilibria_text(system: System, table: dict, search) -> str:
+    """The search's equilibria, each with how many tries reached it and its Morse index,
+    and how complete the list is."""
+    found = search.equilibria
     given = f"J = {table['angular_momentum']:g}" if table["angular_momentum"] is not None \
         else f"Omega = {table['rotation_rate']:g}"
+    tried = (f"the start, {search.shapes} points of the shape sphere (each by Newton and "
+             f"by descent) and {search.seeded} seeded configurations" if search.shapes else
+             f"the start and {search.seeded} seeded configurations")
     lines = [f"Relative equilibria of {system.n_bodies} bodies ({system.describe()}) at "
-             f"{given}, from the start and {table['starts']} seeded configurations: "
-             f"{len(found)} distinct (up to rotations, reflections and permutations)."]
+             f"{given}, from {tried}: {len(found)} distinct (up to rotations, reflections "
+             f"and permutations), reached {', '.join(map(str, search.hits))} times of "
+             f"{search.tries} tries. " + (
+                 "Every one was reached at least twice: no sign of one missed."
+                 if search.missed == 0 else
+                 f"Some were reached only once: about {search.missed:.1f} more may have been "
+                 "missed (Chao's estimate); more starts would find them.")]
     for k, e in enumerate(found):
         i, j = np.triu_indices(system.n_bodies, 1)
         dist = np.linalg.norm(e.positions[i] - e.positions[j], axis=1)
@@ -298,7 +317,9 @@ def equilibria_text(system: System, table: dict, found: list[RelativeEquilibrium
             e.frequencies, e.krein[e.krein != 0])) or "none"
         lines += ["", f"{k + 1}. E = {e.energy:.10g}, J = {e.angular_momentum:.10g}, "
                       f"Omega = {e.rotation_rate:.10g}: "
-                      + ("linearly stable" if e.stable else "unstable"),
+                      + ("linearly stable" if e.stable else "unstable")
+                      + f"; Morse index {e.morse} of the amended potential"
+                      + (" (a minimum)" if e.morse == 0 else ""),
                   "   mutual distances " + ", ".join(f"r{a}{b} = {r:.10g}" for a, b, r in
                                                      zip(i, j, dist)),
                   f"   normal modes in the rotating frame (cycles per unit time, Krein "
@@ -329,8 +350,8 @@ def print_equilibria(path, as_json_text: bool = False, output=None,
                          indent=1)
               if as_json_text else family_text(table, family))
         return 0
-    print(json.dumps(equilibria_json(found), indent=1) if as_json_text else
-          equilibria_text(system, table, found))
+    print(json.dumps(equilibria_json(found.equilibria, found), indent=1) if as_json_text
+          else equilibria_text(system, table, found))
     return 0
 
 

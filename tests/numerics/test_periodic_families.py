@@ -230,3 +230,14 @@ def test_families_in_the_angular_momentum_keep_the_closed_forms(triangle):
         assert member.energy == pytest.approx(110.0, rel=1e-12)
         assert member.period == pytest.approx(math.pi / 3, rel=1e-11)
         assert member.rotation == pytest.approx(math.pi, rel=1e-11)
+
+
+def test_a_lyapunov_start_keeps_the_equilibriums_angular_momentum(triangle):
+    """The displacement along a mode moves J at second order; the start takes it back, so
+    a family in energy runs at the J asked for (36), not at 36 +- 3e-5."""
+    J0 = float(PAPER.angular_momentum(triangle.state(PAPER)))
+    assert J0 == pytest.approx(36.0, rel=1e-14)
+    for mode in (1, 2, 3):
+        start, _ = lyapunov_start(PAPER, triangle, mode, amplitude=1e-2)
+        assert float(PAPER.angular_momentum(start)) == pytest.approx(J0, abs=1e-12)
+        assert np.allclose(PAPER.momentum(start), 0.0, atol=1e-12)

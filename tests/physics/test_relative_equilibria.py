@@ -10,7 +10,8 @@ import pytest
 from survey import integrate
 from survey.cli import main
 from survey.numerics.continuation import equilibrium_family
-from survey.physics.equilibria import relative_equilibrium
+from survey.physics.equilibria import (SHAPES, relative_equilibria, relative_equilibrium,
+                                       shape_configuration, shape_sphere)
 from survey.physics.system import System
 from survey.physics.terms import make_potential
 
@@ -194,3 +195,46 @@ steps = 5
     assert "[equilibria].parameter: 'gravity_H' is neither angular_momentum, mass_K nor a " \
         "parameter" in \
         capsys.readouterr().err
+
+
+def test_the_shape_sphere_points_are_the_triangles_they_name():
+    """shape_configuration puts the point w of the shape sphere back as three positions:
+    centre of mass at the origin, the radius of gyration asked for, and the mass-weighted
+    Jacobi vectors' (|z1|^2 - |z2|^2, 2 z1 conj z2) / (|z1|^2 + |z2|^2) equal to w."""
+    m = np.array([1.0, 0.3, 2.0])
+    for w in shape_sphere(16):
+        q = shape_configuration(m, w, 1.7)
+        assert np.allclose(m @ q, 0.0, atol=1e-12)
+        assert np.sqrt(np.sum(m[:, None] * q ** 2) / m.sum()) == pytest.approx(1.7)
+        z1 = np.sqrt(m[0] * m[1] / (m[0] + m[1])) * complex(*(q[1] - q[0]))
+        pair = (m[0] * q[0] + m[1] * q[1]) / (m[0] + m[1])
+        z2 = np.sqrt((m[0] + m[1]) * m[2] / m.sum()) * complex(*(q[2] - pair))
+        both = abs(z1) ** 2 + abs(z2) ** 2
+        c = 2 * z1 * np.conj(z2) / both
+        np.testing.assert_allclose([(abs(z1) ** 2 - abs(z2) ** 2) / both, c.real, c.imag],
+                                   w, atol=1e-12)
+
+
+def test_the_default_search_finds_every_relative_equilibrium_of_three_bodies():
+    """Equal masses under gravity at J = sqrt 3, from a generic start: Euler's collinear
+    solution and Lagrange's triangle (which seeded starts alone missed), each reached
+    more than once, with their Morse indices on the amended potential -- Euler's a saddle
+    (1), Lagrange's the shape sphere's maximum (2: it minimises the normalised potential
+    sqrt(I) sum m m / r). For masses 1, 0.001, 0.0001 at Omega = 1: all three collinear
+    solutions (one per body in the middle) and the triangle, nothing missed."""
+    gravity = make_potential("gravity", {"G": 1.0}, "pair")
+    start = np.array([[1.0, 0.0], [-0.3, 0.7], [-0.6, -0.9]])
+    search = relative_equilibria(System(np.ones(3), 2, gravity), start, math.sqrt(3.0))
+    euler, lagrange = search.equilibria
+    assert euler.energy == pytest.approx(-25.0 / 12.0, rel=1e-10)
+    assert lagrange.energy == pytest.approx(-1.5, rel=1e-10)
+    assert (euler.morse, lagrange.morse) == (1, 2)
+    assert min(search.hits) >= 2 and search.missed == 0
+    assert search.shapes == SHAPES and search.tries == 1 + 2 * SHAPES
+    unequal = relative_equilibria(System(np.array([1.0, 0.001, 0.0001]), 2, gravity),
+                                  start, rotation_rate=1.0)
+    sides = [np.sort(np.linalg.norm(e.positions[[0, 0, 1]] - e.positions[[1, 2, 2]],
+                                    axis=1)) for e in unequal.equilibria]
+    equilateral = [s for s in sides if s[2] - s[0] < 1e-6 * s[2]]
+    collinear = [s for s in sides if abs(s[0] + s[1] - s[2]) < 1e-9 * s[2]]
+    assert (len(equilateral), len(collinear), len(unequal.equilibria)) == (1, 3, 4)
