@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..catalog.regimes import REGULAR
+from ..catalog.regimes import REGULAR, Regime
 
 TWIST_DRIFT = 3.0      # a frequency step counts where it exceeds this times the two cells'
 #                        own drift (their change between the orbit's halves)
@@ -199,51 +199,59 @@ def how_many(k: int, n: int, left_out: str = "") -> str:
     return said + (f" ({left_out} left out)" if left_out else "")
 
 
-def regions(mask: np.ndarray) -> list[tuple[np.ndarray, bool]]:
+def regions(mask: np.ndarray, edge=None) -> list[tuple[np.ndarray, bool]]:
     """The connected regions of True cells of a grid (neighbours along each axis), each as
     (its cells' flat indices, enclosed): enclosed where no cell of it lies on the grid's
-    edge, so that cells of another kind bound it on every side -- the only case where a
-    region may be called an island, or said to be surrounded."""
+    edge or next to an `edge` cell (e.g. inaccessible: the end of the energy shell, not
+    another regime), so that cells of another kind bound it on every side -- the only
+    case where a region may be called an island, or said to be surrounded."""
     mask = np.asarray(mask, dtype=bool)
+    edge = np.zeros(mask.shape, dtype=bool) if edge is None else np.asarray(edge, dtype=bool)
     label = np.full(mask.shape, -1)
     out = []
     for start in zip(*np.nonzero(mask)):
         if label[start] >= 0:
             continue
         label[start] = len(out)
-        stack, cells, edge = [start], [], False
+        stack, cells, edge_here = [start], [], False
         while stack:
             cell = stack.pop()
             cells.append(np.ravel_multi_index(cell, mask.shape))
             for axis, size in enumerate(mask.shape):
-                edge |= cell[axis] in (0, size - 1)
+                edge_here |= cell[axis] in (0, size - 1)
                 for step in (-1, 1):
                     other = list(cell)
                     other[axis] += step
                     other = tuple(other)
-                    if 0 <= other[axis] < size and mask[other] and label[other] < 0:
+                    if not 0 <= other[axis] < size:
+                        continue
+                    edge_here = edge_here or bool(edge[other])
+                    if mask[other] and label[other] < 0:
                         label[other] = len(out)
                         stack.append(other)
-        out.append((np.sort(np.array(cells)), not edge))
+        out.append((np.sort(np.array(cells)), not edge_here))
     return out
 
 
 def islands(regime: np.ndarray) -> Finding:
     """Regular regions of a map or scan that the grid encloses: bounded on every side by
-    cells of other regimes, not by the grid's edge. A region that touches the edge may go
-    on beyond it, so no geometric word is given to it."""
-    found = regions(np.isin(regime, REGULAR))
+    cells of other regimes, not by the grid's edge or the inaccessible cells (where the
+    energy shell ends). A region that touches either may go on beyond it, so no
+    geometric word is given to it."""
+    found = regions(np.isin(regime, REGULAR), np.asarray(regime) == Regime.INACCESSIBLE)
     inside = [cells for cells, enclosed in found if enclosed]
     sizes = sorted((c.size for c in inside), reverse=True)
     test = "a regular region bounded on every side by other regimes within the grid"
     if not inside:
         return Finding("islands", "Regular islands within the grid", False, test, reason=(
             f"none of the {len(found)} regular region{'s' * (len(found) != 1)} is enclosed "
-            "within the grid (each touches its edge)" if found else "no regular cells"))
+            "within the grid (each touches its edge or an inaccessible cell)" if found
+            else "no regular cells"))
     return Finding("islands", f"{len(inside)} regular island{'s' * (len(inside) > 1)} "
                    f"enclosed by other regimes within the grid ({', '.join(map(str, sizes))} "
                    f"cells), and {len(found) - len(inside)} regular region"
-                   f"{'s' * (len(found) - len(inside) != 1)} cut by the grid's edge", True,
+                   f"{'s' * (len(found) - len(inside) != 1)} cut by the grid's edge or the "
+                   "inaccessible cells", True,
                    test, evidence="the regime of each cell and its neighbours along each axis",
                    numbers={"islands": len(inside), "edge": len(found) - len(inside),
                             "sizes": sizes})

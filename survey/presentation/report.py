@@ -610,7 +610,8 @@ def _variant_words(variant: str, ds) -> str:
     """A [check] run's change, with its values, for the budget table."""
     config = stored_config(ds)
     ind, integ = config.get("indicators", {}), config.get("integration", {})
-    return {"seed": f"seed {ind.get('seed', 0)}, {ind.get('perturbations', 0)} orbits a cell",
+    return {"seed": f"seed {ind.get('seed', 0)}, {ind.get('perturbations', 0)} perturbed "
+                    "orbits a cell",
             "rounding": f"nominal starts {ind.get('nudge', 0.0):g} away (other last bits)",
             "horizon": f"t_final = {integ.get('t_final', defaults.T_FINAL):g}",
             "tolerance": f"rtol = {integ.get('rtol', defaults.RTOL):g}"}[variant]

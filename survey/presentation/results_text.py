@@ -16,7 +16,9 @@ Placeholders:
   the [check] variants not run, whose share it lacks), and {{onset NAME | PART}} one
   contribution of it (step, seed, rounding, horizon, tolerance);
 - {{within NAME | VAR | AXIS=VALUE | X}}: whether a published X lies within the 5-95%
-  quantiles of the cell's ensemble: the verdict a comparison with the paper prints."""
+  quantiles of the cell's ensemble: the verdict a comparison with the paper prints;
+- {{onset NAME | verdict X}}: whether a published onset X lies within twice the onset's
+  total uncertainty."""
 from __future__ import annotations
 
 import contextlib
@@ -137,6 +139,12 @@ def _onset(ds, where, part=None):
         return (plus_minus(b.estimate, b.total) if np.isfinite(b.total) else
                 f"{b.estimate:.6g} (not established)") + (
             f" (not measured: {', '.join(missing)})" if missing else "")
+    if part.startswith("verdict"):
+        x = float(part.split()[1])
+        off = abs(x - b.estimate) / b.total if b.total > 0 else np.inf
+        return (f"agrees: {x:g} lies within twice the onset's uncertainty" if off <= 2 else
+                f"differs: the onset lies {'below' if b.estimate < x else 'above'} {x:g} "
+                f"by {off:.0f} times its uncertainty")
     sizes = {what: size for what, size, _ in b.parts}
     if part not in sizes:
         raise ValueError(f"{name}: no {part!r} in its onset's budget (no such [check] run)")

@@ -106,7 +106,8 @@ def test_all_and_none_only_where_the_count_supports_them():
 def test_an_island_is_a_regular_region_the_grid_encloses():
     """A regular block ringed by chaos is an island; the same block moved to the grid's
     edge is not (it may go on beyond the grid), nor is a region touching the edge by one
-    cell; regions are connected along the axes, not diagonally."""
+    cell, nor one touching the inaccessible cells (the shell's end, not another regime);
+    regions are connected along the axes, not diagonally."""
     C, T = Regime.CHAOTIC, Regime.TORUS
     grid = np.full((6, 7), C)
     grid[2:4, 2:5] = T                          # enclosed: 6 cells
@@ -118,6 +119,10 @@ def test_an_island_is_a_regular_region_the_grid_encloses():
     found = islands(grid)
     assert not found.passed and "touches its edge" in found.text()
     assert not islands(np.full((3, 3), C)).passed
+    shell = np.full((6, 7), C)
+    shell[2:4, 2:5] = T
+    shell[4, 3] = Regime.INACCESSIBLE           # where the energy shell ends: an edge too
+    assert not islands(shell).passed
     diagonal = np.full((5, 5), C)
     diagonal[1, 1] = diagonal[2, 2] = diagonal[3, 3] = T
     assert islands(diagonal).numbers["sizes"] == [1, 1, 1]

@@ -168,7 +168,7 @@ workers = 1
     for r, here, there in counts:
         assert f"| {Regime(r).name.lower()} | {here} | {there} |" in report
     if "## Where chaos sets in\n\nAlong delta the orbits are regular up to" in report:
-        assert "| seed 1, 8 orbits a cell |" in report and "| rtol = 1e-10 |" in report
+        assert "| seed 1, 8 perturbed orbits a cell |" in report and "| rtol = 1e-10 |" in report
         assert "| half the grid step | — |" in report
         assert "Not measured, so not in this uncertainty: rounding" in report
         assert "horizon (twice t_final)" in report
