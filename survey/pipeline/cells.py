@@ -355,6 +355,7 @@ def warm_beside(task: CellTask, first, starts):
     linalg.svd(a)
     linalg.lstsq(a, a[0], 1e-14)
     linalg.chain(a, a, a)
+    linalg.symmetric_eigen(linalg.dot(a, a.T))     # a relative equilibrium's Morse index
     # last: it builds lanes, as the driver does first (workspace_size). numba's disk cache
     # index of a function is read, extended and written back by each process compiling
     # it, so this job keeps to what the driver is not compiling at the same time.
