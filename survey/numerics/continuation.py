@@ -40,6 +40,8 @@ class Located(NamedTuple):
     before: object            # the members on either side
     after: object
     x: np.ndarray             # the scaled unknowns there (mean of the last bracket's ends)
+    width: float = 0.0        # the last bracket's extent in the scaled parameter
+    near: object = None       # the last member solved inside the bracket (None: none)
 
 
 class Branch(NamedTuple):
@@ -175,12 +177,12 @@ def _step_problem(previous, jacobian, got, solve, tests, signature, bisect):
     for name, test in checks.items():
         if test(member, t, None) == test(member2, t2, A2):
             continue
-        at, gap = _bisect(previous, x2, solve, name, test, bisect)
+        at, gap, near, width = _bisect(previous, x2, solve, name, test, bisect)
         if gap:
             return (f"where its {name} test changes, the members on either side stay "
                     f"{gap:.1e} apart (scaled) instead of closing up: a jump to another "
                     "branch, not a bifurcation on one", [])
-        located.append(Located(name, member, member2, at))
+        located.append(Located(name, member, member2, at, width, near))
     return "", located + [(member2, x2, t2)]
 
 
@@ -207,21 +209,25 @@ def _bisect(previous, xb, solve, name, test, bisect):
     """(x where `test` changes between the member `previous` and the unknowns xb, bisected
     along the arclength to `bisect`; how far its bracket's ends stay apart where that is
     more than the bracket's width -- or the corrector fails inside it, so that the ends
-    cannot be brought together -- else 0). On one branch the ends close up as the bracket
-    shrinks; across a jump between two branches they stay a gap apart."""
+    cannot be brought together -- else 0; the last member solved in the bracket; the
+    bracket's extent in the scaled parameter). On one branch the ends close up as the
+    bracket shrinks; across a jump between two branches they stay a gap apart."""
     a, xa, ta = previous
     lo, hi = 0.0, linalg.dot(ta, xb - xa)
     ends = [xa, xb]
+    near = None
     while hi - lo > bisect:
         mid = 0.5 * (lo + hi)
         got = solve(xa + mid * ta, ta, linalg.dot(ta, xa) + mid)
         if got is None:
-            return 0.5 * (ends[0] + ends[1]), max(linalg.norm(ends[1] - ends[0]), GAP)
+            return 0.5 * (ends[0] + ends[1]), max(linalg.norm(ends[1] - ends[0]), GAP), \
+                near, abs(ends[1][-1] - ends[0][-1])
         side = int(test(got[0], tangent(got[2], ta), got[2]) != test(a, ta, None))
-        ends[side] = got[1]
+        ends[side], near = got[1], got[0]
         lo, hi = (mid, hi) if side == 0 else (lo, mid)
     apart = linalg.norm(ends[1] - ends[0])
-    return 0.5 * (ends[0] + ends[1]), (apart if apart > 10 * (hi - lo) + GAP else 0.0)
+    return 0.5 * (ends[0] + ends[1]), (apart if apart > 10 * (hi - lo) + GAP else 0.0), \
+        near, abs(ends[1][-1] - ends[0][-1])
 
 
 def equilibrium_family(systems: Callable, start, p0: float, to: float, steps: int = 20,
@@ -293,8 +299,9 @@ def equilibrium_family(systems: Callable, start, p0: float, to: float, steps: in
     found = []
     for at in branch.found:
         p_at = float(at.x[-1] * scale[-1])
+        bracket = max(float(at.width * scale[-1]), 1e-12 * abs(p_at))   # and the corrector's
         if at.test in NAMED:
-            found.append(Bifurcation(p_at, at.test))
+            found.append(Bifurcation(p_at, at.test, accuracy=bracket))
             continue
         off = min((at.before, at.after), key=lambda e: e.on_axis)
         lam = off.eigenvalues
@@ -302,7 +309,7 @@ def equilibrium_family(systems: Callable, start, p0: float, to: float, steps: in
         quartet = np.any((np.abs(lam.real) > AXIS_TOLERANCE * big)
                          & (np.abs(lam.imag) > AXIS_TOLERANCE * big))
         found.append(Bifurcation(p_at, "complex quartet (Krein collision)" if quartet
-                                 else "real pair"))
+                                 else "real pair", accuracy=bracket))
     return EquilibriumFamily([(v, e) for v, (e, _, _) in zip(values, branch.members)], found,
                              branch.complete, branch.ended)
 

@@ -93,15 +93,25 @@ class PeriodicOrbit(NamedTuple):
         return np.sort(portable.vlog(linalg.modulus(mu)))[::-1] / self.period
 
     @property
+    def index_error(self) -> float:
+        """How well the stability indices are known: each comes twice, from mu and from its
+        partner 1/mu, equal for an exact monodromy; the largest difference between the two
+        (1e-12 on a well-separated pair, 1e-8 where a pair collides at +-1)."""
+        b = self._all_indices()
+        return float(np.max(linalg.modulus(b[::2] - b[1::2]), initial=0.0))
+
+    def _all_indices(self) -> np.ndarray:
+        mu = self.multipliers
+        m2 = mu.real * mu.real + mu.imag * mu.imag         # 1/mu = conj(mu) / |mu|^2
+        b = (mu.real + mu.real / m2) / 2.0 + 1j * ((mu.imag - mu.imag / m2) / 2.0)
+        return b[np.lexsort((np.round(b.imag, 9), np.round(b.real, 9)))]    # pairs adjacent
+
+    @property
     def indices(self) -> np.ndarray:
         """Henon's stability index b = (mu + 1/mu) / 2, one per reciprocal pair (complex
         for a quartet), ascending: |b| <= 1 on the unit circle, b = 1 and b = -1 where a pair
         passes through +1 (tangent, fold or branch) or -1 (period doubling)."""
-        mu = self.multipliers
-        m2 = mu.real * mu.real + mu.imag * mu.imag         # 1/mu = conj(mu) / |mu|^2
-        b = (mu.real + mu.real / m2) / 2.0 + 1j * ((mu.imag - mu.imag / m2) / 2.0)
-        b = b[np.lexsort((np.round(b.imag, 9), np.round(b.real, 9)))]    # pairs adjacent
-        return b[::2]
+        return self._all_indices()[::2]
 
     @property
     def residues(self) -> np.ndarray:
@@ -520,8 +530,10 @@ def periodic_family(systems: Callable[[float], System], orbit: PeriodicOrbit, p0
                         p if pinned == "angular_momentum" else orbit.angular_momentum))
         return out
     values, branch = at_labels(branch, scale[-1], to, held, 1e4 * tol)
+    where = {id(o): x[-1] * scale[-1] for o, x, _ in branch.members}
     found = [Bifurcation(float(at.x[-1] * scale[-1]), at.test if at.test in NAMED else
-                         _crossing(at.before, at.after), float(at.x[n] * scale[n]))
+                         _crossing(at.before, at.after), float(at.x[n] * scale[n]),
+                         _accuracy(at, where, scale[-1]))
              for at in branch.found]
     return Family(values, [o for o, _, _ in branch.members], found, branch.complete,
                   branch.ended)
@@ -532,6 +544,35 @@ def index_margins(orbit: PeriodicOrbit) -> np.ndarray:
     a real index (negative outside), NaN for a complex one (a quartet off the circle)."""
     b = orbit.indices
     return np.where(np.abs(b.imag) <= UNIT_CIRCLE, 1.0 - np.abs(b.real), np.nan)
+
+
+def _accuracy(at, where: dict, scale: float) -> float:
+    """How far a located change may lie from where it is printed: the bisection's last
+    bracket, and for an index through +1 or -1 how far the bisected point lies from a
+    second, independent estimate -- the zero of b -+ 1 interpolated between the members
+    either side, where the indices are known to 1e-12, not within the 1e-8 a colliding
+    pair leaves them at the crossing, where the bisection reads their sign. Elsewhere
+    (a quartet) the indices' own error over their slope. Never below the corrector's
+    tolerance, 1e-12 of the parameter."""
+    p = at.x[-1] * scale
+    bracket = max(at.width * abs(scale), 1e-12 * abs(p))     # the corrector's tolerance
+    if at.test in NAMED or id(at.before) not in where or id(at.after) not in where:
+        return float(bracket)
+    p0, p1 = where[id(at.before)], where[id(at.after)]
+    a, b = at.before.indices, at.after.indices
+    if a.size == b.size:
+        real = (np.abs(a.imag) <= UNIT_CIRCLE) & (np.abs(b.imag) <= UNIT_CIRCLE)
+        for edge in (1.0, -1.0):
+            cross = real & ((a.real - edge) * (b.real - edge) < 0)
+            if cross.any():
+                k = int(np.flatnonzero(cross)[0])
+                guess = p0 + (edge - a[k].real) * (p1 - p0) / (b[k].real - a[k].real)
+                return float(max(bracket, abs(p - guess)))
+    slope = float(np.max(np.abs(b - a))) / abs(p1 - p0) if a.size == b.size and p1 != p0 \
+        else 0.0
+    if at.near is None or slope == 0.0:
+        return float(bracket)
+    return float(max(bracket, at.near.index_error / slope))
 
 
 def _crossing(a: PeriodicOrbit, b: PeriodicOrbit) -> str:

@@ -538,3 +538,6 @@ class Bifurcation(NamedTuple):
     #                           collision: Hamiltonian-Hopf) or a real pair; for a periodic
     #                           family also a fold, or where multipliers leave the circle
     period: float = float("nan")   # a periodic family's period there
+    accuracy: float = float("nan")  # how far the parameter may be off: the bisection's
+    #                                 bracket, or for a periodic family's crossing the
+    #                                 stability indices' own error over their slope

@@ -212,8 +212,8 @@ def family_text(table: dict, family) -> str:
         lines.append(f"| {p:.6g} | {e.energy:.8g} | {e.angular_momentum:.8g} | "
                      f"{e.rotation_rate:.8g} | {'yes' if e.stable else 'no'} | "
                      f"{max(e.rates, default=0.0):.4g} |")
-    lines += [""] + ([f"At {name} = {b.parameter:.10g}: a fold." if b.kind == "fold" else
-                      f"Stability changes at {name} = {b.parameter:.10g}: {b.kind} on the "
+    lines += [""] + ([f"At {name} = {located(b)}: a fold." if b.kind == "fold" else
+                      f"Stability changes at {name} = {located(b)}: {b.kind} on the "
                       "unstable side." for b in found] or ["The stability does not change."])
     return "\n".join(lines)
 
@@ -245,6 +245,9 @@ def equilibrium_dataset(table: dict, family, config_text: str):
          "bifurcation_parameter": ("bifurcation", [b.parameter for b in found],
                                    {"long_name": f"{table['parameter']} where the stability "
                                                  "changes"}),
+         "bifurcation_accuracy": ("bifurcation", [b.accuracy for b in found],
+                                  {"long_name": "how far the parameter may be off: the "
+                                                "bisection's bracket"}),
          "bifurcation_kind": ("bifurcation", np.array([b.kind for b in found], dtype=object))},
         coords={table["parameter"]: ("member", [p for p, _ in members])},
         attrs={"title": f"relative equilibria along {table['parameter']}",
@@ -273,6 +276,17 @@ def write_archive(ds, path, command: str) -> Path:
         raise SurveyError(f"cannot write {out} ({getattr(exc, 'strerror', None) or exc}); "
                           "free some space or choose another --output") from None
     return out
+
+
+def located(b) -> str:
+    """A bifurcation's parameter with the digits its accuracy supports (at most 10), and the
+    accuracy itself: 0.999879112 +- 2e-09."""
+    acc = b.accuracy
+    if not (np.isfinite(acc) and acc > 0):
+        return f"{b.parameter:.10g}"
+    digits = int(np.floor(np.log10(max(abs(b.parameter), 1e-300)))
+                 - np.floor(np.log10(acc))) + 1
+    return f"{b.parameter:.{min(max(digits, 1), 10)}g} +- {acc:.1g}"
 
 
 def equilibria_json(found: list[RelativeEquilibrium], search=None) -> dict:
@@ -507,7 +521,7 @@ def periodic_family_text(system: System, table: dict, family: Family, rows: int 
                      + ", ".join(
                          f"{b.real:.6f}" if abs(b.imag) <= 1e-9 else
                          f"{b.real:.4f}{b.imag:+.4f}i" for b in o.indices) + " |")
-    lines += [""] + ([f"At {name} = {b.parameter:.10g}: {b.kind}." for b in
+    lines += [""] + ([f"At {name} = {located(b)}: {b.kind}." for b in
                       family.bifurcations] or ["No fold, and no multiplier leaves or joins the "
                                                "unit circle between members."])
     indices = np.array([o.indices for o in family.members])
@@ -564,6 +578,10 @@ def family_dataset(table: dict, family: Family, config_text: str):
                                                  "multipliers leave or join the unit circle"}),
          "bifurcation_period": ("bifurcation", [f.period for f in family.bifurcations],
                                 {"long_name": "period there"}),
+         "bifurcation_accuracy": ("bifurcation", [f.accuracy for f in family.bifurcations],
+                                  {"long_name": "how far the parameter may be off: the "
+                                                "bisection's bracket, or the stability "
+                                                "indices' error over their slope"}),
          "bifurcation_kind": ("bifurcation", np.array([f.kind for f in family.bifurcations],
                                                       dtype=object))},
         attrs={"title": f"periodic orbits along {table['parameter']}",

@@ -52,3 +52,27 @@ def test_a_branch_point_on_the_family_is_found_and_passed():
     (at,) = branch.found
     assert at.test == "branch point" and np.linalg.norm(at.x) < 1e-6
     assert branch.members[-1][0] == pytest.approx([-1.0, 1.0])
+
+
+def test_a_crossings_accuracy_is_its_distance_from_an_independent_estimate():
+    """Where an index passes +1 the bisection reads the sign of b - 1 at the crossing,
+    where a colliding pair knows b only to ~1e-8; the members either side know it to
+    1e-12, and the zero of b - 1 interpolated between them is a second estimate: the
+    accuracy printed is how far the two lie apart (never less than the bracket)."""
+    from types import SimpleNamespace as NS
+
+    from survey.numerics.continuation import Located
+    from survey.numerics.periodic import _accuracy
+
+    def orbit(p):      # one pair through +1 at p = 2 (b = 1 + 17 (2 - p)), one elliptic
+        return NS(indices=np.array([-0.3 + 0j, 1.0 + 17.0 * (2.0 - p) + 0j]),
+                  index_error=1e-12)
+    before, after = orbit(1.9999), orbit(2.0001)
+    where = {id(before): 1.9999, id(after): 2.0001}
+    bisected = Located("circle", before, after, np.array([0.0, 2.0 + 3e-9]), 1e-13,
+                       orbit(2.0))
+    assert _accuracy(bisected, where, 1.0) == pytest.approx(3e-9, rel=1e-3)
+    exact = bisected._replace(x=np.array([0.0, 2.0]))
+    assert _accuracy(exact, where, 1.0) == pytest.approx(2e-12)       # the floor
+    fold = bisected._replace(test="fold", width=1e-6)
+    assert _accuracy(fold, where, 1.0) == pytest.approx(1e-6)          # the bracket
