@@ -325,7 +325,8 @@ def _survey(config, command, summary=False, write_report=True, **kw) -> Path:
             print(f"wrote {path} ({ds[V.status].size} cells{refined})")
     checks = {}
     for variant, second in config.checks().items():
-        print(f"checking: the same survey with {_changed(variant, second)}")
+        print("checking: the same survey with " + defaults.check_change(
+            variant, second.tables["indicators"], second.tables["integration"]))
         checks[variant] = run_survey(second, command=f"{command} [check] {variant}", **kw)
         if summary:
             print(f"wrote {checks[variant]}")
@@ -342,16 +343,6 @@ def _survey(config, command, summary=False, write_report=True, **kw) -> Path:
             if summary:
                 print(f"report and figures: {written} (and {path.stem}_*.png beside it)")
     return path
-
-
-def _changed(variant: str, second) -> str:
-    """What a [check] variant's run changes, in words with its values."""
-    ind, integ = second.tables["indicators"], second.tables["integration"]
-    return {"seed": f"seed {ind['seed']} and {ind['perturbations']} perturbed orbits per "
-                    f"cell, the nominal starts {ind['nudge']:g} away",
-            "rounding": f"the nominal starts {ind['nudge']:g} (relative) away",
-            "horizon": f"t_final = {integ['t_final']:g}",
-            "tolerance": f"rtol = {integ['rtol']:g}, atol = {integ['atol']:g}"}[variant]
 
 
 def _special(args):

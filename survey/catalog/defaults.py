@@ -23,3 +23,18 @@ CHECK_VARIANTS = {
     "horizon": "twice t_final",
     "tolerance": "rtol and atol times [check].tolerance",
 }
+
+
+def check_change(variant: str, indicators: dict, integration: dict) -> str:
+    """What a [check] variant's run changed, in words with its values, from its
+    [indicators] and [integration] tables (a validated config's or an archive's stored
+    one): what the run prints when it starts and the report's budget names."""
+    return {"seed": f"seed {indicators.get('seed', 0)} and "
+                    f"{indicators.get('perturbations', 0)} perturbed orbits a cell, the "
+                    f"nominal starts {indicators.get('nudge', 0.0):g} (relative) away",
+            "rounding": f"the nominal starts {indicators.get('nudge', 0.0):g} (relative) "
+                        "away: other last bits",
+            "horizon": f"t_final = {integration.get('t_final', T_FINAL):g}",
+            "tolerance": f"rtol = {integration.get('rtol', RTOL):g}, atol = "
+                         f"{integration.get('atol', ATOL):g}"}[variant]
+

@@ -544,10 +544,11 @@ def _onset_budget(ds, x, regime, found, axis, checks, th) -> list[str]:
             else "half the grid step")
     what = {"step": step, "extension": "the verdicts at the horizon before the last "
                                        "(cells in doubt were decided again longer)",
-            **{k: _variant_words(k, c) for k, c in checks.items()}}
+            **{k: _change(k, c) for k, c in checks.items()}}
     out += ["", "| contribution | onset | shift |", "| --- | --- | --- |"]
     for name, size, there in b.parts:
-        out.append(f"| {what[name]} | {'—' if name == 'step' else 'none' if there is None else f'{there:.6g}'} | "
+        at = "—" if name == "step" else "none" if there is None else f"{there:.6g}"
+        out.append(f"| {what[name]} | {at} | "
                    f"{'no onset' if not np.isfinite(size) else f'{size:.2g}'} |")
     if np.isfinite(b.total):
         out += ["", f"Onset {axis} = {plus_minus(b.estimate, b.total)} (the root sum of squares "
@@ -592,6 +593,13 @@ def _irregular_from(x, regime, found, axis) -> str:
 NEAR = 0.1      # a vote this close to its threshold (relative) is named beside an onset
 
 
+def _change(variant: str, check) -> str:
+    """A [check] run's change, from the config its archive stores."""
+    config = stored_config(check)
+    return defaults.check_change(variant, config.get("indicators", {}),
+                                 config.get("integration", {}))
+
+
 def _near_thresholds(ds, x, where, axis, th) -> list[str]:
     """The cells at `where` whose votes lie within NEAR (relative) of a threshold: their
     verdict would change with a small change of their evidence."""
@@ -604,17 +612,6 @@ def _near_thresholds(ds, x, where, axis, th) -> list[str]:
             out.append(f"The cell at {axis} = {value:g} votes within {NEAR:g} (relative) of "
                        f"a threshold: {', '.join(close)}.")
     return [" ".join(out)] if out else []
-
-
-def _variant_words(variant: str, ds) -> str:
-    """A [check] run's change, with its values, for the budget table."""
-    config = stored_config(ds)
-    ind, integ = config.get("indicators", {}), config.get("integration", {})
-    return {"seed": f"seed {ind.get('seed', 0)}, {ind.get('perturbations', 0)} perturbed "
-                    "orbits a cell",
-            "rounding": f"nominal starts {ind.get('nudge', 0.0):g} away (other last bits)",
-            "horizon": f"t_final = {integ.get('t_final', defaults.T_FINAL):g}",
-            "tolerance": f"rtol = {integ.get('rtol', defaults.RTOL):g}"}[variant]
 
 
 def _second_run(ds, check, regime) -> list[str]:

@@ -168,11 +168,13 @@ workers = 1
     for r, here, there in counts:
         assert f"| {Regime(r).name.lower()} | {here} | {there} |" in report
     if "## Where chaos sets in\n\nAlong delta the orbits are regular up to" in report:
-        assert "| seed 1, 8 perturbed orbits a cell |" in report and "| rtol = 1e-10 |" in report
+        assert "| seed 1 and 8 perturbed orbits a cell, the nominal starts 1e-13 (relative) " \
+            "away |" in report and "| rtol = 1e-10, atol = 1e-10 |" in report
         assert "| half the grid step | — |" in report
         assert "Not measured, so not in this uncertainty: rounding" in report
         assert "horizon (twice t_final)" in report
     (tmp_path / "c_report.md").unlink()
     assert main(["report", str(tmp_path / "c.nc")]) == 0
     again = (tmp_path / "c_report.md").read_text()
-    assert "## The same survey with another seed" in again and "| rtol = 1e-10 |" in again
+    assert "## The same survey with another seed" in again and \
+        "| rtol = 1e-10, atol = 1e-10 |" in again
