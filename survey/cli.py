@@ -130,6 +130,11 @@ def orbit_workflow(path, folder) -> list:
             run = orbits.run_plane(spec)
             written += plots.save({"plane": orbit_plots.plane_figure(spec.name, spec, run)},
                                   folder, spec.name)
+            if spec.manifolds:
+                from .pipeline.special import write_archive
+                written.append(write_archive(
+                    orbits.manifold_dataset(spec, run.manifolds, orbits.plane_text(spec)),
+                    Path(folder) / f"{spec.name}_plane.nc", f"python -m survey orbit {path}"))
             print("\n".join(orbits.describe_plane(spec, run)))
             continue
         runs = orbits.run_orbits(spec)
@@ -359,7 +364,7 @@ def _verify(args):
     from .pipeline.sweep import verify
     if args.cells < 1:
         raise ConfigError("--cells", f"must be >= 1, got {args.cells}")
-    ok, lines = verify_family(args.archive) if is_family(args.archive) else \
+    ok, lines = verify_family(args.archive, args.cells) if is_family(args.archive) else \
         verify(args.archive, cells=args.cells)
     print("\n".join(lines))
     return 0 if ok else 1
@@ -418,9 +423,12 @@ def build_parser():
         sp.set_defaults(func=_special)
     v = sub.add_parser("verify", help="recompute a sample of an archive's cells from its "
                                       "stored config and compare bit for bit (a family "
-                                      "archive: every member, to 1e-8)")
+                                      "archive: every member; a manifold archive: its "
+                                      "orbits, a sample of its points and its first "
+                                      "homoclinic point)")
     v.add_argument("archive")
-    v.add_argument("--cells", type=int, default=8)
+    v.add_argument("--cells", type=int, default=8,
+                   help="cells (a manifold archive: points) to recompute (default 8)")
     v.set_defaults(func=_verify)
     b = sub.add_parser("bench", help="survey's DOP853 vs scipy and heyoka on the paper's orbits")
     b.add_argument("--t-final", type=float, default=defaults.T_FINAL)

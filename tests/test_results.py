@@ -9,7 +9,7 @@ import xarray as xr
 
 from survey.pipeline import orbits
 from survey.pipeline.config import parse_config
-from survey.pipeline.special import special_table
+from survey.pipeline.special import is_family, special_table, verify_family
 from survey.pipeline.sweep import verify
 from survey.presentation.results_text import PLACEHOLDER, render
 
@@ -24,6 +24,16 @@ def check_variant(archive: Path) -> str | None:
     return variant if stem else None
 
 
+def plane_of(archive: Path):
+    """The [[plane]] spec of an orbit workflow whose manifolds an archive holds, or None."""
+    for path in sorted((ROOT / "workflows").glob("*.toml")):
+        if orbits.is_orbit_workflow(path):
+            for spec in orbits.load_workflow(path):
+                if f"{getattr(spec, 'name', '')}_plane" == archive.stem:
+                    return spec
+    return None
+
+
 def workflow_of(archive: Path) -> Path:
     stem = archive.stem.rpartition("_check_")[0] or archive.stem
     return ROOT / "survey" / "default.toml" if stem == "default" \
@@ -33,6 +43,9 @@ def workflow_of(archive: Path) -> Path:
 def stored_text(archive: Path) -> str:
     """The config text an archive must store: its workflow's, or for the [check] run of a
     workflow the text that run derives from it."""
+    plane = plane_of(archive)
+    if plane is not None:
+        return orbits.plane_text(plane)
     text = workflow_of(archive).read_text()
     if check_variant(archive):
         return parse_config(text, check_output=False).checks()[check_variant(archive)].text
@@ -50,6 +63,8 @@ def test_every_survey_workflow_has_its_archive_report_and_figures():
         if orbits.is_orbit_workflow(path):
             for spec in orbits.load_workflow(path):
                 assert list(RESULTS.glob(f"{spec.name}_*.png")), spec.name
+                if getattr(spec, "manifolds", ()):
+                    assert (RESULTS / f"{spec.name}_plane.nc").exists(), spec.name
             continue
         assert (RESULTS / f"{path.stem}.nc").exists(), path.stem
         for variant in parse_config(path.read_text(), check_output=False).checks():
@@ -63,11 +78,14 @@ def test_every_survey_workflow_has_its_archive_report_and_figures():
 def test_each_archive_stores_its_workflow_and_verifies(archive):
     """The stored config is the workflow file's text, and two recomputed cells (the first
     and the last) agree with the archive bit for bit, on any machine
-    (tests/pipeline/test_portable_archives.py)."""
+    (tests/pipeline/test_portable_archives.py); an archive of an isosceles plane's
+    manifolds stores its [[plane]] table and verifies its orbits, two points and its first
+    homoclinic point."""
     with xr.open_dataset(archive) as ds:
         assert ds.attrs["config"] == stored_text(archive)
         assert not ds.attrs["git_commit"].endswith("-dirty")
-    ok, lines = verify(archive, cells=2)
+    ok, lines = verify_family(archive, cells=2) if is_family(archive) else \
+        verify(archive, cells=2)
     assert ok, lines
 
 

@@ -255,3 +255,10 @@ def islands(regime: np.ndarray) -> Finding:
                    test, evidence="the regime of each cell and its neighbours along each axis",
                    numbers={"islands": len(inside), "edge": len(found) - len(inside),
                             "sizes": sizes})
+
+
+def to_accuracy(x: float, accuracy: float) -> str:
+    """x with the decimals its accuracy supports (at most 12): a number printed past its
+    accuracy claims digits it does not have."""
+    places = 12 if not accuracy > 0 else int(min(max(-np.floor(np.log10(accuracy)), 0), 12))
+    return f"{round(x, places) + 0.0:.{places}f}"

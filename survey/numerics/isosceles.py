@@ -77,18 +77,24 @@ class PlaneSection(NamedTuple):
 
 def plane_section(system: System, start, t_final: float, height: float = 0.0,
                   crossings: int = 1000, rtol: float = 1e-12, atol: float = 1e-12,
-                  max_passages: int = 1_000_000) -> PlaneSection:
+                  max_passages: int = 1_000_000, backward: bool = False) -> PlaneSection:
     """The section h = height (crossed upwards) of the orbit of the plane's point `start`
     = (b, h, p_b, p_h): its first `crossings` points or those up to t_final, whichever
     come first; the pair collision b = 0 passed exactly (see the module's note). An orbit
     that meets b = 0 with p_b below GRAZING of its momentum SLIDING times in a row stays
     on the collision line (a start at the triple collision with p_b = 0): it stops there
-    with status COLLISION."""
+    with status COLLISION.
+
+    backward: the crossings of its past instead (the inverse section map), at times
+    -t: the time-reversed orbit (momenta negated) crosses the level downwards where the
+    orbit crossed it upwards."""
     if system.n_bodies != 3 or system.dim != 2 or not np.all(system.masses == 1.0):
         raise ValueError("the isosceles plane is of three unit masses in the plane")
-    y = plane_state(*start)
+    way = -1 if backward else 1
+    b0, h0, p_b0, p_h0 = start
+    y = plane_state(b0, h0, way * p_b0, way * p_h0)
     if y[WX] == y[UX]:      # a start at the pair collision: on the side p_b goes to
-        y[WX], y[UX] = np.copysign(APART, start[2]), -np.copysign(APART, start[2])
+        y[WX], y[UX] = np.copysign(APART, way * p_b0), -np.copysign(APART, way * p_b0)
     E0 = system.energy(y)
     base = np.zeros(system.n)
     base[WX], base[UX] = 1.0, -1.0
@@ -100,7 +106,7 @@ def plane_section(system: System, start, t_final: float, height: float = 0.0,
     while True:
         side = 1.0 if y[WX] - y[UX] > 0 or (y[WX] == y[UX] and y[6 + WX] >= y[6 + UX]) else -1.0
         need = crossings - len(ts)         # the last one asked for ends the integration
-        section = Event(Linear(rise, offset=-float(height)), direction=+1,
+        section = Event(Linear(rise, offset=-float(height)), direction=way,
                         terminal=need == 1)
         kink = Event(Linear(base), direction=-int(side), terminal=True)
         out = integrate(system, y, (t, t_final), events=[section, kink], max_events=need + 1,
@@ -117,7 +123,7 @@ def plane_section(system: System, start, t_final: float, height: float = 0.0,
         pbs += p_b.tolist()
         t, y = out.t, out.y.copy()
         if hit and out.status == Status.OK and len(ts) < crossings:
-            t, y, crossing = _to_collision(system, t, y, height)
+            t, y, crossing = _to_collision(system, t, y, height, way)
             if crossing is not None:            # h passed the level in the Taylor step
                 ts.append(crossing[0])
                 bs.append(crossing[1])
@@ -137,23 +143,24 @@ def plane_section(system: System, start, t_final: float, height: float = 0.0,
         # the other side of b = 0, mirrored exactly about the axis
         y[WX], y[UX] = -side * APART, side * APART
     n = min(len(ts), crossings)
-    return PlaneSection(np.array(ts[:n]), np.array(bs[:n]), np.array(pbs[:n]), passages,
-                        Status.OK if status == Status.EVENT else status, t,
+    return PlaneSection(way * np.array(ts[:n]), np.array(bs[:n]), way * np.array(pbs[:n]),
+                        passages,
+                        Status.OK if status == Status.EVENT else status, way * t,
                         abs(system.energy(y) / E0 - 1.0))
 
 
-def _to_collision(system: System, t: float, y: np.ndarray, height: float):
+def _to_collision(system: System, t: float, y: np.ndarray, height: float, way: int):
     """From a state just before the pair collision to the collision: the time tau at
     which b + b' tau + b'' tau^2 / 2 vanishes, the state a second-order Taylor step of the
     near side's (smooth) motion reaches there, and (t, b, p_b) where the same step crosses
-    h = height upwards (None if it does not)."""
+    h = height upwards (way = 1) or downwards (-1) (None if it does not)."""
     dy = np.zeros_like(y)
     rhs(t, y, dy, *system.kernel_args, 0)       # unit masses: dq/dt = p, dp/dt = F
     b, v, a = y[WX] - y[UX], dy[WX] - dy[UX], dy[6 + WX] - dy[6 + UX]
     tau = max(_first_root(b, v, a), 0.0)
     h, w, c = y[VY] - y[UY] - height, dy[VY] - dy[UY], dy[6 + VY] - dy[6 + UY]
     crossing = None
-    if h < 0.0 <= h + w * tau + 0.5 * c * tau * tau:
+    if way * h < 0.0 <= way * (h + w * tau + 0.5 * c * tau * tau):
         s = min(max(_first_root(h, w, c), 0.0), tau)
         crossing = (t + s, b + v * s + 0.5 * a * s * s,
                     0.5 * (y[6 + WX] - y[6 + UX] + a * s))
@@ -287,3 +294,87 @@ def plane_periodic(system: System, energy: float, height: float, guess, crossing
                       np.concatenate(([x[1]], points[:-1, 1])), crossings, float(t[-1]), r,
                       np.array(history), J if J is not None else np.full((2, 2), np.nan),
                       converged)
+
+
+class PlaneManifolds(NamedTuple):
+    """The stable and unstable manifolds of a hyperbolic periodic orbit of the plane at
+    its first point on the section (branches unstable +, unstable -, stable +, stable -),
+    and each unstable branch's first crossing with each stable one."""
+
+    orbit: PlaneOrbit
+    branches: list
+    homoclinic: list
+
+
+def plane_manifolds(system: System, energy: float, height: float, orbit: PlaneOrbit,
+                    length: float, gap: float, t_final: float = 1000.0,
+                    rtol: float = 1e-13, precision: float = 1e-11) -> PlaneManifolds:
+    """The manifolds of a converged hyperbolic orbit (survey.numerics.manifolds) under its
+    section map P^k and its inverse (the time-reversed orbit's downward crossings), each
+    branch to arclength `length` with points at most `gap` apart, from the eigenvectors of
+    the orbit's Jacobian. A homoclinic point's accuracy is the larger of its chords' error
+    and how far it moves when the integration's tolerance is 10 times looser."""
+    from .manifolds import Homoclinic, first_homoclinic, grow
+    if not orbit.converged or orbit.kind == "elliptic":
+        raise ValueError("manifolds belong to a converged hyperbolic orbit")
+    made = manifold_seeds(system, energy, height, orbit, t_final, rtol)
+    branches = [grow(seeds, kind, side, length, gap) for seeds, (kind, side) in
+                zip(made, BRANCHES)]
+    looser = manifold_seeds(system, energy, height, orbit, t_final, 10 * rtol)
+    homoclinic = []
+    for u in (0, 1):
+        for s in (2, 3):
+            found = first_homoclinic(branches, u, s, made, precision)
+            if found is None:
+                continue
+            moved = first_homoclinic(branches, u, s, looser, precision)
+            shift = np.inf if moved is None else float(np.sqrt(np.sum(
+                (moved.point - found.point) ** 2)))
+            homoclinic.append(Homoclinic(*found[:1], max(found.accuracy, shift), *found[2:]))
+    return PlaneManifolds(orbit, branches, homoclinic)
+
+
+BRANCHES = (("unstable", 1), ("unstable", -1), ("stable", 1), ("stable", -1))
+
+
+def manifold_seeds(system: System, energy: float, height: float, orbit: PlaneOrbit,
+                   t_final: float = 1000.0, rtol: float = 1e-13) -> list:
+    """The Seeds of the four BRANCHES of a hyperbolic orbit's manifolds: its section map
+    P^k (one crossing at a time, each from its point on the section) forward for the
+    unstable ones, backward for the stable ones, from the eigenvectors of the orbit's
+    Jacobian (portable 2 x 2 algebra: the same bits on every machine)."""
+    from .manifolds import seeds
+    k = orbit.crossings
+
+    def mapping(backward):
+        def step(x):
+            start = plane_start(system, energy, height, x[0], x[1])
+            if start is None:
+                return None
+            sec = plane_section(system, start, t_final, height, k, rtol, rtol,
+                                backward=backward)
+            return np.array([sec.b[-1], sec.p_b[-1]]) if sec.b.size == k else None
+        return step
+
+    (mu_u, v_u), (mu_s, v_s) = eigen2(orbit.jacobian)
+    fixed = (orbit.b[0], orbit.p_b[0])
+    return [seeds(mapping(False), fixed, v_u, mu_u, side) for side in (1, -1)] + \
+        [seeds(mapping(True), fixed, v_s, 1.0 / mu_s, side) for side in (1, -1)]
+
+
+def eigen2(J) -> tuple:
+    """The eigenpairs (mu, v) of a real 2 x 2 matrix with real eigenvalues, the larger
+    |mu| first, in closed form (only +, *, /, sqrt: portable bits): mu = t/2 +- sqrt(t^2/4
+    - det), without cancellation; v = (b, mu - a) or (mu - d, c), whichever is longer."""
+    (a, b), (c, d) = J
+    t, det = a + d, a * d - b * c
+    disc = t * t / 4 - det
+    if not disc > 0:
+        raise ValueError("not hyperbolic: complex or equal eigenvalues")
+    big = t / 2 + np.copysign(np.sqrt(disc), t)
+    pairs = []
+    for mu in (big, det / big):
+        v1, v2 = np.array([b, mu - a]), np.array([mu - d, c])
+        v = v1 if v1 @ v1 >= v2 @ v2 else v2
+        pairs.append((float(mu), v / np.sqrt(v @ v)))
+    return pairs

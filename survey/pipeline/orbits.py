@@ -34,6 +34,10 @@ height crosses a level upwards:
     periodic = [[0.0, 0.7], [0.18, 0.0, 2]]   # guesses (b, p_b[, k]) of periodic orbits
     #   with k points on the section (default 1), found by Newton's method on the
     #   section map and marked with their stability (numerics.isosceles.plane_periodic)
+    manifolds = [[0.57, 0.0]]        # guesses of hyperbolic orbits whose stable and
+    manifold_length = 3.0            #   unstable manifolds are grown (numerics.manifolds)
+    manifold_gap = 0.02              #   to this arclength, points at most this far apart,
+    #   drawn on the section and archived in NAME_plane.nc (python -m survey verify)
 """
 from __future__ import annotations
 
@@ -47,6 +51,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..analysis.findings import to_accuracy
 from ..catalog import defaults
 from ..catalog.errors import ConfigError
 from ..catalog.variables import V
@@ -54,8 +59,11 @@ from ..numerics.dop853 import RTOL_MIN
 from ..numerics.indicators import deviation_vectors
 from ..numerics.integrate import Outcome, integrate
 from ..numerics.isosceles import (
+    PlaneManifolds,
     PlaneOrbit,
     PlaneSection,
+    eigen2,
+    plane_manifolds,
     plane_periodic,
     plane_section,
     plane_start,
@@ -323,6 +331,9 @@ class PlaneSpec:
     crossings: int = 500
     tol: float = 1e-13
     periodic: tuple = ()        # guesses (b, p_b, k) of periodic orbits
+    manifolds: tuple = ()       # guesses (b, p_b, k) of hyperbolic ones: their manifolds
+    manifold_length: float = 3.0
+    manifold_gap: float = 0.02
 
     def build(self) -> System:
         """The system (ConfigError naming the key if it is not one)."""
@@ -369,7 +380,8 @@ def check_plane(table: dict, where: str) -> PlaneSpec:
         raise ConfigError(f"{where}.system", "give either system or potential/"
                                              "potential_params, not both")
     for key, low, high in ((V.energy, None, None), ("height", None, None),
-                           ("t_final", 0.0, None), ("tol", RTOL_MIN, TOL_MAX)):
+                           ("t_final", 0.0, None), ("tol", RTOL_MIN, TOL_MAX),
+                           ("manifold_length", 1e-3, 1e3), ("manifold_gap", 1e-4, 1.0)):
         value = table.get(key, getattr(PlaneSpec, key, None))
         if not _finite(value) or (low is not None and not value >= low) or \
                 (high is not None and not value <= high) or (key == "t_final" and value <= 0):
@@ -386,19 +398,23 @@ def check_plane(table: dict, where: str) -> PlaneSpec:
             isinstance(x, list) and len(x) == 2 and all(map(_finite, x)) for x in starts):
         raise ConfigError(f"{where}.starts", "expected a list of [b, p_b] pairs of finite "
                                              "numbers, e.g. [[0.69, 0.0], [0.1, 0.75]]")
-    guesses = table.get("periodic", [])
-    if not isinstance(guesses, list) or not all(
-            isinstance(x, list) and len(x) in (2, 3) and all(map(_finite, x[:2])) and (
-                len(x) == 2 or (
-                    isinstance(x[2], int) and not isinstance(x[2], bool) and x[2] >= 1))
-            for x in guesses):
-        raise ConfigError(f"{where}.periodic", "expected a list of guesses [b, p_b] or "
-                                               "[b, p_b, k] (k >= 1 points on the section), "
-                                               "e.g. [[0.0, 0.7], [0.18, 0.0, 2]]")
+    for key in ("periodic", "manifolds"):
+        guesses = table.get(key, [])
+        if not isinstance(guesses, list) or not all(
+                isinstance(x, list) and len(x) in (2, 3) and all(map(_finite, x[:2])) and (
+                    len(x) == 2 or (
+                        isinstance(x[2], int) and not isinstance(x[2], bool) and x[2] >= 1))
+                for x in guesses):
+            raise ConfigError(f"{where}.{key}", "expected a list of guesses [b, p_b] or "
+                                                "[b, p_b, k] (k >= 1 points on the section), "
+                                                "e.g. [[0.0, 0.7], [0.18, 0.0, 2]]")
+
+    def guesses(key):
+        return tuple((float(x[0]), float(x[1]), int(x[2]) if len(x) > 2 else 1)
+                     for x in table.get(key, []))
     spec = PlaneSpec(**{**table, "starts": tuple((float(b), float(p)) for b, p in starts),
-                        "periodic": tuple((float(x[0]), float(x[1]), int(x[2]) if len(x) > 2
-                                           else 1) for x in guesses)})
-    most = max([crossings] + [k for _, _, k in spec.periodic])
+                        "periodic": guesses("periodic"), "manifolds": guesses("manifolds")})
+    most = max([crossings] + [k for _, _, k in spec.periodic + spec.manifolds])
     check_bytes(most * CROSSING_BYTES + crossings * len(starts) * 24,
                 f"{where}.crossings" if most == crossings else f"{where}.periodic",
                 f"{most:,} crossings of the section", "ask for fewer")
@@ -410,7 +426,8 @@ def check_plane(table: dict, where: str) -> PlaneSpec:
     if system.n_bodies != 3 or system.dim != 2 or not np.all(system.masses == 1.0):
         raise ConfigError(f"{where}.system", "the isosceles plane is of three unit masses in "
                                              "the plane")
-    for key, points in (("starts", spec.starts), ("periodic", spec.periodic)):
+    for key, points in (("starts", spec.starts), ("periodic", spec.periodic),
+                        ("manifolds", spec.manifolds)):
         for k, (b, p_b, *_) in enumerate(points):
             if plane_start(system, spec.energy, spec.height, b, p_b) is None:
                 raise ConfigError(f"{where}.{key}[{k}]", f"(b, p_b) = ({b:g}, {p_b:g}) is not "
@@ -423,13 +440,15 @@ def check_plane(table: dict, where: str) -> PlaneSpec:
 class PlaneRun(NamedTuple):
     """The orbits of a PlaneSpec: their sections, the shell's edge on the section (b and
     the largest |p_b| there), the periodic orbits found from its guesses (one per guess,
-    converged or not) and what the run cost."""
+    converged or not), the manifolds of those asked for (an orbit Newton did not find or
+    found elliptic stands alone) and what the run cost."""
 
     system: System
     sections: list[PlaneSection]
     edge: tuple[np.ndarray, np.ndarray]
     wall: float
     periodic: list[PlaneOrbit]
+    manifolds: list = []          # PlaneManifolds, or the PlaneOrbit that has none
 
 
 def run_plane(spec: PlaneSpec) -> PlaneRun:
@@ -443,6 +462,7 @@ def run_plane(spec: PlaneSpec) -> PlaneRun:
                 for b, p_b in spec.starts]
     periodic = [plane_periodic(system, spec.energy, spec.height, (b, p_b), k, spec.t_final,
                                rtol=spec.tol) for b, p_b, k in spec.periodic]
+    manifolds = spec_manifolds(spec, system)
     wall = time.perf_counter() - clock
     reach = max(max(abs(b) for b, _ in spec.starts), 1e-3)
     while plane_start(system, spec.energy, spec.height, 2 * reach, 0.0) is not None:
@@ -451,7 +471,21 @@ def run_plane(spec: PlaneSpec) -> PlaneRun:
     room = spec.energy - system.potential_energy(
         np.array([plane_state(x, spec.height, 0.0, 0.0) for x in b]))
     edge = np.where(room > 0, np.sqrt(np.maximum(room, 0.0)), np.nan)
-    return PlaneRun(system, sections, (b, edge), wall, periodic)
+    return PlaneRun(system, sections, (b, edge), wall, periodic, manifolds)
+
+
+def spec_manifolds(spec: PlaneSpec, system: System) -> list:
+    """For each of the spec's `manifolds` guesses: the orbit Newton finds there and, if it
+    is hyperbolic, its manifolds (numerics.isosceles.plane_manifolds)."""
+    out = []
+    for b, p_b, k in spec.manifolds:
+        orbit = plane_periodic(system, spec.energy, spec.height, (b, p_b), k, spec.t_final,
+                               rtol=spec.tol)
+        out.append(plane_manifolds(system, spec.energy, spec.height, orbit,
+                                   spec.manifold_length, spec.manifold_gap, spec.t_final,
+                                   spec.tol)
+                   if orbit.converged and orbit.kind != "elliptic" else orbit)
+    return out
 
 
 def describe_plane(spec: PlaneSpec, run: PlaneRun) -> list[str]:
@@ -467,6 +501,37 @@ def describe_plane(spec: PlaneSpec, run: PlaneRun) -> list[str]:
         lines.append(f"  periodic orbit from the guess ({b:g}, {p_b:g}), k = {k}: "
                      + describe_periodic(orbit, seen))
         seen.append(orbit)
+    for (b, p_b, k), found in zip(spec.manifolds, run.manifolds):
+        lines += describe_manifolds(found, f"  manifolds from the guess ({b:g}, {p_b:g}), "
+                                           f"k = {k}: ")
+    return lines
+
+
+def describe_manifolds(found, head: str) -> list[str]:
+    """Lines on a hyperbolic orbit's manifolds: each branch's extent and points, and the
+    first homoclinic points with the digits their accuracy supports."""
+    if not isinstance(found, PlaneManifolds):
+        what = describe_periodic(found) if not found.converged else \
+            f"the orbit there is {found.kind}: it has no stable and unstable manifolds"
+        return [head + what]
+    orbit = found.orbit
+    lines = [head + f"of the {orbit.kind} orbit at ({orbit.b[0] + 0.0:.8f}, {round(orbit.p_b[0], 8) + 0.0:.8f}) "
+                    f"(multiplier {eigen2(orbit.jacobian)[0][0]:.6g})"]
+    for branch in found.branches:
+        lines.append(f"    {branch.kind} {'+' if branch.side > 0 else '-'}: "
+                     f"{branch.points.shape[0]} points to arclength "
+                     f"{branch.arclength[-1]:.3g}, {branch.level.max()} iterates of its "
+                     f"fundamental domain"
+                     + ("" if branch.resolved else "; stopped short (point budget)"))
+    for h in found.homoclinic:
+        u, s = (found.branches[i] for i in (h.unstable, h.stable))
+        lines.append(f"    first crossing of unstable {'+' if u.side > 0 else '-'} and stable "
+                     f"{'+' if s.side > 0 else '-'} (homoclinic): ({to_accuracy(h.point[0], h.accuracy)}, "
+                     f"{to_accuracy(h.point[1], h.accuracy)}) +- {h.accuracy:.0e}, angle "
+                     f"{np.degrees(h.angle):.2f} degrees, arclength {h.arclength_unstable:.4f} "
+                     f"along the unstable branch")
+    if not found.homoclinic:
+        lines.append("    no homoclinic crossing within this arclength")
     return lines
 
 
@@ -524,3 +589,146 @@ def is_orbit_workflow(path) -> bool:
         return "orbit" in raw or "plane" in raw
     except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError, RecursionError):
         return False
+
+
+def plane_text(spec: PlaneSpec) -> str:
+    """A [[plane]] table as the TOML text its archive stores (a [plane] table of every
+    key, defaults included), from which `verify` computes it again."""
+    from dataclasses import asdict
+
+    from .config import _to_toml
+
+    def plain(v):
+        return [plain(x) for x in v] if isinstance(v, (tuple, list)) else v
+    table = {k: plain(v) for k, v in asdict(spec).items() if v is not None}
+    return _to_toml({"plane": table})
+
+
+def manifold_dataset(spec: PlaneSpec, found: list, config_text: str):
+    """The manifolds of a plane run as a labelled Dataset: per guess the orbit Newton
+    found (its point, period, kind, unstable multiplier); per branch which orbit, stable
+    or unstable, which side; per point (b, p_b), arclength, level and seed; per
+    homoclinic point where, how accurately, which branches cross there and at what angle."""
+    import xarray as xr
+    grown = [f for f in found if isinstance(f, PlaneManifolds)]
+    orbits = [f.orbit if isinstance(f, PlaneManifolds) else f for f in found]
+    branches = [(k, b) for k, f in enumerate(found) if isinstance(f, PlaneManifolds)
+                for b in f.branches]
+    homoclinic = [(k, h) for k, f in enumerate(grown) for h in f.homoclinic]
+    offset = np.cumsum([0] + [len(f.branches) for f in grown])
+    points = np.concatenate([b.points for _, b in branches]) if branches else np.empty((0, 2))
+
+    def each(values, dim, long_name, dtype=np.float64):
+        return (dim, np.array(values, dtype=dtype), {"long_name": long_name})
+    hyperbolic = [o.converged and o.kind != "elliptic" for o in orbits]
+    return xr.Dataset(
+        {"orbit_b": each([o.b[0] for o in orbits], "orbit", "base b of the orbit's first "
+                         "point on the section (where Newton ended if not converged)"),
+         "orbit_p_b": each([o.p_b[0] for o in orbits], "orbit", "p_b of that point"),
+         "orbit_crossings": each([o.crossings for o in orbits], "orbit", "k: its points on "
+                                 "the section", np.int64),
+         "orbit_period": each([o.period for o in orbits], "orbit", "period"),
+         "orbit_converged": each([o.converged for o in orbits], "orbit", "1 where Newton "
+                                 "converged", np.int8),
+         "orbit_kind": ("orbit", np.array([o.kind for o in orbits], dtype=object)),
+         "orbit_multiplier": each([eigen2(o.jacobian)[0][0] if h else np.nan
+                                   for o, h in zip(orbits, hyperbolic)], "orbit",
+                                  "unstable multiplier of the section map P^k"),
+         "branch_orbit": each([k for k, _ in branches], "branch", "the orbit it belongs to",
+                              np.int64),
+         "branch_kind": ("branch", np.array([b.kind for _, b in branches], dtype=object)),
+         "branch_side": each([b.side for _, b in branches], "branch", "the half of the "
+                             "eigenvector it leaves along", np.int8),
+         "branch_resolved": each([b.resolved for _, b in branches], "branch", "1 where it "
+                                 "reached manifold_length within the point budget", np.int8),
+         "point_branch": each(np.repeat(np.arange(len(branches)),
+                                        [b.points.shape[0] for _, b in branches]), "point",
+                              "the branch it is on", np.int64),
+         "b": each(points[:, 0], "point", "base b"),
+         "p_b": each(points[:, 1], "point", "p_b = (db/dt)/2"),
+         "arclength": each(np.concatenate([b.arclength for _, b in branches] or [[]]),
+                           "point", "arclength along its branch from the orbit's point"),
+         "level": each(np.concatenate([b.level for _, b in branches] or [[]]), "point",
+                       "n: the point is P^n (P^-n) of its seed", np.int64),
+         "seed": each(np.concatenate([b.seed for _, b in branches] or [[]]), "point",
+                      "sigma: its seed is x + s0 |mu|^sigma v"),
+         "homoclinic_b": each([h.point[0] for _, h in homoclinic], "homoclinic",
+                              "base b of the first crossing of an unstable and a stable "
+                              "branch"),
+         "homoclinic_p_b": each([h.point[1] for _, h in homoclinic], "homoclinic",
+                                "p_b of that crossing"),
+         "homoclinic_accuracy": each([h.accuracy for _, h in homoclinic], "homoclinic",
+                                     "how far it may be off: its chords' error or its move "
+                                     "at a 10 times looser tolerance, the larger"),
+         "homoclinic_unstable": each([offset[k] + h.unstable for k, h in homoclinic],
+                                     "homoclinic", "the unstable branch", np.int64),
+         "homoclinic_stable": each([offset[k] + h.stable for k, h in homoclinic],
+                                   "homoclinic", "the stable branch", np.int64),
+         "homoclinic_angle": each([h.angle for _, h in homoclinic], "homoclinic",
+                                  "angle between the branches there, radians"),
+         "homoclinic_arclength": each([h.arclength_unstable for _, h in homoclinic],
+                                      "homoclinic", "arclength along the unstable branch")},
+        attrs={"title": f"stable and unstable manifolds on the section h = {spec.height:g} "
+                        f"of the isosceles plane, E = {spec.energy:g}",
+               "family": "manifolds", "name": spec.name, "config": config_text})
+
+
+def verify_manifolds(stored, cells: int = 8) -> list[str]:
+    """How a manifold archive differs from its config computed again: every orbit (Newton
+    again, bit for bit), a sample of `cells` points of its branches (first, last, the rest
+    at random; each P^n of its seed again) and the first homoclinic point (located again
+    on the stored branches). Empty if they agree."""
+    from ..numerics.isosceles import manifold_seeds
+    from ..numerics.manifolds import Branch, first_homoclinic
+    table = read_toml(stored.attrs["config"], "the stored config").get("plane", {})
+    spec = check_plane(table, "[plane]")
+    system = spec.build()
+    lines = []
+    found = [plane_periodic(system, spec.energy, spec.height, (b, p_b), k, spec.t_final,
+                            rtol=spec.tol) for b, p_b, k in spec.manifolds]
+    if len(found) != stored.sizes.get("orbit", 0):
+        return [f"the config asks for {len(found)} orbits, the archive has "
+                f"{stored.sizes.get('orbit', 0)}"]
+    fresh = manifold_dataset(spec, found, stored.attrs["config"])
+    for name in [v for v in fresh.variables if v.startswith("orbit_")]:
+        a, b = stored[name].values, fresh[name].values
+        if [str(x) for x in a] != [str(x) for x in b]:
+            lines.append(f"{name}: {a.tolist()} stored, {b.tolist()} computed again")
+    if lines:
+        return lines
+    made = {k: manifold_seeds(system, spec.energy, spec.height, orbit, spec.t_final,
+                              spec.tol) for k, orbit in enumerate(found)
+            if orbit.converged and orbit.kind != "elliptic"}
+    branch_orbit = stored["branch_orbit"].values
+    first = {int(j): int(np.sum(branch_orbit[:j] == branch_orbit[j]))
+             for j in range(branch_orbit.size)}        # a branch's place in its orbit's four
+    n = stored.sizes["point"]
+    rest = np.random.default_rng(0).permutation(np.arange(1, max(n - 1, 1)))
+    for i in np.unique(np.concatenate([[0, n - 1], rest[:max(cells - 2, 0)]]))[:n]:
+        j = int(stored["point_branch"].values[i])
+        seeds = made[int(branch_orbit[j])][first[j]]
+        point = seeds.point(float(stored["seed"].values[i]), int(stored["level"].values[i]))
+        kept = np.array([stored["b"].values[i], stored["p_b"].values[i]])
+        if point is None or point.tobytes() != kept.tobytes():
+            lines.append(f"point {i} (branch {j}, level {int(stored['level'].values[i])}): "
+                         f"{kept.tolist()} stored, "
+                         f"{None if point is None else point.tolist()} computed again")
+    if stored.sizes.get("homoclinic", 0):
+        u, s = (int(stored[f"homoclinic_{x}"].values[0]) for x in ("unstable", "stable"))
+        k = int(branch_orbit[u])
+        branches = []
+        for j in np.flatnonzero(branch_orbit == k):
+            on = stored["point_branch"].values == j
+            branches.append(Branch(str(stored["branch_kind"].values[j]),
+                                   int(stored["branch_side"].values[j]),
+                                   np.column_stack((stored["b"].values[on],
+                                                    stored["p_b"].values[on])),
+                                   stored["arclength"].values[on], stored["level"].values[on],
+                                   stored["seed"].values[on],
+                                   bool(stored["branch_resolved"].values[j])))
+        h = first_homoclinic(branches, first[u], first[s], made[k])
+        kept = np.array([stored["homoclinic_b"].values[0], stored["homoclinic_p_b"].values[0]])
+        if h is None or h.point.tobytes() != kept.tobytes():
+            lines.append(f"the first homoclinic point: {kept.tolist()} stored, "
+                         f"{None if h is None else h.point.tolist()} located again")
+    return lines

@@ -810,11 +810,13 @@ def is_family(path) -> bool:
         return "family" in ds.attrs
 
 
-def verify_family(path) -> tuple[bool, list[str]]:
+def verify_family(path, cells: int = 8) -> tuple[bool, list[str]]:
     """A family archive against its stored config: the family computed again and compared
     member by member -- the parameter and every per-member number (period, rotation, E, J,
     states, multipliers; or E, J, Omega, positions, eigenvalues) -- bit for bit, on any
-    machine: the integrator and the linear algebra (physics.linalg) are portable."""
+    machine: the integrator and the linear algebra (physics.linalg) are portable. An
+    archive of manifolds (pipeline.orbits.verify_manifolds): its orbits, `cells` of its
+    points and its first homoclinic point."""
     import hashlib
     import tempfile
 
@@ -829,6 +831,18 @@ def verify_family(path) -> tuple[bool, list[str]]:
     if hashlib.sha256(text.encode()).hexdigest() != stored.attrs["config_sha256"]:
         return False, [f"{path}: config_sha256 does not match the stored config text (edited "
                        "after the run)"]
+    made = f"(made on {stored.attrs.get('machine', 'an unrecorded machine')}, checked on " \
+           f"{machine()})"
+    if kind == "manifolds":
+        from .orbits import verify_manifolds
+        lines = verify_manifolds(stored, cells)
+        if lines:
+            return False, [f"{path}: the manifolds computed again differ {made}:"] + \
+                [f"  {line}" for line in lines]
+        return True, [f"{path}: {stored.sizes['orbit']} orbits, {min(cells, stored.sizes['point'])} "
+                      f"of {stored.sizes['point']} points and "
+                      f"{min(1, stored.sizes.get('homoclinic', 0))} homoclinic point computed "
+                      f"again agree bit for bit {made}"]
     with tempfile.TemporaryDirectory() as folder:
         config = Path(folder) / "family.toml"
         config.write_text(text)
@@ -838,8 +852,6 @@ def verify_family(path) -> tuple[bool, list[str]]:
         else:
             _, table, family = solve_equilibria(config)
             fresh = equilibrium_dataset(table, family, text)
-    made = f"(made on {stored.attrs.get('machine', 'an unrecorded machine')}, checked on " \
-           f"{machine()})"
     lines = _family_differences(stored, fresh)
     if lines:
         return False, [f"{path}: the family computed again differs {made}:"] + \

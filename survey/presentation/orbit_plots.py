@@ -189,8 +189,17 @@ def plane_figure(name: str, spec, run) -> Figure:
     for (b0, p0), sec, colour in zip(spec.starts, run.sections, colours):
         ax.plot(sec.b, sec.p_b, ".", ms=1.8, color=colour, rasterized=True)
         ax.plot([b0], [p0], "x", ms=4, color=colour)
-    marked = []
-    for orbit in run.periodic:
+    grown = [f for f in run.manifolds if hasattr(f, "branches")]
+    for kind, colour in (("unstable", "#d62728"), ("stable", "#1f3fb4")):
+        for k, branch in enumerate(b for f in grown for b in f.branches if b.kind == kind):
+            ax.plot(branch.points[:, 0], branch.points[:, 1], "-", color=colour, lw=0.9,
+                    label=None if k else f"{kind} manifold")
+    crossings = np.array([h.point for f in grown for h in f.homoclinic]).reshape(-1, 2)
+    if crossings.size:
+        ax.plot(crossings[:, 0], crossings[:, 1], "o", ms=5, mfc="gold", mec="k", mew=0.8,
+                ls="none", label="first homoclinic crossings")
+    marked, shown = [], run.periodic + [f.orbit for f in grown]
+    for orbit in shown:
         if not orbit.converged or any(o.same_as(orbit) for o in marked):
             continue
         elliptic = orbit.kind == "elliptic"
@@ -198,7 +207,7 @@ def plane_figure(name: str, spec, run) -> Figure:
                 mfc="none" if elliptic else "k", mec="k", mew=1.4, ls="none",
                 label=None if any(o.kind == orbit.kind for o in marked) else
                 f"{orbit.kind} periodic orbit" + (" (its k points)" if
-                                                  max(o.crossings for o in run.periodic
+                                                  max(o.crossings for o in shown
                                                       if o.converged) > 1 else ""))
         marked.append(orbit)
     inside = np.isfinite(edge)
@@ -220,7 +229,10 @@ def plane_figure(name: str, spec, run) -> Figure:
         f"starts), {points} crossings, {passages} passages through b = 0, |E/E0 - 1| <= "
         f"{worst:.0e}" + (f"; {early} orbits ended early (step limit)" if early else "")
         + (f"; {len(marked)} periodic orbits marked (Newton on the section map, stability "
-           f"from its Jacobian's trace)" if marked else ""),
+           f"from its Jacobian's trace)" if marked else "")
+        + (f"; the manifolds of {len(grown)} hyperbolic orbit{'s' if len(grown) > 1 else ''}"
+           f" to arclength {spec.manifold_length:g}, grown from its eigenvectors"
+           if grown else ""),
         110), fontsize="small")
     ax.legend(loc="upper right", fontsize="small", framealpha=0.9)
     return fig

@@ -18,7 +18,10 @@ Placeholders:
 - {{within NAME | VAR | AXIS=VALUE | X}}: whether a published X lies within the 5-95%
   quantiles of the cell's ensemble: the verdict a comparison with the paper prints;
 - {{onset NAME | verdict X}}: whether a published onset X lies within twice the onset's
-  total uncertainty."""
+  total uncertainty;
+- {{manifolds NAME}}: a manifold archive (an isosceles plane's NAME.nc): its hyperbolic
+  orbits, how far their branches were grown and their first homoclinic crossings, each
+  to the digits its accuracy supports."""
 from __future__ import annotations
 
 import contextlib
@@ -64,6 +67,10 @@ def _fill(body: str, find, archives: dict) -> str:
             raise ValueError(f"{{{{{body}}}}}: {pattern!r} not found in {find(name)}")
         return found.group(1)
     args = [a.strip() for a in rest.split("|")]
+    if kind == "manifolds":
+        import xarray as xr
+        with xr.open_dataset(find(f"{args[0]}.nc")) as ds:
+            return _manifolds(ds)
     if args[0] not in archives:
         import xarray as xr
         archives[args[0]] = xr.open_dataset(find(f"{args[0]}.nc"))
@@ -149,3 +156,30 @@ def _onset(ds, where, part=None):
     if part not in sizes:
         raise ValueError(f"{name}: no {part!r} in its onset's budget (no such [check] run)")
     return "no onset" if not np.isfinite(sizes[part]) else f"{sizes[part]:.2g}"
+
+
+def _manifolds(ds) -> str:
+    from ..analysis.findings import to_accuracy
+    parts = []
+    for k in range(ds.sizes["orbit"]):
+        if not (ds["branch_orbit"].values == k).any():
+            continue
+        on = np.isin(ds["point_branch"].values, np.flatnonzero(ds["branch_orbit"].values == k))
+        text = (f"the {ds['orbit_kind'].values[k]} orbit at b = {ds['orbit_b'].values[k]:.8f}"
+                f" (multiplier {ds['orbit_multiplier'].values[k]:.6g}): its four branches "
+                f"to arclength {ds['arclength'].values[on].max():.3g} ({int(on.sum())} "
+                f"points)")
+        crossings = []
+        for h in np.flatnonzero(ds["branch_orbit"].values[ds["homoclinic_unstable"].values]
+                                == k):
+            acc = float(ds["homoclinic_accuracy"].values[h])
+            side = ["-", "+"]
+            u, s = (int(ds[f"homoclinic_{x}"].values[h]) for x in ("unstable", "stable"))
+            crossings.append(
+                f"unstable {side[int(ds['branch_side'].values[u] > 0)]} with stable "
+                f"{side[int(ds['branch_side'].values[s] > 0)]} at "
+                f"({to_accuracy(float(ds['homoclinic_b'].values[h]), acc)}, "
+                f"{to_accuracy(float(ds['homoclinic_p_b'].values[h]), acc)}) +- {acc:.0e}")
+        parts.append(text + ("; first crossings (homoclinic): " + "; ".join(crossings)
+                             if crossings else "; no homoclinic crossing within it"))
+    return "; ".join(parts) or "no hyperbolic orbit"

@@ -16,9 +16,9 @@ from survey.numerics.isosceles import (
 from survey.physics.system import System
 
 
-def reduced_section(start, n, t_final, forces, height=0.0, tol=1e-13):
-    """The first n upward crossings of h = height, (t, b, p_b), of the reduced plane with
-    forces(b, h, s) = (dp_b/dt, dp_h/dt) on the side s = sgn(b)."""
+def reduced_section(start, n, t_final, forces, height=0.0, tol=1e-13, direction=1):
+    """The first n upward (direction = -1: downward) crossings of h = height, (t, b, p_b),
+    of the reduced plane with forces(b, h, s) = (dp_b/dt, dp_h/dt) on the side s = sgn(b)."""
     def rhs(t, y, s):
         b, h, pb, ph = y
         fb, fh = forces(b, h, s)
@@ -30,7 +30,7 @@ def reduced_section(start, n, t_final, forces, height=0.0, tol=1e-13):
 
     def section(t, y, s):
         return y[1] - height
-    section.direction = 1
+    section.direction = direction
     out, t, y = [], 0.0, np.array(start, dtype=float)
     s = 1.0 if y[0] > 0 else -1.0
     while len(out) < n and t < t_final:
@@ -207,6 +207,32 @@ def test_a_plane_workflow_draws_its_section(tmp_path, capsys):
     assert "guess (0.57, 0), k = 1: 1 point (0.56590170, 0.00000000)" in out
 
 
+def test_a_plane_workflow_archives_manifolds_that_verify(tmp_path, capsys):
+    """manifolds = [...] grows the manifolds of the orbits found there (an elliptic one
+    has none, and says so), draws them and archives them in NAME_plane.nc, which `verify`
+    computes again bit for bit -- and which fails once a point is moved."""
+    import netCDF4
+
+    from survey.cli import main, orbit_workflow
+    path = tmp_path / "plane.toml"
+    path.write_text('[[plane]]\nname = "iso"\nenergy = 1.0\nstarts = [[0.69, 0.0]]\n'
+                    'crossings = 10\nt_final = 100.0\nmanifolds = [[0.57, 0.0], [0.0, 0.7]]\n'
+                    'manifold_length = 0.5\nmanifold_gap = 0.1\n')
+    written = orbit_workflow(path, tmp_path)
+    assert [p.name for p in written] == ["iso_plane.png", "iso_plane.nc"]
+    out = capsys.readouterr().out
+    assert "of the hyperbolic orbit at (0.56590170, 0.00000000) (multiplier 2.21884)" in out
+    assert "unstable +: " in out and "stable -: " in out
+    assert "guess (0, 0.7), k = 1: the orbit there is elliptic" in out
+    archive = tmp_path / "iso_plane.nc"
+    assert main(["verify", str(archive), "--cells", "3"]) == 0
+    assert "3 of " in capsys.readouterr().out
+    with netCDF4.Dataset(archive, "a") as ds:
+        ds["b"][0] = ds["b"][0] + 1e-15
+    assert main(["verify", str(archive), "--cells", "3"]) == 1
+    assert "point 0 (branch 0, level 0)" in capsys.readouterr().out
+
+
 @pytest.mark.parametrize("text, key, message", [
     ('starts = [[0.8, 0.0]]', "[[plane]] 1.starts[0]", "not on the section"),
     ('starts = [[0.1]]', "[[plane]] 1.starts", "[b, p_b] pairs"),
@@ -219,6 +245,13 @@ def test_a_plane_workflow_draws_its_section(tmp_path, capsys):
     ('starts = [[0.1, 0.0]]\nperiodic = [0.1, 0.0]', "[[plane]] 1.periodic", "guesses"),
     ('starts = [[0.1, 0.0]]\nperiodic = [[0.1, 0.0], [0.9, 0.0]]',
      "[[plane]] 1.periodic[1]", "not on the section"),
+    ('starts = [[0.1, 0.0]]\nmanifolds = [[0.9, 0.0]]', "[[plane]] 1.manifolds[0]",
+     "not on the section"),
+    ('starts = [[0.1, 0.0]]\nmanifolds = [0.57, 0.0]', "[[plane]] 1.manifolds", "guesses"),
+    ('starts = [[0.1, 0.0]]\nmanifold_gap = 0.0', "[[plane]] 1.manifold_gap",
+     "finite number >="),
+    ('starts = [[0.1, 0.0]]\nmanifold_length = 1e9', "[[plane]] 1.manifold_length",
+     "<= 1000"),
 ])
 def test_plane_tables_that_cannot_work_are_refused(tmp_path, text, key, message):
     from survey.pipeline.orbits import load_workflow
@@ -227,3 +260,94 @@ def test_plane_tables_that_cannot_work_are_refused(tmp_path, text, key, message)
     with pytest.raises(ConfigError) as err:
         load_workflow(path)
     assert err.value.key == key and message in str(err.value)
+
+
+@pytest.fixture(scope="module")
+def saddle_manifolds():
+    """The manifolds of the perimetric plane's hyperbolic fixed point (0.5659, 0) at E = 1
+    (multiplier 2.21884), each branch to arclength 3.5: far enough for first homoclinic
+    crossings."""
+    from survey.numerics.isosceles import plane_manifolds
+    system = System.create()
+    saddle = plane_periodic(system, 1.0, 0.0, (0.57, 0.0))
+    return system, plane_manifolds(system, 1.0, 0.0, saddle, length=3.5, gap=0.05)
+
+
+def reduced_map(system, x, n, backward=False):
+    """P^n(x) (P^-n backward: the time-reversed orbit's downward crossings) in the
+    independent reduced integration."""
+    b, h, p_b, p_h = plane_start(system, 1.0, 0.0, *x)
+    way = -1 if backward else 1
+    out = reduced_section((b, h, way * p_b, way * p_h), n, 100.0 * n, perimetric,
+                          direction=way)
+    return np.array([out[-1, 1], way * out[-1, 2]])
+
+
+def test_manifolds_leave_along_the_eigenvectors_of_an_independent_jacobian(saddle_manifolds):
+    from survey.numerics.isosceles import eigen2
+    system, found = saddle_manifolds
+    x, step = np.array([found.orbit.b[0], found.orbit.p_b[0]]), 1e-5
+    J = np.column_stack([(reduced_map(system, x + e, 1) - reduced_map(system, x - e, 1))
+                         / (2 * step) for e in (np.array([step, 0.0]), np.array([0.0, step]))])
+    reference = eigen2(J)
+    for (mu, v), (mu_ref, v_ref) in zip(eigen2(found.orbit.jacobian), reference):
+        assert mu == pytest.approx(mu_ref, rel=1e-6)
+        assert min(np.hypot(*(v - v_ref)), np.hypot(*(v + v_ref))) < 1e-6
+    assert reference[0][0] == pytest.approx(2.21884, abs=1e-5)
+
+
+def test_manifold_points_match_an_independent_integration(saddle_manifolds):
+    """The first 20 points of the unstable and the stable + branch beyond 0.05 of the
+    fixed point (levels 8 to 14: each P^n, or P^-n, of its seed) agree with the reduced
+    integration from the same seed to 1e-8."""
+    from survey.numerics.isosceles import manifold_seeds
+    system, found = saddle_manifolds
+    made = manifold_seeds(system, 1.0, 0.0, found.orbit)
+    fixed = np.array([found.orbit.b[0], found.orbit.p_b[0]])
+    for index, backward in ((0, False), (2, True)):
+        branch = found.branches[index]
+        far = np.flatnonzero(np.hypot(*(branch.points - fixed).T) > 0.05)[:20]
+        assert far.size == 20 and branch.level[far].max() >= 10
+        for i in far:
+            ref = reduced_map(system, made[index].seed(branch.seed[i]), branch.level[i],
+                              backward)
+            assert np.abs(ref - branch.points[i]).max() < 1e-8, (index, i)
+
+
+def test_stable_branches_are_the_unstable_ones_reflected(saddle_manifolds):
+    """The section map's reversing symmetry R (b, p_b) -> (b, -p_b) (time reversal with
+    the reflection h -> -h, which keeps the section h = 0 crossed upwards) takes the
+    unstable manifold to the stable one: R of each stable point P^-n(x* + s v_s) is
+    P^n(R x* + s R v_s) (x* is on Fix R to 1e-10), and R v_s is an unstable eigenvector."""
+    from survey.numerics.isosceles import manifold_seeds
+    from survey.numerics.manifolds import seeds
+    system, found = saddle_manifolds
+    made = manifold_seeds(system, 1.0, 0.0, found.orbit)
+    R = np.array([1.0, -1.0])
+    assert abs(found.orbit.p_b[0]) < 1e-10                   # the fixed point is on Fix R
+    for stable in (2, 3):
+        mirrored = R * made[stable].vector
+        twin = next(k for k in (0, 1) if np.hypot(*(made[k].vector - mirrored)) < 1e-7)
+        forward = seeds(made[0].step, R * made[0].fixed, mirrored, made[stable].stretch, 1)
+        branch = found.branches[stable]
+        picks = np.linspace(0, branch.points.shape[0] - 1, 20).astype(int)
+        for i in picks:
+            ours = forward.point(branch.seed[i], branch.level[i])
+            assert np.abs(ours - R * branch.points[i]).max() < 1e-8, (stable, i)
+        assert found.branches[twin].points.shape == branch.points.shape
+
+
+def test_a_first_homoclinic_point_goes_to_the_fixed_point_both_ways(saddle_manifolds):
+    """The unstable - and stable + branches cross by arclength 3.5; the crossing, mapped
+    forward as often as the stable branch took to bring it out, and backward as often as
+    the unstable one did, lands near the fixed point both times."""
+    system, found = saddle_manifolds
+    h = next(h for h in found.homoclinic if (h.unstable, h.stable) == (1, 2))
+    assert h.accuracy < 1e-8 and h.angle > 0.1
+    fixed = np.array([found.orbit.b[0], found.orbit.p_b[0]])
+    u, s = found.branches[h.unstable], found.branches[h.stable]
+    near_u = u.level[np.searchsorted(u.arclength, h.arclength_unstable)]
+    near_s = s.level[np.argmin(np.hypot(*(s.points - h.point).T))]
+    for n, backward in ((near_s, False), (near_u, True)):
+        end = reduced_map(system, h.point, n, backward)
+        assert np.hypot(*(end - fixed)) < 1e-3, (n, backward, end)
