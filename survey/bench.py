@@ -28,9 +28,9 @@ from .numerics.dop853 import (A2, A3, A4, A5, A6, A7, A8, A9, A10, A11, A12, B, 
 from .numerics.indicators import deviation_vectors
 from .numerics.integrate import _Frame, integrate, integrate_batch
 from .physics.families import initial_state
-from .physics import portable
-from .physics.jit import helper, kernel, leaf
-from .physics.portable import fma
+from .machine import portable
+from .machine.jit import helper, kernel, leaf
+from .machine.portable import fma
 from .physics.system import SIMD_LANES, System, rhs_lanes, state_size, workspace_size
 from .physics.terms import make_potential
 

@@ -150,7 +150,6 @@ def _plot(args):
     from .catalog.variables import V
     from .pipeline.archive import open_archive
     from .pipeline.resources import ensure_folder
-    from .pipeline.special import section_slice, special_cells
     known = [V.regime] + [i.headline for i in REGISTRY if i.map is not None]
     for name in args.var or []:
         if name not in known:
@@ -160,10 +159,20 @@ def _plot(args):
     with open_archive(args.archive) as ds:
         _survey_archive(args.archive, ds, "plot")
         from .presentation import plots
-        figs = plots.figures(ds, args.var or None, special_cells(ds), section_slice(ds))
+        figs = plots.figures(_with_report_attributes(ds), args.var or None)
         for path in plots.save(figs, out, Path(args.archive).stem):
             print(f"wrote {path}")
     return 0
+
+
+def _with_report_attributes(ds):
+    """An archive with what its report needs from a solver (pipeline.special.
+    report_attributes): stored by every survey since they were, computed here for an
+    archive written before."""
+    if "special_cells" in ds.attrs:
+        return ds
+    from .pipeline.special import report_attributes
+    return ds.assign_attrs(report_attributes(ds))
 
 
 def _survey_archive(path, ds, command: str):
@@ -179,7 +188,6 @@ def _report(args):
     import contextlib
 
     from .pipeline.archive import check_archives, open_archive
-    from .pipeline.special import section_slice, special_cells
     from .presentation import report
     from .pipeline.resources import ensure_folder
     archive = Path(args.archive)
@@ -187,8 +195,7 @@ def _report(args):
     with open_archive(archive) as ds, contextlib.ExitStack() as stack:
         _survey_archive(archive, ds, "report")
         checks = {v: stack.enter_context(open_archive(f)) for v, f in check_archives(archive)}
-        path = report.write(ds, out, archive.stem, checks=checks,
-                            special=special_cells(ds), slice_at=section_slice(ds))
+        path = report.write(_with_report_attributes(ds), out, archive.stem, checks=checks)
     print(f"wrote {path} and its figures")
     return 0
 
@@ -341,10 +348,8 @@ def _survey(config, command, summary=False, write_report=True, **kw) -> Path:
         if summary:
             print("\n".join(summarise(ds)))
         if write_report:      # imported here: matplotlib alone takes 0.3 s to import
-            from .pipeline.special import section_slice, special_cells
             from .presentation import report
-            written = report.write(ds, path.parent, path.stem, checks=others,
-                                   special=special_cells(ds), slice_at=section_slice(ds))
+            written = report.write(ds, path.parent, path.stem, checks=others)
             if summary:
                 print(f"report and figures: {written} (and {path.stem}_*.png beside it)")
     return path
@@ -478,7 +483,7 @@ def main(argv=None):
     args = build_parser().parse_args(argv)
     if args.command in COMPILING_COMMANDS and sys.stderr.isatty():
         # before the heavy imports, so that it shows at once
-        from .physics.jit import kernels_cached
+        from .machine.jit import kernels_cached
         from .pipeline.progress import FIRST_COMPILE
         if not kernels_cached():
             print("survey: first run here: the kernels compile before the work starts "

@@ -25,6 +25,14 @@ CHECK_VARIANTS = {
 }
 
 
+def check_archive(archive, variant: str):
+    """Where a survey archive's [check] run of `variant` is written: beside it, as
+    <stem>_check_<variant>.nc."""
+    from pathlib import Path
+    archive = Path(archive)
+    return archive.with_name(f"{archive.stem}_check_{variant}.nc")
+
+
 def check_change(variant: str, indicators: dict, integration: dict) -> str:
     """What a [check] variant's run changed, in words with its values, from its
     [indicators] and [integration] tables (a validated config's or an archive's stored

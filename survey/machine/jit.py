@@ -4,8 +4,11 @@ numba's disk cache when kernel sources change.
 numba's disk cache is keyed by each function's own source file, so a kernel that inlines
 code from another module (rhs inlines the forces of forces.py, the driver inlines rhs), or
 freezes another module's constants (the status codes), would keep stale machine code after
-that module changes. Importing this module (every compiled module does, first) clears
-survey's cached kernels whenever the kernel modules' sources have changed.
+that module changes.
+
+What this module changes beyond itself happens in one call, `start`, made once as it is
+imported (every compiled module imports it first): the cached kernels cleared if their
+sources changed, and LLVM told the machine's real vector width (process-wide).
 """
 from __future__ import annotations
 
@@ -20,8 +23,8 @@ from numba.core.registry import cpu_target
 
 PACKAGE = Path(__file__).parents[1]
 # the modules whose source compiled code depends on, and the folders that hold kernels
-SOURCES = ("catalog/status.py", "physics/*.py", "numerics/*.py", "bench.py")
-KERNEL_FOLDERS = (".", "physics", "numerics")
+SOURCES = ("catalog/status.py", "machine/*.py", "physics/*.py", "numerics/*.py", "bench.py")
+KERNEL_FOLDERS = (".", "machine", "physics", "numerics")
 
 
 def cache_folder(source_folder: Path) -> Path:
@@ -75,8 +78,6 @@ def kernels_cached(package: Path = PACKAGE) -> bool:
     return any(cache_folder(package / "numerics").glob("integrate._run-*.nbi"))
 
 
-refresh_kernel_cache()
-
 
 # The AVX-512 cores known to run a 512-bit operation in full (Zen 5's server parts); Zen 4
 # runs it as two 256-bit halves, and LLVM's own tuning keeps Intel's cores at 256 bits.
@@ -115,7 +116,16 @@ def vector_width():
     return 4
 
 
-VECTOR_DOUBLES = vector_width()
+def start() -> int:
+    """Everything survey changes outside itself before it compiles, in one place: numba's
+    disk cache brought in step with the kernel sources (refresh_kernel_cache), and LLVM's
+    vector width set for the machine (vector_width, which holds for the process). Returns
+    the vector width in doubles."""
+    refresh_kernel_cache()
+    return vector_width()
+
+
+VECTOR_DOUBLES = start()
 
 # Every compiled function: cached on disk, and IEEE arithmetic (inf/nan, never a Python
 # exception such as ZeroDivisionError from inside a kernel; the integrator turns

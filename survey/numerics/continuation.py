@@ -15,7 +15,7 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
-from ..physics import linalg
+from ..machine import linalg
 from ..physics.equilibria import (
     AXIS_TOLERANCE,
     Bifurcation,

@@ -11,8 +11,8 @@ import math
 
 import numpy as np
 
-from ..physics.jit import helper, lanes, leaf
-from ..physics.portable import fma
+from ..machine.jit import helper, lanes, leaf
+from ..machine.portable import fma
 from ..physics.system import rhs, rhs_lanes, state_size
 
 EPS = np.finfo(np.float64).eps

@@ -11,7 +11,7 @@ from typing import NamedTuple, Sequence
 import numpy as np
 
 from ..physics.forces import cross, dot, norm, sub, vec
-from ..physics.jit import leaf
+from ..machine.jit import leaf
 from ..physics.system import System
 from .dop853 import EPS, dense_eval
 

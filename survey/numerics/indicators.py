@@ -28,8 +28,8 @@ from ..catalog import defaults
 from ..catalog.indicators import IndicatorOptions
 from ..catalog.status import Status
 from ..catalog.variables import ENSEMBLE_QUANTILES, ENSEMBLE_STATISTICS, history_times
-from ..physics.linalg import orthonormal
-from ..physics.portable import vdot, vnorm
+from ..machine.linalg import orthonormal
+from ..machine.portable import vdot, vnorm
 from ..physics.system import System, rhs
 from .events import Crossings
 from .integrate import EVAL, EVENTS, FINE, Outcome, integrate_batch

@@ -38,8 +38,8 @@ from typing import NamedTuple, Sequence
 import numpy as np
 from ..catalog import defaults
 from ..catalog.status import Status
-from ..physics import portable
-from ..physics.jit import helper, lanes, leaf
+from ..machine import portable
+from ..machine.jit import helper, lanes, leaf
 from ..physics.terms import AREA, PERIMETER
 from ..physics.system import (
     SIMD_LANES, SIMD_MIN, System, rhs, rhs_lanes, state_size, workspace_size,

@@ -24,7 +24,7 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
-from ..physics.portable import vatan2, vexp, vlog
+from ..machine.portable import vatan2, vexp, vlog
 
 FIRST = 1e-5        # s0: the seeds' distance from the fixed point (their quadratic error,
 #                     ~1e-10, and the eigenvector's shrink as the map stretches the branch)

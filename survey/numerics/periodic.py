@@ -23,7 +23,7 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
-from ..physics import linalg, portable
+from ..machine import linalg, portable
 from ..physics.equilibria import (
     Bifurcation,
     RelativeEquilibrium,

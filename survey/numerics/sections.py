@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 
-from ..physics import portable
+from ..machine import portable
 from ..physics.jacobi import jacobi_weights, phase_form, position_form
 from ..physics.system import System
 from .events import Area, Event, Linear, Quadratic, Sides

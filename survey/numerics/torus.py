@@ -26,7 +26,7 @@ stores.
 
 Like the integrator, the analysis gives the same bits on every machine: its sums run in
 compiled loops in a fixed order, its exponentials and trigonometric functions are
-survey.physics.portable's (numpy's SIMD versions, BLAS's products and libm's complex
+survey.machine.portable's (numpy's SIMD versions, BLAS's products and libm's complex
 exponential round by the CPU). Only the FFT that seeds NAFF's lines comes from numpy
 (pocketfft, compiled for the baseline CPU), and only the index of its largest bin is used.
 """
@@ -41,9 +41,9 @@ import numpy as np
 from ..catalog import defaults
 from ..catalog.regimes import Thresholds
 from ..catalog.variables import OBSERVABLES, fundamental_names, shape_dof
-from ..physics import portable
+from ..machine import portable
 from ..physics.jacobi import reduced
-from ..physics.jit import helper, kernel, lanes
+from ..machine.jit import helper, kernel, lanes
 
 TWO_PI = 2.0 * math.pi
 

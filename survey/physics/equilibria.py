@@ -2,7 +2,7 @@
 tangent forces, the equilibrium reached by descending the potential, and relative
 equilibria (rigid rotations) with their linear stability.
 
-All the linear algebra is physics.linalg's, compiled in a fixed order of IEEE operations
+All the linear algebra is machine.linalg's, compiled in a fixed order of IEEE operations
 instead of LAPACK and BLAS: a chaotic orbit started at an equilibrium amplifies a
 difference in its last bit, and a family continued from one decides its steps by noise,
 so both must be the same bits on every machine."""
@@ -12,9 +12,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .jit import kernel
-from . import linalg
-from .linalg import orthonormal, symmetric_eigen
+from ..machine.jit import kernel
+from ..machine import linalg
+from ..machine.linalg import orthonormal, symmetric_eigen
 from .system import System, centre_of_mass, rhs
 
 

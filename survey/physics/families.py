@@ -18,7 +18,7 @@ from typing import Callable
 import numpy as np
 
 from ..catalog.errors import Inaccessible
-from . import linalg, portable
+from ..machine import linalg, portable
 from .equilibria import equilibrium_positions, forces
 from .forces import profile
 from .jacobi import (

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import math
 
-from . import portable
-from .jit import helper, lanes, leaf
+from ..machine import portable
+from ..machine.jit import helper, lanes, leaf
 from .terms import BARRIER, LENNARD_JONES, PERIMETER, POWER
 
 

@@ -15,9 +15,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from . import portable
+from ..machine import portable
 from .forces import profile
-from .jit import kernel
+from ..machine.jit import kernel
 from .system import System, weighted_sum
 from .terms import PERIMETER
 

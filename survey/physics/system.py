@@ -38,8 +38,8 @@ from .forces import (
     vec,
 )
 from .geometry import cross
-from .portable import fma, power, vnorm
-from .jit import VECTOR_DOUBLES, helper, kernel, lanes, leaf
+from ..machine.portable import fma, power, vnorm
+from ..machine.jit import VECTOR_DOUBLES, helper, kernel, lanes, leaf
 from .terms import (
     AREA,
     BARRIER,

@@ -123,7 +123,7 @@ MACHINE_OVERRIDES = ("NUMBA_CPU_NAME", "NUMBA_CPU_FEATURES", "NPY_DISABLE_CPU_FE
 def machine() -> str:
     """The CPU and the code paths chosen for it: the CPU model, the target numba compiles
     for, numpy's SIMD dispatch level, the C library, and any setting that overrides them.
-    Provenance only: every x86-64 machine computes the same bits (survey.physics.portable),
+    Provenance only: every x86-64 machine computes the same bits (survey.machine.portable),
     which verify, run on another machine, shows."""
     import platform
 
@@ -136,9 +136,9 @@ def machine() -> str:
                           if line.startswith("model name")), "")
     except OSError:
         pass
-    from ..physics.jit import VECTOR_DOUBLES
+    from ..machine.jit import VECTOR_DOUBLES
     # what numba's code generator was made with (its configuration may since have been
-    # reloaded from an environment without survey.physics.jit's 256-bit setting)
+    # reloaded from an environment without survey.machine.jit's 256-bit setting)
     _, target, features = cpu_target.target_context.codegen().magic_tuple()
     if features.endswith("+prefer-256-bit"):
         target += " in 256-bit vectors"
@@ -271,12 +271,15 @@ def prefetch():
     xr.Variable(("x",), np.zeros(1))
 
 
-def write(config, load: Callable[[list[str]], dict], command: str, cells=None) -> Path:
+def write(config, load: Callable[[list[str]], dict], command: str, cells=None,
+          annotate: Callable | None = None) -> Path:
     """Write the archive atomically: to a temporary file beside the output, in groups of
     variables of at most GROUP_BYTES together (peak memory: a group, or one variable if
     larger), then renamed into place. `load(names)` returns those variables over all cells
     in flat C order (a refined survey: over its `cells`, sorted lattice ids), each of shape
-    (cells, ...)."""
+    (cells, ...). annotate(ds) -> attributes (text) computed from the finished Dataset,
+    added before the rename (what the report needs that only a solver can compute:
+    pipeline.special.report_attributes)."""
     import xarray as xr
     out = config.output
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -298,6 +301,12 @@ def write(config, load: Callable[[list[str]], dict], command: str, cells=None) -
             derived = derive(ds)
         _append(tmp, [(v, derived[v.name], dims + v.extra, derived.get(v.name + ":attrs", {}))
                       for v in variables(config) if v.derived])
+        if annotate is not None:
+            import netCDF4
+            with xr.open_dataset(tmp, engine="netcdf4") as ds:
+                extra = annotate(ds.load())
+            with netCDF4.Dataset(tmp, "a") as nc:
+                nc.setncatts(extra)
         with open(tmp, "rb+") as fh:
             os.fsync(fh.fileno())
         os.replace(tmp, out)
@@ -355,9 +364,8 @@ def partial_path(out: Path) -> Path:
 
 def check_archives(archive) -> list[tuple[str, Path]]:
     """(variant, path) of each [check] run's archive found beside a survey archive."""
-    archive = Path(archive)
     return [(v, f) for v in defaults.CHECK_VARIANTS
-            if (f := archive.with_name(f"{archive.stem}_check_{v}.nc")).exists()]
+            if (f := defaults.check_archive(archive, v)).exists()]
 
 
 def open_archive(path):

@@ -28,7 +28,7 @@ from ..catalog.variables import (
 from ..numerics import torus
 from ..numerics.indicators import batch_options, combine, conservation_errors, ensemble
 from ..numerics.integrate import compile_handoff, integrate_batch
-from ..physics import linalg, portable
+from ..machine import linalg, portable
 from ..physics.families import initial_state
 from ..physics.jacobi import reduced
 from . import archive
@@ -325,7 +325,7 @@ def warm_beside(task: CellTask, first, starts):
     every worker) and the linear algebra of the report's special solutions (which the
     driver compiled after the survey) -- on stand-in data of the types they are given: a
     smooth quasi-periodic motion near the first start, small matrices (the wrappers of
-    physics.linalg make their kernels' arguments contiguous float64)."""
+    machine.linalg make their kernels' arguments contiguous float64)."""
     if not first.size:
         return
     system = next(_systems(task, first, starts))[0]

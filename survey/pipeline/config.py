@@ -366,11 +366,11 @@ class Config:
             survey["name"] = f"{self.name}_check_{variant}"
             if survey.get("output"):    # the text names the file its own output implies
                 path = Path(survey["output"])
-                survey["output"] = str(path.with_name(f"{path.stem}_check_{variant}.nc"))
+                survey["output"] = str(defaults.check_archive(path, variant))
             second = validate(raw, _to_toml(raw), f"{self.source} [check] {variant}",
                               check_output=False)
-            second.tables["survey"]["output"] = str(self.output.with_name(
-                f"{self.output.stem}_check_{variant}.nc"))
+            second.tables["survey"]["output"] = str(defaults.check_archive(self.output,
+                                                                           variant))
             ensure_writable(second.output)
             out[variant] = second
         return out

@@ -28,7 +28,7 @@ from ..numerics.periodic import (
     periodic_family,
     periodic_orbit,
 )
-from ..physics import linalg
+from ..machine import linalg
 from ..physics.equilibria import (
     RelativeEquilibrium,
     forces,
@@ -803,6 +803,24 @@ def special_cells(ds) -> list[dict]:
     return equilibrium_cells(ds) + homographic_cells(ds)
 
 
+def report_attributes(ds) -> dict[str, str]:
+    """What a survey's report needs that only a solver computes, as attributes of its
+    archive (JSON text): the special solutions its cells start on (special_cells) and the
+    section coordinates a section grid fixes (section_slice). Written with the archive
+    (pipeline.archive.write), so every reader -- `python -m survey report`,
+    `ds.survey.report()` -- sets the same beside the cells without solving again."""
+    def plain(x):
+        if isinstance(x, np.integer):
+            return int(x)
+        if isinstance(x, (np.floating, np.bool_)):
+            return x.item()
+        if isinstance(x, np.ndarray):
+            return x.tolist()
+        raise TypeError(f"{type(x).__name__} is not JSON")
+    return {"special_cells": json.dumps(special_cells(ds), default=plain),
+            "section_slice": json.dumps(section_slice(ds))}
+
+
 def is_family(path) -> bool:
     """Whether an archive is a family (of `equilibria` or `periodic --output`)."""
     from .archive import open_archive
@@ -814,7 +832,7 @@ def verify_family(path, cells: int = 8) -> tuple[bool, list[str]]:
     """A family archive against its stored config: the family computed again and compared
     member by member -- the parameter and every per-member number (period, rotation, E, J,
     states, multipliers; or E, J, Omega, positions, eigenvalues) -- bit for bit, on any
-    machine: the integrator and the linear algebra (physics.linalg) are portable. An
+    machine: the integrator and the linear algebra (machine.linalg) are portable. An
     archive of manifolds (pipeline.orbits.verify_manifolds): its orbits, `cells` of its
     points and its first homoclinic point."""
     import hashlib

@@ -26,7 +26,7 @@ from ..catalog.status import Status
 from ..catalog.variables import BY_NAME, V
 from . import archive
 from ..analysis.refine import known_from, plan
-from ..physics.jit import kernels_cached
+from ..machine.jit import kernels_cached
 from ..physics.system import SIMD_LANES
 from .cells import (
     CellTask,
@@ -54,6 +54,7 @@ from .checkpoints import (
 from .config import Config, load_config, parse_config
 from .progress import COMPILING, FIRST_COMPILE, notice
 from .resources import check_address
+from .special import report_attributes
 
 
 @contextlib.contextmanager
@@ -268,7 +269,7 @@ def _write(config, load, command, cells, folder, progress) -> Path:
     says what to do."""
     try:
         with notice(f"writing {config.output}", progress):
-            return archive.write(config, load, command, cells)
+            return archive.write(config, load, command, cells, annotate=report_attributes)
     except OSError as exc:
         raise write_error(exc, config.output, folder) from None
     except RuntimeError as exc:     # netCDF4 reports a full disk as an HDF error
@@ -628,7 +629,7 @@ def verify(path, cells: int = 8, seed: int = 0, differences: dict | None = None)
     """Check an archive against its stored config -- the config's sha256, the grid
     coordinates, the variables, their dimensions and attributes -- then recompute a sample
     of cells and compare every variable the schema declares reproducible, bit for bit: on
-    any x86-64 machine the cells compute the same bits (survey.physics.portable). Returns
+    any x86-64 machine the cells compute the same bits (survey.machine.portable). Returns
     (ok, report lines), each mismatch with its largest difference relative to the value;
     `differences`, if given, receives those per variable. A file that is not a survey
     archive raises ArchiveError."""
@@ -701,6 +702,9 @@ def _refinement_problem(ds, config, ids) -> str:
             f"{extra} not called for)")
 
 
+REPORT_ATTRIBUTES = ("special_cells", "section_slice")   # special.report_attributes
+
+
 def same_results(old, new) -> list[str]:
     """How archive `new` differs from archive `old` beyond provenance (when and where it was
     made, the code's commit, the run times): the config, the coordinates and every
@@ -708,6 +712,9 @@ def same_results(old, new) -> list[str]:
     with archive.open_archive(old) as a, archive.open_archive(new) as b:
         if a.attrs["config"] != b.attrs["config"]:
             return ["the config differs"]
+        stored = [k for k in REPORT_ATTRIBUTES if a.attrs.get(k) != b.attrs.get(k)]
+        if stored:
+            return [f"the {stored[0]} attribute differs"]
         if set(a.variables) != set(b.variables):
             return ["the variables differ: " + ", ".join(sorted(set(a.variables)
                                                                 ^ set(b.variables)))]

@@ -29,9 +29,19 @@ class SurveyAccessor:
         return figs if folder is None else plots.save(figs, folder, self._stem())
 
     def report(self, folder) -> Path:
-        """Write the Markdown report and its figures into `folder`; returns its path."""
+        """Write the Markdown report and its figures into `folder`; returns its path: the
+        report `python -m survey report` writes, with the [check] runs' archives found
+        beside the Dataset's file."""
+        import contextlib
+
+        from ..catalog.defaults import CHECK_VARIANTS, check_archive
         from . import report
-        return report.write(self._ds, folder, self._stem())
+        source = self._ds.encoding.get("source")
+        with contextlib.ExitStack() as stack:
+            checks = {} if source is None else {
+                v: stack.enter_context(xr.open_dataset(f)) for v in CHECK_VARIANTS
+                if (f := check_archive(source, v)).exists()}
+            return report.write(self._ds, folder, self._stem(), checks=checks)
 
     def _stem(self) -> str:
         return Path(self._ds.encoding.get("source", "survey")).stem

@@ -10,6 +10,7 @@ writes them.
 from __future__ import annotations
 
 import itertools
+import json
 import textwrap
 import warnings
 from pathlib import Path
@@ -71,13 +72,17 @@ def _cell_xy(ds, idx, a, b) -> tuple[float, float]:
     return float(_per_cell(ds, a)[flat]), float(_per_cell(ds, b)[flat])
 
 
-def figures(ds, variables=None, special=(), slice_at=None) -> dict[str, Figure]:
+def figures(ds, variables=None, special=None, slice_at=None) -> dict[str, Figure]:
     """The figures that fit the archive's grid: maps for two axes, scans for one, the
     section, convergence histories and the frequency map where the data exist. special:
-    the special solutions its cells start on (pipeline.special.special_cells), marked on
-    the regime map and the scans; slice_at: the section coordinates a grid over the others
-    fixes (pipeline.special.section_slice), for its overlay of crossings. A refined survey
-    over one axis is drawn as the uneven grid it is (analysis.refine.as_grid)."""
+    the special solutions its cells start on, marked on the regime map and the scans;
+    slice_at: the section coordinates a grid over the others fixes, for its overlay of
+    crossings -- both, unless given, as the archive stores them (stored_special). A
+    refined survey over one axis is drawn as the uneven grid it is
+    (analysis.refine.as_grid)."""
+    stored, fixed = stored_special(ds)
+    special = stored if special is None else special
+    slice_at = fixed if slice_at is None else slice_at
     ds = as_grid(ds)
     axes = grid_axes(ds)
     out = {}
@@ -233,6 +238,16 @@ def _two_axis_figure(ds):
         ax.set_title(f"{ds.sizes['cell']} cells, refined to level {int(ds['level'].max())}: "
                      "each drawn over the square of its level's spacing", fontsize="small")
     return (fig, ax, hist, *_on_grid(ds))
+
+
+def stored_special(ds) -> tuple[list[dict], dict]:
+    """The special solutions an archive's cells start on and the section slice its grid
+    fixes, as the survey stored them (pipeline.special.report_attributes; none in an
+    archive written before they were stored)."""
+    special = json.loads(ds.attrs.get("special_cells", "[]"))
+    for s in special:
+        s["index"] = tuple(s["index"])
+    return special, json.loads(ds.attrs.get("section_slice", "{}"))
 
 
 def _special_marks(special) -> list[tuple[tuple, str, str]]:

@@ -30,17 +30,17 @@ def without_provenance(text: str) -> str:
                      if not line.startswith(PROVENANCE_LINE))
 
 
-def write(ds, folder, stem: str | None = None, figures: bool = True, checks=None,
-          special=(), slice_at=None) -> Path:
+def write(ds, folder, stem: str | None = None, figures: bool = True, checks=None) -> Path:
     """Write STEM_report.md and its figures into `folder`; returns the report's path.
     checks: the archives of the survey's [check] runs by variant (defaults.CHECK_VARIANTS);
     the report states the claims of the seed run beside its own, and every run's share in
-    an onset's uncertainty. special: the special solutions its cells
-    start on (pipeline.special.special_cells), set beside the family; slice_at: the
-    section coordinates a section grid fixes (pipeline.special.section_slice)."""
+    an onset's uncertainty. The special solutions its cells start on, set beside the
+    family, and the slice a section grid fixes are those the archive stores
+    (plots.stored_special)."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     stem = stem or Path(ds.encoding.get("source", "survey")).stem
+    special, slice_at = plots.stored_special(ds)
     ds = as_grid(ds)
     figs = plots.save(plots.figures(ds, special=special, slice_at=slice_at), folder,
                       stem) if figures else []
@@ -52,7 +52,8 @@ def write(ds, folder, stem: str | None = None, figures: bool = True, checks=None
     return path
 
 
-def markdown(ds, figure_names=(), checks=None, special=()) -> str:
+def markdown(ds, figure_names=(), checks=None, special=None) -> str:
+    special = plots.stored_special(ds)[0] if special is None else special
     ds, checks = as_grid(ds), {k: as_grid(c) for k, c in (checks or {}).items()}
     check = checks.get("seed")          # the second run whose claims are set beside ours
     config = stored_config(ds)

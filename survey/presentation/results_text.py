@@ -134,7 +134,7 @@ def _onset(ds, where, part=None):
         checks = {}
         for variant in defaults.CHECK_VARIANTS:
             try:
-                path = find(f"{name}_check_{variant}.nc")
+                path = find(defaults.check_archive(name + ".nc", variant).name)
             except FileNotFoundError:
                 continue
             checks[variant] = as_grid(stack.enter_context(xr.open_dataset(path)))

@@ -9,7 +9,7 @@ import functools
 import numpy as np
 import pytest
 
-from survey.physics import linalg as L
+from survey.machine import linalg as L
 
 
 def orthogonal(n, seed):

@@ -10,7 +10,7 @@ import numba
 import numpy as np
 import pytest
 
-from survey.physics import portable as P
+from survey.machine import portable as P
 
 getcontext().prec = 50
 PI = Decimal("3.14159265358979323846264338327950288419716939937510582097494459")

@@ -216,7 +216,7 @@ def test_compiled_passes_give_the_bits_of_the_array_formulas():
     archives in results/ were made with), for any leading shape, and a scalar for one
     state."""
     from survey.numerics.torus import observable
-    from survey.physics import portable
+    from survey.machine import portable
     from survey.physics.geometry import cross
     from survey.physics.system import centre_of_mass, weighted_sum
     from survey.physics.terms import make_potential

@@ -108,7 +108,7 @@ def test_verify_is_strict_on_any_machine(made_here, tmp_path, monkeypatch):
 
 
 TARGET = """
-import survey.physics.jit
+import survey.machine.jit
 from numba.core.registry import cpu_target
 from survey.pipeline.archive import machine
 print(repr((cpu_target.target_context.codegen().magic_tuple()[1:], machine())))
@@ -122,7 +122,7 @@ def test_kernels_vectorise_in_the_real_vector_width_unless_the_user_set_the_targ
     the archive's machine says so; a target the user sets is kept as set."""
     from llvmlite import binding
 
-    from survey.physics.jit import FULL_512
+    from survey.machine.jit import FULL_512
     got = {}
     # the host's own target first, whatever target this test suite itself runs under
     host = {k: v for k, v in os.environ.items()

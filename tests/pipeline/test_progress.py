@@ -27,7 +27,7 @@ def test_a_slow_phase_is_announced_and_timed_a_quick_one_is_silent():
 def test_a_cold_kernel_cache_is_recognised(tmp_path):
     """The command line says at once that a first run compiles: it knows from numba's cache
     index of the integrator's kernel whether the kernels are there."""
-    from survey.physics.jit import kernels_cached
+    from survey.machine.jit import kernels_cached
     cache = tmp_path / "numerics" / "__pycache__"
     cache.mkdir(parents=True)
     assert not kernels_cached(tmp_path)
@@ -39,7 +39,7 @@ def test_kernel_caches_elsewhere_are_found_and_refreshed(tmp_path, monkeypatch):
     """With NUMBA_CACHE_DIR, numba keeps a folder's kernels in <dir>/<name>_<sha1 of its
     path>: the first-run notice looks there, and a change of the kernel sources deletes
     the stale kernels there."""
-    from survey.physics.jit import cache_folder, kernels_cached, refresh_kernel_cache
+    from survey.machine.jit import cache_folder, kernels_cached, refresh_kernel_cache
     package = tmp_path / "survey"
     (package / "numerics").mkdir(parents=True)
     (package / "numerics" / "integrate.py").write_text("# a kernel source\n")
@@ -61,7 +61,7 @@ def test_a_read_only_install_is_looked_for_in_numbas_cache_in_the_home(tmp_path,
     """Where a package's __pycache__ cannot be written, numba caches its kernels under its
     cache folder in the user's home: the first-run notice and the refresh of stale kernels
     look there (not at the empty __pycache__, which said "first run" every time)."""
-    import survey.physics.jit as jit
+    import survey.machine.jit as jit
     from numba.misc.appdirs import AppDirs
     package = tmp_path / "survey"
     (package / "numerics").mkdir(parents=True)
@@ -83,7 +83,8 @@ COVERAGE = r"""
 import numpy as np
 from numba.core.dispatcher import Dispatcher
 from survey.numerics import integrate, torus
-from survey.physics import linalg, portable, system as system_module
+from survey.machine import linalg, portable
+from survey.physics import system as system_module
 from survey.physics.equilibria import relative_equilibrium
 from survey.pipeline import cells
 from survey.pipeline.config import parse_config

@@ -89,13 +89,28 @@ def test_the_report_sets_the_equilibrium_beside_the_family(tmp_path):
     assert [s["cell"] for s in special] == ["delta=0"] and special[0]["stable"]
     modes = 3.0 * np.array([1 - 2 ** -0.5, 1 + 2 ** -0.5, 2.0]) / (2 * np.pi)
     np.testing.assert_allclose(special[0]["frequencies"], modes, rtol=1e-10)
-    text = report.markdown(ds, special=special)
+    assert plots_stored(ds)[0] == [{**s, "index": tuple(s["index"])} for s in special]
+    text = report.markdown(ds)          # what the archive stores, solved with the survey
     assert "## Special solutions in this family" in text
     assert "delta=0: rotating at Omega = 3, linearly stable; normal modes 0.139846 (-)" in text
     assert "The nearest regular cell, delta = 0.1, has shape frequencies 0.1398" in text
     from survey.presentation import plots
-    legend = [t.get_text() for t in plots.figures(ds, special=special)["scan"].legends[0].texts]
+    legend = [t.get_text() for t in plots.figures(ds)["scan"].legends[0].texts]
     assert "relative equilibrium, linearly stable (1)" in legend
+    # the command and the Dataset's accessor write the same report
+    import xarray as xr
+
+    from survey.cli import main
+    assert main(["report", str(tmp_path / "scan.nc"), "--out", str(tmp_path / "cli")]) == 0
+    with xr.open_dataset(tmp_path / "scan.nc") as opened:
+        written = opened.survey.report(tmp_path / "api")
+    assert report.without_provenance(written.read_text()) == \
+        report.without_provenance((tmp_path / "cli" / "scan_report.md").read_text())
+
+
+def plots_stored(ds):
+    from survey.presentation.plots import stored_special
+    return stored_special(ds)
 
 
 def test_the_report_sets_the_homographic_orbit_beside_the_ftle_it_causes(tmp_path):
