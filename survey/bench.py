@@ -26,12 +26,13 @@ from .catalog.variables import V
 from .numerics.dop853 import (A2, A3, A4, A5, A6, A7, A8, A9, A10, A11, A12, B, BETA_ROOTS,
                               BHH1, BHH2, BHH3, ER, ERR_FLOOR_ROOT, _dot, error_norms, stages)
 from .numerics.indicators import deviation_vectors
-from .numerics.integrate import _Frame, integrate, integrate_batch
+from .numerics.integrate import Frame, integrate, integrate_batch
 from .physics.families import initial_state
 from .machine import portable
 from .machine.jit import helper, kernel, leaf
 from .machine.portable import fma
-from .physics.system import SIMD_LANES, System, rhs_lanes, state_size, workspace_size
+from .physics.lanes import SIMD_LANES, rhs_lanes, state_size, workspace_size
+from .physics.system import System
 from .physics.terms import make_potential
 
 CASES = [("chaotic 'sides'", "sides", {}),
@@ -264,12 +265,12 @@ def interaction_terms(t_final=2000.0, repeats=5, out=print):
         best = {}
         for _ in range(repeats):
             for name, system, full in ways:
-                with mock.patch.object(_Frame, "of", lambda *a: None) if full else \
+                with mock.patch.object(Frame, "of", lambda *a: None) if full else \
                         contextlib.nullcontext():
                     t = time.perf_counter()
                     integrate(system, y0, t_final, **kw)
                     best[name] = min(best.get(name, math.inf), time.perf_counter() - t)
-        # the own path integrates the relative motion (8 components, integrate._Frame), the
+        # the own path integrates the relative motion (8 components, integrate.Frame), the
         # general one all 12: the same orbit to the tolerance, not the same bits; compared
         # over t = 10 (the 'sides' orbit is chaotic)
         short = [integrate(s, y0, min(t_final, 10.0), **kw).y for s in (own, general)]
@@ -1021,7 +1022,7 @@ def plain_step(t_final, repeats):
     system = System.create()
     y0 = initial_state(system, CASES[0][1], **CASES[0][2])
     w = deviation_vectors(system, y0, 1, seed=0)
-    frame = _Frame.of(system, y0[None], w[None], [])
+    frame = Frame.of(system, y0[None], w[None], [])
     z = frame.reduce(np.concatenate([y0, w[0]])[None], 1)[0]
     _plain_dop853(z, 1.0, 1e-12, 1e-3)
     best, (steps, _, y) = _best_time(lambda: _plain_dop853(z, t_final, 1e-12, 1e-3), repeats)
@@ -1050,7 +1051,7 @@ def step_costs(t_final=2000.0, repeats=5, lanes=(1, 4, 8, 16), out=print):
                 starts = np.repeat(y0[None], L, 0)
                 tangents = np.repeat(w[None], L, 0) if n_tan else None
                 # the states the driver integrates: each orbit's relative motion
-                frame = _Frame.of(system, starts, np.zeros((L, n_tan, y0.size))
+                frame = Frame.of(system, starts, np.zeros((L, n_tan, y0.size))
                                   if tangents is None else tangents, [])
                 Y = np.ascontiguousarray(frame.reduce(
                     starts if tangents is None else

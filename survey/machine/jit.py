@@ -75,7 +75,7 @@ def refresh_kernel_cache(package: Path = PACKAGE):
 def kernels_cached(package: Path = PACKAGE) -> bool:
     """Whether numba's disk cache holds survey's kernels (else the first survey compiles
     them, half a minute to a minute on 2 cores)."""
-    return any(cache_folder(package / "numerics").glob("integrate._run-*.nbi"))
+    return any(cache_folder(package / "numerics").glob("driver._run-*.nbi"))
 
 
 
@@ -86,7 +86,7 @@ FULL_512 = ("znver5",)
 
 def vector_width():
     """Have LLVM vectorise for the machine's real vector width, and return it in doubles (4
-    or 8): the fewest lanes whose loops run as SIMD instructions (physics.system.SIMD_MIN).
+    or 8): the fewest lanes whose loops run as SIMD instructions (physics.lanes.SIMD_MIN).
 
     With 512 bits the loop vectoriser puts 8 doubles in a vector, so a loop over SIMD lanes
     runs as SIMD only from 8 lanes and entirely scalar at 4. On AVX-512 cores other than

@@ -1,7 +1,7 @@
 """Dormand-Prince 8(5,3) (Hairer's DOP853): its tableau, the stages of one step, the blended
 error estimate and the 7th-order dense output, compiled, for L orbits at once stored
 variable-major (component i of lane k at y[i * L + k]; L = 1 is one orbit). The driver that
-steps the orbits is `integrate.dop853`. Sums of products are fused multiply-adds
+steps the orbits is `driver.dop853`. Sums of products are fused multiply-adds
 (`portable.fma`, correctly rounded, the same bits on every CPU), in the tableau's order: on
 Intel's CPUs, where multiplications and additions share two pipes, the stage combinations
 are bound by them, and fused they run ~1.2-1.3x faster (a scan task 9-12%)."""
@@ -13,7 +13,8 @@ import numpy as np
 
 from ..machine.jit import helper, lanes, leaf
 from ..machine.portable import fma
-from ..physics.system import rhs, rhs_lanes, state_size
+from ..physics.lanes import rhs_lanes, state_size
+from ..physics.system import rhs
 
 EPS = np.finfo(np.float64).eps
 

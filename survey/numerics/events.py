@@ -263,7 +263,7 @@ class _Relative(EventFunction):
 
 def relative_events(events: Sequence[Event], system: System, R, C):
     """The events as functions of a reduced state x whose full state is R x + c, c in the
-    span of C's columns (the centre of mass's place and motion; integrate._Frame): possible
+    span of C's columns (the centre of mass's place and motion; integrate.Frame): possible
     when every function and guard is a linear or quadratic form that c leaves alone (the
     Jacobi surfaces phi, sigma, eta, p_sigma, p_eta; forms of relative coordinates), to
     roundoff -- else None."""

@@ -32,7 +32,8 @@ from ..machine.linalg import orthonormal
 from ..machine.portable import vdot, vnorm
 from ..physics.system import System, rhs
 from .events import Crossings
-from .integrate import EVAL, EVENTS, FINE, Outcome, integrate_batch
+from .driver import EVAL, EVENTS, FINE
+from .integrate import Outcome, integrate_batch
 
 
 class ChaosIndicators(NamedTuple):
@@ -152,7 +153,7 @@ class Ensemble(NamedTuple):
 
     starts: np.ndarray        # (J, n)
     tangents: np.ndarray      # (J, n_tan, n)
-    record: np.ndarray        # (J,) what each records (integrate.EVENTS | EVAL | FINE)
+    record: np.ndarray        # (J,) what each records (driver.EVENTS | EVAL | FINE)
     nominal: int              # the first `nominal` jobs integrate the nominal orbit
 
 

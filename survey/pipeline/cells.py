@@ -27,7 +27,8 @@ from ..catalog.variables import (
 )
 from ..numerics import torus
 from ..numerics.indicators import batch_options, combine, conservation_errors, ensemble
-from ..numerics.integrate import compile_handoff, integrate_batch
+from ..numerics.driver import compile_handoff
+from ..numerics.integrate import integrate_batch
 from ..machine import linalg, portable
 from ..physics.families import initial_state
 from ..physics.jacobi import reduced

@@ -27,7 +27,7 @@ from ..catalog.variables import BY_NAME, V
 from . import archive
 from ..analysis.refine import known_from, plan
 from ..machine.jit import kernels_cached
-from ..physics.system import SIMD_LANES
+from ..physics.lanes import SIMD_LANES
 from .cells import (
     CellTask,
     build_starts,

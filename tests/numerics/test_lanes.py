@@ -171,7 +171,7 @@ def test_the_driver_compiles_once_for_every_batch():
     new machine's first run): batches of more
     orbits than lanes (ordered by a pilot run), fewer, one, with and without tangent
     vectors, events and samples, backwards, all run the driver the first one compiled."""
-    from survey.numerics.integrate import _adopt, _run
+    from survey.numerics.driver import _adopt, _run
     system = System.create()
     starts = np.array([initial_state(system, "equilateral", delta=x)
                        for x in np.linspace(0.0, 6.0, 21)])

@@ -1,5 +1,5 @@
 """Batches of three bodies in the plane under one perimetric or areal term integrate the
-relative motion alone (integrate._Frame: bodies 0 and 1 in each orbit's centre-of-mass
+relative motion alone (integrate.Frame: bodies 0 and 1 in each orbit's centre-of-mass
 frame, the third rebuilt): checked against the full integration of the same orbits (the
 general path of sums of terms, which integrates all 12 components; its bits are the full
 planar path's, tests/physics/test_system.py) on starts whose centre of mass is off the
@@ -11,7 +11,7 @@ import pytest
 from survey.bench import GeneralPath as Full
 from survey.numerics.events import Event, Linear
 from survey.numerics.indicators import deviation_vectors
-from survey.numerics.integrate import _Frame, integrate_batch
+from survey.numerics.integrate import Frame, integrate_batch
 from survey.numerics.sections import section_event
 from survey.physics.families import initial_state
 from survey.physics.system import System
@@ -46,8 +46,8 @@ def test_the_relative_motion_gives_the_full_integrations_orbits(potential, masse
     # the Jacobi surfaces, moved with the centre of mass: written anew for the reduced state
     events = (section_event(system), section_event(system, "sigma", 1.0, 0),
               section_event(system, "p_eta", 0.0, -1))
-    assert _Frame.of(system, starts, w[:, None], events) is not None
-    assert _Frame.of(full, starts, w[:, None], ()) is None
+    assert Frame.of(system, starts, w[:, None], events) is not None
+    assert Frame.of(full, starts, w[:, None], ()) is None
     T = 30.0
     kw = dict(tangents=w[:, None], megno=True, t_eval=np.linspace(0.0, T, 7),
               sample_tangents=True, t_fine=np.linspace(0.05, T - 0.05, 40), events=events)
@@ -86,17 +86,17 @@ def test_what_the_relative_motion_cannot_hold_runs_full():
     drift = np.zeros(12)
     drift[0] = drift[2] = drift[4] = 1.0              # every body moved the same way
     events = (section_event(system),)
-    assert _Frame.of(system, y0[None], drift[None, None], ()) is None
+    assert Frame.of(system, y0[None], drift[None, None], ()) is None
     none = np.zeros((1, 0, 12))
-    assert _Frame.of(system, y0[None], none, events) is not None
+    assert Frame.of(system, y0[None], none, events) is not None
     sides = (section_event(system, "perimeter", 3.0),)
     absolute = (section_event(system, "linear", 0.0, coefficients=np.eye(12)[0]),)
     guarded = (Event(Linear(np.eye(12)[0] - np.eye(12)[2]), guard=sides[0].function),)
     for events in (sides, absolute, guarded):
-        assert _Frame.of(system, y0[None], none, events) is None
+        assert Frame.of(system, y0[None], none, events) is None
     four = System.create(masses=(1.0,) * 4)
     y4 = np.zeros((1, 16))
-    assert _Frame.of(four, y4, np.zeros((1, 0, 16)), ()) is None
+    assert Frame.of(four, y4, np.zeros((1, 0, 16)), ()) is None
     for kw in (dict(tangents=drift[None, None]), dict(events=sides), dict(events=absolute)):
         a = integrate_batch(system, y0[None], 20.0, **kw)[0]
         b = integrate_batch(full, y0[None], 20.0, **kw)[0]

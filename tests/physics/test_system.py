@@ -9,9 +9,8 @@ could tell the paths apart."""
 import numpy as np
 import pytest
 
-from survey.physics.system import (
-    System, _leading_forces, rhs, rhs_lanes, workspace_size,
-)
+from survey.physics.lanes import rhs_lanes, workspace_size
+from survey.physics.system import System, _leading_forces, rhs
 from survey.physics.terms import TERMS, make_potential
 
 PLANAR = [t for t in TERMS if t.kind == "triplet" and t.name.startswith(("perimetric",
@@ -69,7 +68,7 @@ def test_the_simd_lanes_give_the_general_path_bit_for_bit(term, shift):
 @pytest.mark.parametrize("case", OTHERS, ids=list(OTHERS))
 def test_other_systems_in_lanes_give_the_same_bits(case):
     """Perimetric and areal terms of more bodies or in 3-D, alone, together and beside pair
-    and ATM terms (system.general_lanes from SIMD_MIN lanes on, `rhs` lane by lane below);
+    and ATM terms (lanes.general_lanes from SIMD_MIN lanes on, `rhs` lane by lane below);
     the paper's term beside a pair term (its own SIMD loops, then the pair's)."""
     rng = np.random.default_rng(8)
     N, d, terms = OTHERS[case]

@@ -31,7 +31,7 @@ def test_a_cold_kernel_cache_is_recognised(tmp_path):
     cache = tmp_path / "numerics" / "__pycache__"
     cache.mkdir(parents=True)
     assert not kernels_cached(tmp_path)
-    (cache / "integrate._run-400.py311.nbi").write_bytes(b"")
+    (cache / "driver._run-400.py311.nbi").write_bytes(b"")
     assert kernels_cached(tmp_path)
 
 
@@ -48,7 +48,7 @@ def test_kernel_caches_elsewhere_are_found_and_refreshed(tmp_path, monkeypatch):
     folder = cache_folder(package / "numerics")
     assert folder.parent == tmp_path / "cache" and folder.name.startswith("numerics_")
     folder.mkdir()
-    (folder / "integrate._run-400.py311.nbi").write_bytes(b"")
+    (folder / "driver._run-400.py311.nbi").write_bytes(b"")
     assert kernels_cached(package)
     refresh_kernel_cache(package)                   # sources unchanged: kept
     assert kernels_cached(package)
@@ -75,14 +75,14 @@ def test_a_read_only_install_is_looked_for_in_numbas_cache_in_the_home(tmp_path,
     assert folder.parent.is_relative_to(tmp_path / "home-cache")
     assert folder.name.startswith("numerics_")
     folder.mkdir(parents=True)
-    (folder / "integrate._run-400.py311.nbi").write_bytes(b"")
+    (folder / "driver._run-400.py311.nbi").write_bytes(b"")
     assert jit.kernels_cached(package)
 
 
 COVERAGE = r"""
 import numpy as np
 from numba.core.dispatcher import Dispatcher
-from survey.numerics import integrate, torus
+from survey.numerics import driver, integrate, torus
 from survey.machine import linalg, portable
 from survey.physics import system as system_module
 from survey.physics.equilibria import relative_equilibrium
@@ -92,7 +92,7 @@ from survey.pipeline.config import parse_config
 def signatures():
     kernels = [(m.__name__, k, v) for m in (torus, linalg) for k, v in vars(m).items()
                if isinstance(v, Dispatcher)] + [
-        ("integrate", "_adopt", integrate._adopt),
+        ("driver", "_adopt", driver._adopt),
         ("system", "_potential_energies", system_module._potential_energies),
         ("portable", "_elementwise", portable._elementwise),
         ("portable", "power", portable.power)]
@@ -113,7 +113,7 @@ task, starts = cells.CellTask.of(config), cells.build_starts(config)
 cells.warm_beside(task, np.array([0]), starts[:1])
 warm = signatures()
 assert sum(map(len, warm.values())) > 10, warm
-assert all(warm[k] for k in [("integrate", "_adopt"), ("system", "_potential_energies"),
+assert all(warm[k] for k in [("driver", "_adopt"), ("system", "_potential_energies"),
                              ("portable", "_elementwise"), ("portable", "power")]), warm
 res = cells.run_cells(task, np.array([0, 1]), starts)        # real samples, analysed
 assert np.isfinite(res["frequency"]).any()

@@ -1,0 +1,1069 @@
+"""The driver: orbits (each with its tangent vectors) stepped by DOP853 as SIMD lanes, with
+events, samples, periodic renormalisation and the MEGNO/FLI/WBA accumulators, compiled
+(`dop853`, called by numerics.integrate, which validates and shapes what it returns).
+
+Lanes: L orbits advance together in flat variable-major state (component i of lane k at
+Y[i * L + k]), so the stage combinations, error norms, dense output and -- for three
+bodies in the plane -- the right-hand side are loops over lanes that the compiler turns
+into SIMD instructions. Each lane has its own time, step, error norm, accept/reject,
+budget, status, events, samples and accumulators; every decision is taken lane by lane
+with the arithmetic of one orbit, so a lane gives the bits one orbit alone gives (L = 1),
+whatever the lane count and whatever the other lanes hold (tests/numerics/test_lanes.py).
+A lane whose orbit ends takes the next start of the batch: no lane waits for the slowest.
+Once every start is taken and at most half the lanes still run, those orbits move to half
+as many lanes, down to SIMD_MIN, where the last orbit goes on in one lane (`_adopt`): idle
+lanes cost the SIMD loops as much as busy ones, and SIMD_MIN lanes with two orbits less
+than those two one after the other.
+
+The kernel is one compiled function for every system, potential and event set (all chosen
+by integer codes and parameter arrays), so it is cached on disk. Nothing raises inside it:
+failures come back as a `Status`. Error control covers the first `n_err` components of
+each orbit (the orbit by default; the tangent vectors optionally). Dense output is built
+only for steps that need it -- a step holding requested output times, and a step in which
+a watched event may cross zero (screened first on a cubic model of it from the step's ends,
+`_screen`) -- for all lanes at once when any lane needs it now. A step that holds
+only orbit samples at t_fine (the torus analysis': every few steps of every lane) needs it
+later: its stages wait in `Deferred` until a batch of such steps fills, whose dense output
+is then built in SIMD loops over the batch, not over every lane at every round.
+"""
+from __future__ import annotations
+
+import math
+import mmap
+import threading
+import time
+from typing import NamedTuple
+
+import numpy as np
+from ..catalog.status import Status
+from ..machine import portable
+from ..machine.jit import helper, lanes, leaf
+from ..physics.lanes import SIMD_LANES, SIMD_MIN, rhs_lanes, state_size, workspace_size
+from ..physics.system import rhs
+from .dop853 import (
+    BETA_ROOTS,
+    EPS,
+    ERR_FLOOR_ROOT,
+    dense_eval,
+    dense_eval_lanes,
+    dense_prepare,
+    error_norms,
+    norm_block,
+    stages,
+)
+from .events import (
+    event_slope,
+    event_value,
+    may_cross,
+    scan_events,
+)
+
+# the kernel returns plain integers (numba freezes module globals as constants)
+OK_, EVENT_, COLLISION_, STEP_LIMIT_, NONFINITE_, TIME_LIMIT_ = (
+    int(s) for s in (Status.OK, Status.EVENT, Status.COLLISION, Status.STEP_LIMIT,
+                     Status.NONFINITE, Status.TIME_LIMIT))
+RUNNING = -1
+# _run's returns besides the next job: every job has ended; the jobs are all started and at
+# most half the lanes still run one (the rest go on in fewer lanes: `dop853`)
+DONE, HANDOFF = -1, -2
+# what an accepted step needs of the dense output (`_needs_dense`)
+DENSE_LATER, DENSE_ORBIT, DENSE_ALL = 1, 2, 3
+# what a job records besides its end state: crossings of the watched events, samples at
+# t_eval, orbit samples at t_fine
+EVENTS, EVAL, FINE = 1, 2, 4
+
+
+class RawOutcome(NamedTuple):
+    """What the compiled driver returns, one row per job (`integrate_batch` turns it into
+    Outcomes). Rows of the event, sample and fine arrays belong to the jobs that record
+    them, in job order."""
+
+    status: np.ndarray        # (M,)
+    t: np.ndarray             # (M,) time reached
+    y: np.ndarray             # (M, nf) full state at t
+    counts: np.ndarray        # (M, 4) accepted steps, rejected, rhs evaluations, events found
+    h_range: np.ndarray       # (M, 2) smallest and largest accepted step
+    ev_index: np.ndarray      # (Me, max_events) recorded crossings: event, time, orbit state
+    ev_t: np.ndarray
+    ev_y: np.ndarray
+    samples: np.ndarray       # (Ms, T, n_eval) states at t_eval
+    sample_log: np.ndarray    # (Ms, T, n_tan) accumulated log growth at t_eval
+    log_growth: np.ndarray    # (M, n_tan) accumulated log growth at t (vectors rescaled)
+    max_log: np.ndarray       # (M, n_tan) largest ln(|w|/|w0|) at step ends (the FLI)
+    fine: np.ndarray          # (Mf, Tf, n) orbit states at t_fine
+    wba: np.ndarray           # (M, 2) (sum of g dL, sum of g dt) over the steps, first
+    #                           vector: their ratio is the weighted Birkhoff average of the
+    #                           growth rate (g(s) = exp(-1/(s(1-s))) at the step's mid-time
+    #                           s; Sander & Meiss 2025)
+    megno_sums: np.ndarray    # (M, 2) (s L - int L, int Y) at t: ratios to s are Y/2, <Y>
+    sample_megno: np.ndarray  # (Ms, T, 2) the same at t_eval
+
+
+class Deferred(NamedTuple):
+    """Accepted steps whose orbit samples at t_fine wait for their dense output: P slots,
+    variable-major like Lanes over the orbit's n components (slot p of component i at
+    Y[i * P + p]), each with what `dense_prepare` reads -- the states at the step's ends and
+    stages 1 and 6-13 -- and which samples it holds."""
+
+    Y: np.ndarray             # (n P,) state at the step's start
+    YN: np.ndarray            # (n P,) at its end
+    K: np.ndarray             # (16, n P) stages (14-16 computed when the batch is built)
+    F: np.ndarray             # (7, n P) dense-output coefficients
+    HH: np.ndarray            # (n P,) each slot's step at each of its components
+    YT: np.ndarray            # (n P,) stage states
+    W: np.ndarray             # rhs_lanes workspace
+    x: np.ndarray             # (P,) each slot's first sample time in units of its step
+    XX: np.ndarray            # (n P,) the same at each of its components
+    S: np.ndarray             # (n P,) the states there
+    t: np.ndarray             # (P,) the step's start, size, end
+    h: np.ndarray
+    t_new: np.ndarray
+    row: np.ndarray           # (P,) the job's row of the fine output
+    first: np.ndarray         # (P,) its samples first .. end - 1
+    end: np.ndarray
+    count: np.ndarray         # (1,) slots filled
+
+
+class Lanes(NamedTuple):
+    """The driver's per-lane state: variable-major buffers of L orbits, and one entry (or
+    row) per lane of every scalar the one-orbit driver keeps."""
+
+    Y: np.ndarray             # (nf L,) states
+    K: np.ndarray             # (16, nf L) stage derivatives
+    YT: np.ndarray            # (nf L,) stage states
+    YN: np.ndarray            # (nf L,) candidate states
+    F: np.ndarray             # (7, nf L) dense-output coefficients
+    HH: np.ndarray            # (nf L,) each lane's step at each of its components
+    W: np.ndarray             # rhs_lanes workspace
+    S: np.ndarray             # (2 (nf + 1) L,) the error norms' scratch
+    err: np.ndarray           # (L,) error norms
+    grow: np.ndarray          # (L,) the step's factor if it is accepted (`_step_factors`)
+    err_next: np.ndarray      # (L,) err_old's next value then
+    cut: np.ndarray           # (L,) the step's factor if it is rejected
+    NW: np.ndarray            # ((2 n_tan + 1) L,) tangent vectors' norms, their logs,
+                              # the steps' Birkhoff weights; (L,) finiteness
+    taken: np.ndarray         # (L,) int64 -1 (every bit set) where the lane takes its new
+                              # state, 0 where it keeps its old one
+    job: np.ndarray           # (L,) the job a lane runs, -1: idle
+    t: np.ndarray
+    h: np.ndarray
+    h_max: np.ndarray
+    err_old: np.ndarray       # (L,) max(err, 1e-4)^(1/128) of the last accepted step
+    flags: np.ndarray         # (L, 4) rejected last, nonfinite last, last step, tried
+    i_eval: np.ndarray        # (L,) next t_eval / t_fine sample
+    i_fine: np.ndarray
+    t_next_renorm: np.ndarray
+    acc: np.ndarray           # (L, 4) MEGNO: L at the last step end, int L, Y; clock start
+    g_old: np.ndarray         # (L, m) watched events at the last step end, and slopes
+    s_old: np.ndarray
+    g_new: np.ndarray         # (L, m) the same at the accepted step's end (`_screen`)
+    s_new: np.ndarray
+    todo: np.ndarray          # (L, m) may_cross of each: the events the step scans
+    found_x: np.ndarray
+    found_e: np.ndarray
+    yd: np.ndarray            # (nf,) scratch of one lane
+    y1: np.ndarray            # (nf,) contiguous copy of one lane (starts)
+    k1: np.ndarray            # (2, nf)
+    wait: Deferred
+
+
+@helper
+def _finite(x):
+    for a in range(x.size):
+        if not math.isfinite(x[a]):
+            return False
+    return True
+
+
+@helper
+def _initial_step(masses, d, measure, prof, par, n_tan, nf, n_err, t, y, K, yt, direction,
+                  h_max, rtol, atol, W, rb):
+    """Hairer's hinit: a first step from the sizes of y, f(y) (in K[0]) and an estimate
+    of the second derivative (one evaluation, into K[1]), at most h_max."""
+    dnf = 0.0
+    dny = 0.0
+    for a in range(n_err):
+        sk = atol + rtol * abs(y[a])
+        dnf += (K[0, a] / sk) * (K[0, a] / sk)
+        dny += (y[a] / sk) * (y[a] / sk)
+    h = 1e-6 if (dnf <= 1e-10 or dny <= 1e-10) else 0.01 * math.sqrt(dny / dnf)
+    h = min(h, h_max)
+    for a in range(nf):
+        yt[a] = y[a] + direction * h * K[0, a]
+    _rhs_one(t + direction * h, yt, K[1], masses, d, measure, prof, par, n_tan, W, rb)
+    der2 = 0.0
+    for a in range(n_err):
+        sk = atol + rtol * abs(y[a])
+        q = (K[1, a] - K[0, a]) / sk
+        der2 += q * q
+    der2 = math.sqrt(der2 / max(n_err, 1)) / h
+    der12 = max(abs(der2), math.sqrt(dnf / max(n_err, 1)))
+    h1 = max(1e-6, h * 1e-3) if der12 <= 1e-15 else portable.root8(0.01 / der12)[0]
+    return min(100.0 * h, h1, h_max)
+
+
+@helper
+def _finish(k, ln, out, status, rows):
+    """Lane k's job ends with `status`: its time and state into the outputs; the lane
+    becomes idle."""
+    j = ln.job[k]
+    L = ln.job.size
+    out.status[j] = status
+    out.t[j] = ln.t[k]
+    for i in range(out.y.shape[1]):
+        out.y[j, i] = ln.Y[i * L + k]
+    ln.job[k] = -1
+
+
+@helper
+def _start(k, j, ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, n_err,
+           rtol, atol, h0, h_max, events, t_eval, n_eval, t_fine, renorm_dt, now, rb):
+    """Job j into lane k: its start, first evaluation, samples at t0, events' first values
+    and first step. Returns False if the job ended at once (nonfinite start, zero span)."""
+    L = ln.job.size
+    nf = y0s.shape[1]
+    n = state_size(masses, d, rb)
+    eoff, ep, direc, terminal, guard, watch = events
+    y, K = ln.y1, ln.k1
+    ln.job[k] = j
+    ln.t[k] = t0
+    for i in range(nf):
+        y[i] = y0s[j, i]
+        ln.Y[i * L + k] = y[i]
+    out.h_range[j, 0] = np.inf
+    ln.acc[k, 0] = ln.acc[k, 1] = ln.acc[k, 2] = 0.0
+    ln.acc[k, 3] = now
+    ln.i_eval[k] = 0
+    ln.i_fine[k] = 0
+    direction = 1.0 if t1 >= t0 else -1.0
+    ln.t_next_renorm[k] = t0 + direction * renorm_dt
+    for f in range(4):
+        ln.flags[k, f] = 0
+    ln.err_old[k] = ERR_FLOOR_ROOT
+    if not _finite(y):
+        _finish(k, ln, out, NONFINITE_, rows)
+        return False
+    for tt in range(n_tan):
+        out.log_growth[j, tt] = -portable.log(tangent_norm(y, n * (1 + tt), n, rb))
+    _rhs_one(t0, y, K[0], masses, d, measure, prof, par, n_tan, ln.W, rb)
+    out.counts[j, 2] += 1
+    for i in range(nf):
+        ln.K[0, i * L + k] = K[0, i]
+    if not _finite(K[0]):
+        _finish(k, ln, out, NONFINITE_, rows)
+        return False
+    r = rows[1, j]
+    if r >= 0:
+        while ln.i_eval[k] < t_eval.size and t_eval[ln.i_eval[k]] == t0:
+            put_sample(out.samples[r, ln.i_eval[k]], y, n_eval, rb)
+            for tt in range(n_tan):
+                out.sample_log[r, ln.i_eval[k], tt] = out.log_growth[j, tt]
+            ln.i_eval[k] += 1
+    r = rows[2, j]
+    if r >= 0:
+        while ln.i_fine[k] < t_fine.size and t_fine[ln.i_fine[k]] == t0:
+            put_sample(out.fine[r, ln.i_fine[k]], y, n, rb)
+            ln.i_fine[k] += 1
+    if rows[0, j] >= 0:
+        for e in range(eoff.size - 1):
+            if watch[e]:
+                # the lane's strided copies, as at every step: one compiled layout
+                ln.g_old[k, e] = event_value(ep, eoff[e], ln.Y[k::L], masses, d)
+                ln.s_old[k, e] = event_slope(ep, eoff[e], ln.Y[k::L], ln.K[0, k::L], n, ln.yd,
+                                             masses, d, 1.0)
+    span = abs(t1 - t0)
+    if span == 0.0:
+        _finish(k, ln, out, OK_, rows)
+        return False
+    ln.h_max[k] = min(h_max, span) if h_max > 0.0 else span
+    if h0 > 0.0:
+        h = min(h0, ln.h_max[k])
+    else:
+        h = _initial_step(masses, d, measure, prof, par, n_tan, nf, n_err, t0, y, K, ln.YT,
+                          direction, ln.h_max[k], rtol, atol, ln.W, rb)
+        out.counts[j, 2] += 1
+    ln.h[k] = h * direction
+    return True
+
+
+@helper
+def _lane(ln, k):
+    """Lane k's state, new state and dense output as strided views: made where a branch
+    uses them (each view's length costs an integer division, on every lane's every step
+    when made up front)."""
+    L = ln.job.size
+    return ln.Y[k::L], ln.YN[k::L], ln.F[:, k::L]
+
+
+@helper
+def _record(k, ln, out, rows, t0, t1, masses, d, n, rb, megno, events, max_events, n_sub,
+            t_eval, n_eval, t_fine, later):
+    """What lane k's accepted step [t, t + h] records, before the lane takes its new state
+    (its dense output prepared if it needs one now): counters, event crossings, samples;
+    with `later`, its samples at t_fine wait in ln.wait. Returns EVENT_ at a terminal event
+    (the state and time then the event's), else RUNNING. n: the orbit's components in the
+    state; rb: None, or the mass ratios of reduced states."""
+    j = ln.job[k]
+    yd = ln.yd
+    t, h = ln.t[k], ln.h[k]
+    last = ln.flags[k, 2] == 1
+    direction = 1.0 if t1 >= t0 else -1.0
+    eoff, ep, direc, terminal, guard, watch = events
+    m = eoff.size - 1
+    counts = out.counts[j]
+    counts[0] += 1
+    out.h_range[j, 0] = min(out.h_range[j, 0], abs(h))
+    out.h_range[j, 1] = max(out.h_range[j, 1], abs(h))
+    t_new = t1 if last else t + h
+    nd_ready = 0
+    x_stop = 1.0
+    terminal_hit = False
+    re = rows[0, j]
+    if m > 0 and re >= 0:
+        # the events `_screen` found may cross zero are scanned on the 7th-order dense output
+        scan = False
+        for e in range(m):
+            scan = scan or ln.todo[k, e] > 0
+        n_found = np.int64(0)       # not the literal 0: numba would compile scan_events twice
+        if scan:        # (the crossings found below come from a scan: its views)
+            y, ynew, F = _lane(ln, k)
+            counts[2] += 3
+            nd_ready = n
+            xtol = 4.0 * EPS * max(abs(t), abs(t_new)) / abs(h)
+            for e in range(m):
+                if ln.todo[k, e]:
+                    g0 = eoff[guard[e]] if guard[e] >= 0 else -1
+                    n_found = scan_events(ep, eoff[e], ln.g_old[k, e], ln.g_new[k, e],
+                                          direc[e], g0, n_sub if ln.todo[k, e] == 2 else 1,
+                                          h, xtol, F, y, n, yd, masses, d, ln.found_x,
+                                          ln.found_e, e, n_found)
+        for e in range(m):
+            ln.g_old[k, e] = ln.g_new[k, e]
+            ln.s_old[k, e] = ln.s_new[k, e]
+        for p in range(n_found):
+            xr = ln.found_x[p]
+            if counts[3] < max_events:
+                dense_eval(F, y, xr, n, yd)
+                out.ev_index[re, counts[3]] = ln.found_e[p]
+                out.ev_t[re, counts[3]] = t + xr * h
+                for i in range(n):
+                    out.ev_y[re, counts[3], i] = yd[i]
+            counts[3] += 1
+            if terminal[ln.found_e[p]]:
+                terminal_hit = True
+                x_stop = xr
+                break
+    t_stop = t + x_stop * h if terminal_hit else t_new
+    need = ln.Y.size // ln.job.size if terminal_hit else 0     # the whole state
+    rs, rf = rows[1, j], rows[2, j]
+    i_eval, i_fine = ln.i_eval[k], ln.i_fine[k]
+    if rs >= 0 and i_eval < t_eval.size and direction * (t_eval[i_eval] - t_stop) <= 0.0:
+        need = max(need, n_eval)
+    if rf >= 0 and i_fine < t_fine.size and direction * (t_fine[i_fine] - t_stop) <= 0.0:
+        need = max(need, n)
+    if need > nd_ready:
+        counts[2] += 3
+    log_growth = out.log_growth[j]
+    L_prev, int_L, Y_prev = ln.acc[k, 0], ln.acc[k, 1], ln.acc[k, 2]
+    megno_sums = out.megno_sums[j]
+    while rs >= 0 and i_eval < t_eval.size and direction * (t_eval[i_eval] - t_stop) <= 0.0:
+        y, ynew, F = _lane(ln, k)
+        src = ynew
+        if t_eval[i_eval] != t_new:
+            dense_eval(F, y, (t_eval[i_eval] - t) / h, n_eval, yd)
+            src = yd
+        put_sample(out.samples[rs, i_eval], src, n_eval, rb)
+        for tt in range(log_growth.size):
+            out.sample_log[rs, i_eval, tt] = log_growth[tt]
+        if megno and n_eval >= 2 * n:
+            part = t_eval[i_eval] - t
+            L_at = log_growth[0] + portable.log(tangent_norm(src, n, n, rb))
+            elapsed = t_eval[i_eval] - t0
+            int_at = int_L + 0.5 * part * (L_prev + L_at)
+            Y_at = 2.0 * (elapsed * L_at - int_at) / elapsed if elapsed != 0.0 else 0.0
+            out.sample_megno[rs, i_eval, 0] = elapsed * L_at - int_at
+            out.sample_megno[rs, i_eval, 1] = megno_sums[1] + 0.5 * part * (Y_prev + Y_at)
+        i_eval += 1
+    if later:
+        first = i_fine
+        while rf >= 0 and i_fine < t_fine.size and \
+                direction * (t_fine[i_fine] - t_stop) <= 0.0:
+            i_fine += 1
+        if i_fine > first:
+            _defer(ln, k, rf, first, i_fine, t, h, t_new, n)
+    while rf >= 0 and i_fine < t_fine.size and direction * (t_fine[i_fine] - t_stop) <= 0.0:
+        y, ynew, F = _lane(ln, k)
+        _fine_sample(out.fine[rf, i_fine], t_fine[i_fine], F, y, ynew, t, h, t_new, n, yd,
+                     rb)
+        i_fine += 1
+    ln.i_eval[k], ln.i_fine[k] = i_eval, i_fine
+    if terminal_hit:
+        y, ynew, F = _lane(ln, k)
+        nf = y.size
+        dense_eval(F, y, x_stop, nf, yd)
+        for a in range(nf):
+            y[a] = yd[a]
+        ln.t[k] = t_stop
+        return EVENT_
+    return RUNNING
+
+
+@helper
+def _fine_sample(sample, at, F, y, ynew, t, h, t_new, n, yd, rb):
+    """The orbit's state at time `at` of the step [t, t_new] (t + h but for the last) from
+    its dense output (F, y), into `sample` (in full: `put_sample`)."""
+    if at == t_new:
+        put_sample(sample, ynew, n, rb)
+    else:
+        dense_eval(F, y, (at - t) / h, n, yd)
+        put_sample(sample, yd, n, rb)
+
+
+@helper
+def _copy_lane(to, p, P, src, k, L, n):
+    """Components 0..n-1 of lane k of src (L lanes) into slot p of `to` (P slots). The
+    indices are unsigned: a signed index computed from run-time sizes gets a wrap-around
+    fix-up at every access (3 instructions; the copy 25% slower; strided views instead cost
+    more to make than they save)."""
+    for i in range(n):
+        to[np.uint64(i * P + p)] = src[np.uint64(i * L + k)]
+
+
+@helper
+def _defer(ln, k, row, first, end, t, h, t_new, n):
+    """Lane k's accepted step (its orbit's n components) into a slot of ln.wait: its
+    samples first .. end - 1 at t_fine (row `row` of the fine output) are taken when the
+    batch is built (`_flush`)."""
+    w = ln.wait
+    P = w.t.size
+    L = ln.job.size
+    p = w.count[0]
+    # array by array (all of them in one loop over the components spilled their addresses
+    # to the stack: 11 streams)
+    _copy_lane(w.Y, p, P, ln.Y, k, L, n)
+    _copy_lane(w.YN, p, P, ln.YN, k, L, n)
+    _copy_lane(w.K[0], p, P, ln.K[0], k, L, n)
+    for s in range(5, 13):
+        _copy_lane(w.K[s], p, P, ln.K[s], k, L, n)
+    w.t[p], w.h[p], w.t_new[p] = t, h, t_new
+    w.row[p], w.first[p], w.end[p] = row, first, end
+    w.count[0] = p + 1
+
+
+@leaf
+def _flush(ln, out, masses, d, measure, prof, par, t_fine, rb):
+    """The waiting steps' dense output, all P slots in SIMD loops (slots past the count
+    hold stale values, computed and ignored), and their samples at t_fine: each slot's
+    first (most steps hold one) in a SIMD loop too, any others one by one."""
+    w = ln.wait
+    P = w.t.size
+    c = w.count[0]
+    if c == 0:
+        return
+    n = w.Y.size // P
+    _spread(w.h, w.HH, P, n)
+    dense_prepare(masses, d, measure, prof, par, P, n, w.Y, w.YN, w.HH, w.K, w.YT, w.F, w.W,
+                  rb)
+    for p in range(P):
+        w.x[p] = (t_fine[w.first[p]] - w.t[p]) / w.h[p] if p < c else 0.0
+    _spread(w.x, w.XX, P, n)
+    dense_eval_lanes(w.F, w.Y, w.XX, n * P, w.S)
+    for p in range(c):
+        F, y, ynew = w.F[:, p::P], w.Y[p::P], w.YN[p::P]
+        fine = out.fine[w.row[p]]
+        first = w.first[p]
+        if t_fine[first] == w.t_new[p]:
+            put_sample(fine[first], ynew, n, rb)
+        else:
+            put_sample(fine[first], w.S[p::P], n, rb)
+        for i in range(first + 1, w.end[p]):
+            _fine_sample(fine[i], t_fine[i], F, y, ynew, w.t[p], w.h[p], w.t_new[p], n,
+                         ln.yd, rb)
+    w.count[0] = 0
+
+
+@helper
+def _advance(k, ln, out, t0, t1, n, n_tan, megno, renorm_dt, NW):
+    """Lane k after its accepted step (its state already the new one): the time, and its
+    tangent vectors' growth (FLI), renormalisation, MEGNO and WBA, from their norms, logs
+    and the step's Birkhoff weight in NW (`_growth_terms`).
+    Returns OK_ if the job reached t1, else RUNNING."""
+    L = ln.job.size
+    j = ln.job[k]
+    last = ln.flags[k, 2] == 1
+    direction = 1.0 if t1 >= t0 else -1.0
+    t_old = ln.t[k]
+    t = t1 if last else t_old + ln.h[k]
+    ln.t[k] = t
+    log_growth = out.log_growth[j]
+    L_prev, int_L, Y_prev = ln.acc[k, 0], ln.acc[k, 1], ln.acc[k, 2]
+    megno_sums = out.megno_sums[j]
+    # ---- tangent vectors: track growth (FLI) and renormalise when due
+    if n_tan > 0:
+        due = direction * (t - ln.t_next_renorm[k]) >= 0.0
+        if due:
+            ln.t_next_renorm[k] = t + direction * renorm_dt
+        for tt in range(n_tan):
+            off = n * (1 + tt)
+            wn, log_wn = NW[tt * L + k], NW[(n_tan + tt) * L + k]
+            Lw = log_growth[tt] + log_wn
+            out.max_log[j, tt] = max(out.max_log[j, tt], Lw)
+            if tt == 0:
+                g = NW[2 * n_tan * L + k]
+                out.wba[j, 0] += g * (Lw - L_prev)
+                out.wba[j, 1] += g * (t - t_old)
+                if megno:
+                    int_L += 0.5 * (t - t_old) * (L_prev + Lw)
+                    elapsed = t - t0
+                    Y_new = 2.0 * (elapsed * Lw - int_L) / elapsed
+                    megno_sums[0] = elapsed * Lw - int_L
+                    megno_sums[1] += 0.5 * (t - t_old) * (Y_prev + Y_new)
+                    Y_prev = Y_new
+                L_prev = Lw
+            if due or wn > 1e100 or wn < 1e-100:
+                inv = 1.0 / wn
+                y, K0 = ln.Y[k::L], ln.K[0, k::L]
+                for a in range(off, off + n):
+                    y[a] *= inv
+                    K0[a] *= inv
+                log_growth[tt] += log_wn
+    ln.acc[k, 0], ln.acc[k, 1], ln.acc[k, 2] = L_prev, int_L, Y_prev
+    return OK_ if last else RUNNING
+
+
+@leaf
+def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol,
+         n_err, max_steps, h0, h_max, h_min, events, max_events, n_sub, t_eval, n_eval,
+         renorm_dt, time_limit, t_fine, next_job, iterations, now, rb):
+    """At most `iterations` steps of every lane (the kernel checks the clock between
+    calls); returns the next job to start, DONE when every job has ended, or HANDOFF
+    when every job has started and at most half the lanes run one. rb: None for full
+    states, the mass ratios for reduced ones (physics.lanes.state_size): two
+    compilations, each of the code its kind runs."""
+    L = ln.job.size
+    nf = y0s.shape[1]
+    M = y0s.shape[0]
+    direction = 1.0 if t1 >= t0 else -1.0
+    for _ in range(iterations):
+        # ---- lanes without a job take the next one; lanes whose job must end, end it
+        active = 0
+        for k in range(L):
+            while ln.job[k] < 0 and next_job < M:
+                next_job += 1
+                _start(k, next_job - 1, ln, out, y0s, rows, t0, t1, masses, d, measure,
+                       prof, par, n_tan, n_err, rtol, atol, h0, h_max, events, t_eval,
+                       n_eval, t_fine, renorm_dt, now, rb)
+            j = ln.job[k]
+            if j < 0:
+                ln.h[k] = 0.0
+                continue
+            counts = out.counts[j]
+            if counts[0] + counts[1] >= max_steps:
+                _finish(k, ln, out, STEP_LIMIT_, rows)
+            elif time_limit > 0.0 and now - ln.acc[k, 3] > time_limit:
+                _finish(k, ln, out, TIME_LIMIT_, rows)
+            elif not (abs(ln.h[k]) > max(h_min, 10.0 * EPS * abs(ln.t[k]), 1e-300)):
+                _finish(k, ln, out, NONFINITE_ if ln.flags[k, 1] else COLLISION_, rows)
+            if ln.job[k] < 0:          # ended now: take the next job at the next round
+                ln.h[k] = 0.0
+                continue
+            active += 1
+            last = direction * (ln.t[k] + ln.h[k] - t1) >= 0.0
+            ln.flags[k, 2] = 1 if last else 0
+            if last:
+                ln.h[k] = t1 - ln.t[k]
+        if active == 0:
+            if next_job >= M:
+                _flush(ln, out, masses, d, measure, prof, par, t_fine, rb)
+                return DONE
+            continue
+        _spread(ln.h, ln.HH, L, nf)
+        # ---- one attempt of every lane's step
+        stages(masses, d, measure, prof, par, n_tan, L, ln.Y, ln.HH, ln.K, ln.YT, ln.YN,
+               ln.W, rb)
+        error_norms(ln.Y, ln.YN, ln.K, L, n_err, rtol, atol, ln.h, ln.err, ln.S)
+        _step_factors(ln.err, ln.err_old, L, ln.grow, ln.err_next, ln.cut)
+        rhs_lanes(0.0, ln.YN, ln.K[12], L, masses, d, measure, prof, par, n_tan, ln.W, rb)
+        _finite_lanes(ln.YN, ln.K[12], L, nf, ln.NW)
+        dense = later = 0
+        n = state_size(masses, d, rb)
+        for k in range(L):
+            j = ln.job[k]
+            ln.flags[k, 3] = 0
+            if j < 0:
+                continue
+            counts = out.counts[j]
+            counts[2] += 11
+            err = ln.err[k]
+            ok = math.isfinite(err)
+            if ok and err <= 1.0:
+                counts[2] += 1
+                ok = math.isfinite(ln.NW[k])
+            if not ok:
+                counts[1] += 1
+                ln.h[k] *= 0.25
+                ln.flags[k, 0] = 1
+                ln.flags[k, 1] = 1
+                continue
+            ln.flags[k, 1] = 0
+            if err > 1.0:
+                counts[1] += 1
+                ln.h[k] *= ln.cut[k]
+                ln.flags[k, 0] = 1
+                continue
+            ln.flags[k, 3] = 1          # accepted
+            need = _needs_dense(k, ln, rows, t1, direction, events, t_eval, t_fine,
+                                n_eval > n, masses, d, n)
+            later += need == DENSE_LATER
+            dense = max(dense, need)
+        if dense >= DENSE_ORBIT:    # the orbits' interpolant where no lane needs more
+            dense_prepare(masses, d, measure, prof, par, L, nf if dense == DENSE_ALL else n,
+                          ln.Y, ln.YN, ln.HH, ln.K, ln.YT, ln.F, ln.W, rb)
+        elif dense == DENSE_LATER and ln.wait.count[0] + later > ln.wait.t.size:
+            _flush(ln, out, masses, d, measure, prof, par, t_fine, rb)   # room for the steps
+        for k in range(L):
+            if ln.flags[k, 3]:
+                ended = _record(k, ln, out, rows, t0, t1, masses, d, n, rb, megno, events,
+                                max_events, n_sub, t_eval, n_eval, t_fine,
+                                dense == DENSE_LATER)
+                if ended == EVENT_:
+                    _finish(k, ln, out, EVENT_, rows)
+                    ln.flags[k, 3] = 0
+            ln.taken[k] = -ln.flags[k, 3]
+        # ---- accepted lanes take their new states, then their tangent vectors' norms
+        _take(ln.Y, ln.YN, ln.K[0], ln.K[12], ln.taken, L, nf)
+        _tangent_norms(ln.Y, L, n, n_tan, ln.NW, rb)
+        if n_tan > 0:
+            _growth_terms(ln.NW, ln.t, ln.h, ln.flags, t0, t1, L, n_tan)
+        for k in range(L):
+            if not ln.flags[k, 3]:
+                continue
+            if _advance(k, ln, out, t0, t1, n, n_tan, megno, renorm_dt,
+                        ln.NW) == OK_:
+                _finish(k, ln, out, OK_, rows)
+                continue
+            ln.err_old[k] = ln.err_next[k]
+            fac = ln.grow[k]
+            if ln.flags[k, 0]:
+                fac = min(fac, 1.0)
+            ln.flags[k, 0] = 0
+            ln.h[k] = direction * min(abs(ln.h[k]) * fac, ln.h_max[k])
+        if next_job >= M and L > 1:
+            running = 0
+            for k in range(L):
+                running += ln.job[k] >= 0
+            # half as many lanes while they are at least SIMD_MIN (`dop853`); below, one lane
+            # for the last orbit alone (SIMD_MIN lanes cost less than two orbits one after
+            # the other in one lane)
+            if 0 < running and (2 * running <= L if L // 2 >= SIMD_MIN else running == 1):
+                _flush(ln, out, masses, d, measure, prof, par, t_fine, rb)
+                return HANDOFF
+    _flush(ln, out, masses, d, measure, prof, par, t_fine, rb)
+    return next_job
+
+
+# Work on every lane at once: flat loops over all components of all lanes, which the
+# compiler vectorises, then per-lane sums in the components' order (as one orbit sums).
+
+@lanes
+def _spread(h, HH, L, nf):
+    """Each lane's value h[k] at each of its components."""
+    if L == 1:
+        for i in range(nf):
+            HH[i] = h[0]
+        return
+    for i in range(nf):
+        for k in range(L):
+            HH[i * L + k] = h[k]
+
+
+@lanes
+def _finite_lanes(Y, K, L, nf, out):
+    """out[k]: finite iff every component of lane k in Y and K is (x * 0 is NaN for inf and
+    NaN, and NaN survives the sum)."""
+    if L == 1:                 # one orbit: one loop (a loop per component cost 80 ns)
+        s = 0.0
+        for i in range(nf):
+            s += Y[i] * 0.0 + K[i] * 0.0
+        out[0] = s
+        return
+    for k in range(L):
+        out[k] = 0.0
+    for i in range(nf):
+        y, dy = Y[i * L:], K[i * L:]
+        for k in range(L):
+            out[k] += y[k] * 0.0 + dy[k] * 0.0
+
+
+@lanes
+def _step_factors(err, err_old, L, grow, err_next, cut):
+    """The step control of every lane at once, from its error norm err and the last accepted
+    step's err_old: the factor of its step if it is accepted, h 0.9 err^-(1/8 - BETA)
+    err_old^BETA in [1/3, 6] (grow), err_old's next value (err_next), and the factor if it
+    is rejected, 0.9 err^-1/8 but at least 1/3 (cut). Seven chained square roots and two
+    divisions, ~200 cycles of latency for one lane, the same in SIMD for 4; lane by lane
+    inside the bookkeeping they took ~3% of a 16-lane step. Meaningful for finite errors
+    only."""
+    for k in range(L):
+        r8, r128 = portable.root8(max(err[k], 1e-10))
+        fac = 0.9 * r128 / r8 * portable.ipow(err_old[k], BETA_ROOTS)
+        grow[k] = min(6.0, max(1.0 / 3.0, fac))
+        err_next[k] = r128 if err[k] >= 1e-4 else ERR_FLOOR_ROOT
+        cut[k] = max(1.0 / 3.0, 0.9 / r8)
+
+
+@lanes
+def _take(Y, YN, K0, K12, take, L, nf):
+    """Lanes with take[k] = -1 adopt their new state YN and its derivative K12, those with 0
+    keep theirs: a select of the bits under the lane's mask, which runs as SIMD
+    instructions (a store under `if` ran lane by lane: 360 ns for 16 lanes, 190 now)."""
+    if L == 1:
+        if take[0] != 0:
+            for i in range(nf):
+                Y[i] = YN[i]
+                K0[i] = K12[i]
+        return
+    y, yn, k0, k12 = Y.view(np.int64), YN.view(np.int64), K0.view(np.int64), K12.view(np.int64)
+    for i in range(nf):
+        # views at each component: see dop853.error_norms
+        a, b, c, e = y[i * L:], yn[i * L:], k0[i * L:], k12[i * L:]
+        for k in range(L):
+            a[k] = (b[k] & take[k]) | (a[k] & ~take[k])
+            c[k] = (e[k] & take[k]) | (c[k] & ~take[k])
+
+
+@lanes
+def _tangent_norms(Y, L, n, n_tan, NW, rb):
+    """NW[t * L + k]: the norm of lane k's tangent vector t, summed in its components' order
+    as `tangent_norm` does."""
+    if L == 1:
+        for t in range(n_tan):
+            NW[t] = tangent_norm(Y, n * (1 + t), n, rb)
+        return
+    for t in range(n_tan):
+        nw = NW[t * L:(t + 1) * L]
+        for k in range(L):
+            nw[k] = 0.0
+        if rb is None:
+            for i in range(n * (1 + t), n * (2 + t)):
+                w = Y[i * L:]
+                for k in range(L):
+                    nw[k] += w[k] * w[k]
+        else:           # positions, then momenta, each followed by the third body's
+            for h in range(2):
+                b = n * (1 + t) + 4 * h
+                for i in range(b, b + 4):
+                    w = Y[i * L:]
+                    for k in range(L):
+                        nw[k] += w[k] * w[k]
+                _rebuilt_squares(Y, L, b, rb if h == 0 else (1.0, 1.0), nw)
+        for k in range(L):
+            nw[k] = math.sqrt(nw[k])
+
+
+@helper
+def _rebuilt_squares(Y, L, i0, c, nw):
+    """Add to nw the squares of the third body's rebuilt components -(c0 a + c1 b) from
+    rows i0, i0 + 1 (body 0) and i0 + 2, i0 + 3 (body 1)."""
+    for r in range(2):
+        a, b = Y[(i0 + r) * L:], Y[(i0 + 2 + r) * L:]
+        for k in range(L):
+            x = portable.fma(c[0], a[k], c[1] * b[k])
+            nw[k] += x * x
+
+
+@helper
+def put_sample(sample, src, n_eval, rb):
+    """A sample of the state src (n_eval components): as it is, or a reduced one (rb: the
+    mass ratios) in full blocks of 12, the third body rebuilt as `integrate.Frame.full` rebuilds it
+    (the centre of mass's motion is added afterwards, `_com_added`): rebuilt in a second
+    array, the samples' fresh memory cost a sampled scan task 0.5 s."""
+    if rb is None:
+        for i in range(n_eval):
+            sample[i] = src[i]
+    else:
+        a, b = rb
+        for k in range(n_eval // 8):
+            i, o = 8 * k, 12 * k
+            for c in range(2):
+                q0, q1, p0, p1 = src[i + c], src[i + 2 + c], src[i + 4 + c], src[i + 6 + c]
+                sample[o + c], sample[o + 2 + c], sample[o + 4 + c] = q0, q1, -(a * q0 + b * q1)
+                sample[o + 6 + c], sample[o + 8 + c], sample[o + 10 + c] = p0, p1, -(p0 + p1)
+
+
+@helper
+def tangent_norm(y, off, n, rb):
+    """|w| of the tangent vector at y[off:off + n]; of a reduced one (rb: the mass ratios)
+    with the third body's rebuilt deviations, in the full vector's order: the norm FTLE,
+    MEGNO and FLI measure whatever the state's form."""
+    if rb is None:
+        return norm_block(y, off, n)
+    s = 0.0
+    for h in range(2):                      # positions, then momenta
+        b = off + 4 * h
+        c = rb if h == 0 else (1.0, 1.0)
+        for i in range(b, b + 4):
+            s += y[i] * y[i]
+        for r in range(2):
+            x = portable.fma(c[0], y[b + r], c[1] * y[b + 2 + r])
+            s += x * x
+    return math.sqrt(s)
+
+
+@helper
+def _rhs_one(t, y, dy, masses, d, measure, prof, par, n_tan, W, rb):
+    """The right-hand side at one state: `rhs`, or for a reduced state its lane loops at
+    L = 1 (W: their workspace). The 1 is given as an int64: a literal one is a type of its
+    own, and compiled a second copy of the lanes' right-hand sides (~7 s of a first run)."""
+    if rb is None:
+        rhs(t, y, dy, masses, d, measure, prof, par, n_tan)
+    else:
+        rhs_lanes(t, y, dy, np.int64(1), masses, d, measure, prof, par, n_tan, W, rb)
+
+
+@lanes
+def _growth_terms(NW, t, h, flags, t0, t1, L, n_tan):
+    """From the tangent vectors' norms NW[:n_tan L], what `_advance` needs of every lane at
+    once: their logs (NW[n_tan L:2 n_tan L]) and each step's weight in the weighted
+    Birkhoff average (NW[2 n_tan L:]): a log and an exp series per lane and step, in loops
+    over the lanes that run as SIMD instructions (inside each lane's bookkeeping, one lane
+    after another, their latency chains took ~8% of a 16-lane step)."""
+    norms, logs, weights = NW[:n_tan * L], NW[n_tan * L:2 * n_tan * L], NW[2 * n_tan * L:]
+    for i in range(n_tan * L):          # views: see dop853.error_norms
+        logs[i] = portable.log(norms[i])
+    for k in range(L):
+        t_new = t1 if flags[k, 2] == 1 else t[k] + h[k]
+        x = (0.5 * (t[k] + t_new) - t0) / (t1 - t0)
+        weights[k] = portable.exp(-1.0 / (x * (1.0 - x))) if 0.0 < x < 1.0 else 0.0
+
+
+@leaf
+def _adopt(to, slot, ln, k):
+    """Lane k of ln into lane `slot` of `to`: everything a lane carries from step to step
+    (its state and derivative, time, step, budgets, flags, samples' and events' places,
+    MEGNO sums, clock), so it goes on with the same bits."""
+    L, Lt = ln.job.size, to.job.size
+    for i in range(ln.Y.size // L):
+        to.Y[i * Lt + slot] = ln.Y[i * L + k]
+        to.K[0, i * Lt + slot] = ln.K[0, i * L + k]
+    to.job[slot], to.t[slot], to.h[slot], to.h_max[slot] = ln.job[k], ln.t[k], ln.h[k], \
+        ln.h_max[k]
+    to.err_old[slot], to.t_next_renorm[slot] = ln.err_old[k], ln.t_next_renorm[k]
+    to.i_eval[slot], to.i_fine[slot] = ln.i_eval[k], ln.i_fine[k]
+    for f in range(4):
+        to.flags[slot, f] = ln.flags[k, f]
+        to.acc[slot, f] = ln.acc[k, f]
+    for e in range(ln.g_old.shape[1]):
+        to.g_old[slot, e] = ln.g_old[k, e]
+        to.s_old[slot, e] = ln.s_old[k, e]
+
+
+@helper
+def _screen(k, ln, rows, events, masses, d, n):
+    """Lane k's accepted step against the events it watches, on a cubic model of each g(t)
+    from its values and slopes at the step's ends (no dense output): ln.todo[k, e] > 0 where
+    g_e may cross zero, for `_record` to scan on the dense output. Returns what of the dense
+    output those scans need: DENSE_ALL if a terminal event may cross (its crossing ends the
+    lane with the whole state there), DENSE_ORBIT if another may, 0 if none -- as on most
+    steps, so that one lane watching a section does not cost every lane of its batch three
+    more stages with tangents at every step."""
+    eoff, ep, direc, terminal, guard, watch = events
+    m = eoff.size - 1
+    if m == 0 or rows[0, ln.job[k]] < 0:
+        return 0
+    L = ln.job.size
+    h = ln.h[k]
+    ynew, f = ln.YN[k::L], ln.K[12, k::L]
+    need = 0
+    for e in range(m):
+        ln.todo[k, e] = 0
+        if watch[e]:
+            ln.g_new[k, e] = event_value(ep, eoff[e], ynew, masses, d)
+            ln.s_new[k, e] = event_slope(ep, eoff[e], ynew, f, n, ln.yd, masses, d, h)
+            ln.todo[k, e] = may_cross(ln.g_old[k, e], ln.s_old[k, e], ln.g_new[k, e],
+                                      ln.s_new[k, e], h)
+            if ln.todo[k, e] > 0:
+                need = max(need, DENSE_ALL if terminal[e] else DENSE_ORBIT)
+    return need
+
+
+@helper
+def _needs_dense(k, ln, rows, t1, direction, events, t_eval, t_fine, tangent_samples,
+                 masses, d, n):
+    """What of the dense output lane k's accepted step needs: DENSE_ALL now (a terminal
+    event may cross in it, or it holds a sample time and samples carry tangents),
+    DENSE_ORBIT now (another event may cross, or it holds an orbit-only sample time of
+    t_eval, recorded with the accumulators of the moment), DENSE_LATER (only orbit samples
+    of t_fine), 0 none. It screens the lane's events on the way (`_screen`): `_record`
+    reads what that stored."""
+    j = ln.job[k]
+    need = _screen(k, ln, rows, events, masses, d, n)
+    t_new = t1 if ln.flags[k, 2] else ln.t[k] + ln.h[k]
+    i = ln.i_eval[k]
+    if rows[1, j] >= 0 and i < t_eval.size and direction * (t_eval[i] - t_new) <= 0.0:
+        return max(need, DENSE_ALL if tangent_samples else DENSE_ORBIT)
+    i = ln.i_fine[k]
+    if need == 0 and rows[2, j] >= 0 and i < t_fine.size and \
+            direction * (t_fine[i] - t_new) <= 0.0:
+        return DENSE_LATER
+    return need
+
+
+CACHE_LINE = 64
+
+
+def _zeros(shape, dtype=np.float64) -> np.ndarray:
+    """np.zeros starting on a cache line (numpy's own start on 16 bytes): a lane row of
+    the SIMD loops -- a multiple of 64 bytes -- is then never split across two lines, nor a
+    vector load or store within it. numpy's start varies with the process's heap, and so
+    did the speed: a 51-orbit scan task to t = 1000 ran 1.02-1.05 s (best of 3, in each of
+    5 processes) against 1.05-1.21 s with numpy's arrays, and to t = 500, interleaved with
+    them in 10 processes each, 0.06 s (10%) faster on average; once, in a profile, a load
+    in the tangent forces made a whole run a third slower."""
+    size = int(np.prod(shape)) * np.dtype(dtype).itemsize
+    raw = np.zeros(size + CACHE_LINE, dtype=np.uint8)
+    start = -raw.ctypes.data % CACHE_LINE
+    return raw[start:start + size].view(dtype).reshape(shape)
+
+
+def _lanes(L, n, nf, n_tan, m, n_sub) -> Lanes:
+    """A driver's state for L lanes of orbits of n components with n_tan tangent vectors
+    each (nf in all), m watched events scanned in n_sub parts of a step."""
+    return Lanes(
+        _zeros(nf * L), _zeros((16, nf * L)), _zeros(nf * L), _zeros(nf * L),
+        _zeros((7, nf * L)), _zeros(nf * L), _zeros(workspace_size(L, nf)),
+        _zeros(2 * (nf + 1) * L),
+        _zeros(L), _zeros(L), _zeros(L), _zeros(L), _zeros((2 * n_tan + 1) * L),
+        _zeros(L, dtype=np.int64),
+        np.full(L, -1, dtype=np.int64),
+        _zeros(L), _zeros(L),
+        _zeros(L), _zeros(L), _zeros((L, 4), dtype=np.int64),
+        _zeros(L, dtype=np.int64), _zeros(L, dtype=np.int64), _zeros(L),
+        _zeros((L, 4)), _zeros((L, max(m, 1))), _zeros((L, max(m, 1))),
+        _zeros((L, max(m, 1))), _zeros((L, max(m, 1))),
+        _zeros((L, max(m, 1)), dtype=np.int64),
+        _zeros(max(1, m * n_sub)), _zeros(max(1, m * n_sub), dtype=np.int64),
+        _zeros(nf), _zeros(nf), _zeros((2, nf)), _deferred(2 * max(L, SIMD_LANES), n))
+
+
+def _deferred(P, n) -> Deferred:
+    return Deferred(
+        _zeros(n * P), _zeros(n * P), _zeros((16, n * P)), _zeros((7, n * P)),
+        _zeros(n * P), _zeros(n * P), _zeros(workspace_size(P, n)),
+        _zeros(P), _zeros(n * P), _zeros(n * P), _zeros(P),
+        _zeros(P), _zeros(P), _zeros(P, dtype=np.int64),
+        _zeros(P, dtype=np.int64), _zeros(P, dtype=np.int64),
+        _zeros(1, dtype=np.int64))
+
+
+_samples = threading.local()
+
+
+def _reused(shape) -> np.ndarray:
+    """A NaN-filled array of `shape` in this thread's buffer of orbit samples, kept for its
+    next batch and grown as needed. A task's torus analysis samples ~100 MB: a fresh array
+    faults that memory in at every task, in the huge pages numpy asks for, which cost
+    0.01-0.2 s by the state of the machine's memory (a 51-orbit task of the bench scan
+    integrated in 0.87-1.07 s, mean 0.95, against 0.86-1.03, mean 0.90, reused; twelve
+    runs each). Anonymous private memory, in the kernel's default pages."""
+    size = int(np.prod(shape))
+    if size == 0:
+        return np.zeros(shape)
+    buf = getattr(_samples, "buf", None)
+    if buf is None or buf.size < size:
+        _samples.buf = None             # the old buffer freed before the new one is made
+        flags = mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS
+        buf = _samples.buf = np.frombuffer(mmap.mmap(-1, size * 8, flags=flags),
+                                           dtype=np.float64)
+    out = buf[:size].reshape(shape)
+    out.fill(np.nan)
+    return out
+
+
+def compile_handoff():
+    """Compile (or load) `_adopt`, the move of a lane to a batch of fewer, which a survey
+    first calls in its first real task (warm_up's short run ends before any): its types
+    are those of every Lanes, whatever the sizes (cells.warm_beside)."""
+    _adopt(_lanes(1, 2, 2, 0, 0, 1), 0, _lanes(2, 2, 2, 0, 0, 1), 0)
+
+
+def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol,
+           n_err, max_steps, h0, h_max, h_min, events, max_events, n_sub, t_eval, n_eval,
+           renorm_dt, time_limit, t_fine, L, rb, reuse_samples=False):
+    """Integrate M orbits (+ n_tan tangent vectors each; starts y0s, shape (M, nf)) from t0
+    to t1 in L lanes.
+
+    rows: (3, M) the row of each job in the event, sample and fine outputs (-1: the job
+    does not record them). events: (offsets, records, direction, terminal, guard, watch)
+    arrays; a watched event e records every crossing of g_e = 0 in its direction (+1
+    rising in time, -1 falling, 0 both) where its guard function (index, or -1) is > 0;
+    n_sub sub-intervals per step are scanned, so two crossings in one step are both found.
+    t_eval: output times (monotone in the direction of integration), sampled on the dense
+    output for the first n_eval components. t_fine: a second grid of output times for the
+    orbit alone: the time series the torus analysis reads. Tangent vectors are rescaled to
+    unit norm every renorm_dt (<= 0: every step), their logs accumulated in log_growth,
+    which starts at -ln|w(t0)|. time_limit: wall-clock seconds per job (0: none). rb: None
+    for full states, or the mass ratios m0/m2, m1/m2 of reduced ones (`integrate.Frame`).
+    reuse_samples: the t_fine samples go into this thread's reused buffer (`_reused`).
+
+    MEGNO (if megno, for the first tangent vector; Cincotta & Simo 2000): with
+    L(t) = ln(|w(t)|/|w0|) and s = t - t0, Y(s) = (2/s) int_0^s u dL(u) and <Y> =
+    (1/s) int_0^s Y. Integrating by parts, int_0^s u dL = s L(s) - int_0^s L: MEGNO needs
+    only L, known exactly at every step end, never the rate dL/dt = w'.w/|w|^2, which near a
+    close approach spikes within a single step (the Hessian grows like a power of 1/r) and
+    wrecks any quadrature of it. int L and int Y are trapezoid sums over the steps (and at
+    output times, over the part of the step before them, with L from the dense output).
+
+    The state lives in arrays allocated here and the stepping in the compiled `_run`,
+    called from Python: a compiled wrapper would cost the cold start seconds of
+    compilation (numba re-optimises and re-generates a caller's whole call tree) for a
+    loop that turns once, or once per 256 rounds with a time limit.
+    """
+    M, nf = y0s.shape
+    n = state_size(masses, d, rb)
+    nfull = 2 * masses.size * d     # samples, fine ones too, are written in full (`put_sample`)
+    m = events[0].size - 1
+    Me, Ms, Mf = rows[0].max() + 1, rows[1].max() + 1, rows[2].max() + 1
+    T, Tf = t_eval.size, t_fine.size
+    out = RawOutcome(
+        np.full(M, OK_, dtype=np.int64), np.full(M, t0), y0s.copy(),
+        np.zeros((M, 4), dtype=np.int64), np.zeros((M, 2)),
+        # crossings are read only up to the count recorded: no need to touch the rest
+        np.empty((Me, max_events), dtype=np.int64), np.empty((Me, max_events)),
+        np.empty((Me, max_events, n)), np.full((Ms, T, n_eval // n * nfull), np.nan),
+        np.full((Ms, T, n_tan), np.nan), np.zeros((M, n_tan)), np.zeros((M, n_tan)),
+        _reused((Mf, Tf, nfull)) if reuse_samples else np.full((Mf, Tf, nfull), np.nan),
+        np.zeros((M, 2)), np.zeros((M, 2)),
+        np.full((Ms, T, 2), np.nan))
+
+    def drive(ln, next_job):
+        # with a time limit, back every 256 rounds to read the clock
+        rounds = 256 if time_limit > 0.0 else 1 << 62
+        while next_job >= 0:
+            now = time.perf_counter() if time_limit > 0.0 else 0.0
+            next_job = _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par,
+                            n_tan, megno, rtol, atol, n_err, max_steps, h0, h_max, h_min,
+                            events, max_events, n_sub, t_eval, n_eval, renorm_dt,
+                            time_limit, t_fine, next_job, rounds, now, rb)
+        return next_job
+
+    # The SIMD loops cost all L lanes whether they run a job or not: once every job has
+    # started and at most half the lanes run one (their lengths differ 2x and more), those
+    # go on in half as many lanes, down to SIMD_MIN, where the last one goes on alone.
+    ln, next_job = _lanes(L, n, nf, n_tan, m, n_sub), 0
+    while drive(ln, next_job) == HANDOFF:
+        next_job, running = M, np.flatnonzero(ln.job >= 0)
+        if ln.job.size // 2 >= SIMD_MIN:
+            fewer = _lanes(ln.job.size // 2, n, nf, n_tan, m, n_sub)
+            for slot, k in enumerate(running):
+                _adopt(fewer, slot, ln, k)
+            ln = fewer
+            continue
+        one, handed = _lanes(1, n, nf, n_tan, m, n_sub), time.perf_counter()
+        for k in running:
+            _adopt(one, 0, ln, k)
+            if time_limit > 0.0:    # a job's budget does not run while it waits its turn
+                one.acc[0, 3] += time.perf_counter() - handed
+            drive(one, M)
+        break
+    return out
