@@ -531,15 +531,65 @@ def _advance(k, ln, out, t0, t1, n, n_tan, megno, renorm_dt, NW):
     return OK_ if last else RUNNING
 
 
+class Model(NamedTuple):
+    """The system as every kernel takes it (physics.system.System.kernel_args): masses,
+    dimension, the leading perimetric or areal term's measure and profile codes, and the
+    terms' parameters."""
+
+    masses: np.ndarray
+    d: int
+    measure: int
+    prof: int
+    par: np.ndarray
+
+
+class Control(NamedTuple):
+    """How every orbit of a batch is stepped: from t0 to t1, with n_tan tangent vectors
+    (MEGNO of the first if megno), the error of its first n_err components held to
+    rtol, atol, at most max_steps steps and time_limit wall-clock seconds (0: none), the
+    first step h0 and the steps' bounds h_max, h_min (0: free), the tangent vectors
+    renormalised every renorm_dt (<= 0: every step)."""
+
+    t0: float
+    t1: float
+    n_tan: int
+    megno: bool
+    rtol: float
+    atol: float
+    n_err: int
+    max_steps: int
+    h0: float
+    h_max: float
+    h_min: float
+    renorm_dt: float
+    time_limit: float
+
+
+class Recording(NamedTuple):
+    """What the orbits record besides their ends: crossings of the encoded events
+    (events.encode_events; at most max_events each, n_sub sub-intervals of a step
+    scanned), the first n_eval components at the times t_eval, the orbit at t_fine."""
+
+    events: tuple
+    max_events: int
+    n_sub: int
+    t_eval: np.ndarray
+    n_eval: int
+    t_fine: np.ndarray
+
+
 @leaf
-def _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol,
-         n_err, max_steps, h0, h_max, h_min, events, max_events, n_sub, t_eval, n_eval,
-         renorm_dt, time_limit, t_fine, next_job, iterations, now, rb):
+def _run(ln, out, y0s, rows, model, control, recording, next_job, iterations, now, rb):
     """At most `iterations` steps of every lane (the kernel checks the clock between
     calls); returns the next job to start, DONE when every job has ended, or HANDOFF
     when every job has started and at most half the lanes run one. rb: None for full
     states, the mass ratios for reduced ones (physics.lanes.state_size): two
-    compilations, each of the code its kind runs."""
+    compilations, each of the code its kind runs (an argument of its own, not a field of
+    the records: numba prunes the branches of the other kind on arguments)."""
+    masses, d, measure, prof, par = model
+    (t0, t1, n_tan, megno, rtol, atol, n_err, max_steps, h0, h_max, h_min, renorm_dt,
+     time_limit) = control
+    events, max_events, n_sub, t_eval, n_eval, t_fine = recording
     L = ln.job.size
     nf = y0s.shape[1]
     M = y0s.shape[0]
@@ -929,31 +979,31 @@ def _zeros(shape, dtype=np.float64) -> np.ndarray:
 def _lanes(L, n, nf, n_tan, m, n_sub) -> Lanes:
     """A driver's state for L lanes of orbits of n components with n_tan tangent vectors
     each (nf in all), m watched events scanned in n_sub parts of a step."""
+    m1 = max(m, 1)
     return Lanes(
-        _zeros(nf * L), _zeros((16, nf * L)), _zeros(nf * L), _zeros(nf * L),
-        _zeros((7, nf * L)), _zeros(nf * L), _zeros(workspace_size(L, nf)),
-        _zeros(2 * (nf + 1) * L),
-        _zeros(L), _zeros(L), _zeros(L), _zeros(L), _zeros((2 * n_tan + 1) * L),
-        _zeros(L, dtype=np.int64),
-        np.full(L, -1, dtype=np.int64),
-        _zeros(L), _zeros(L),
-        _zeros(L), _zeros(L), _zeros((L, 4), dtype=np.int64),
-        _zeros(L, dtype=np.int64), _zeros(L, dtype=np.int64), _zeros(L),
-        _zeros((L, 4)), _zeros((L, max(m, 1))), _zeros((L, max(m, 1))),
-        _zeros((L, max(m, 1))), _zeros((L, max(m, 1))),
-        _zeros((L, max(m, 1)), dtype=np.int64),
-        _zeros(max(1, m * n_sub)), _zeros(max(1, m * n_sub), dtype=np.int64),
-        _zeros(nf), _zeros(nf), _zeros((2, nf)), _deferred(2 * max(L, SIMD_LANES), n))
+        Y=_zeros(nf * L), K=_zeros((16, nf * L)), YT=_zeros(nf * L), YN=_zeros(nf * L),
+        F=_zeros((7, nf * L)), HH=_zeros(nf * L), W=_zeros(workspace_size(L, nf)),
+        S=_zeros(2 * (nf + 1) * L),
+        err=_zeros(L), grow=_zeros(L), err_next=_zeros(L), cut=_zeros(L),
+        NW=_zeros((2 * n_tan + 1) * L), taken=_zeros(L, dtype=np.int64),
+        job=np.full(L, -1, dtype=np.int64), t=_zeros(L), h=_zeros(L), h_max=_zeros(L),
+        err_old=_zeros(L), flags=_zeros((L, 4), dtype=np.int64),
+        i_eval=_zeros(L, dtype=np.int64), i_fine=_zeros(L, dtype=np.int64),
+        t_next_renorm=_zeros(L), acc=_zeros((L, 4)),
+        g_old=_zeros((L, m1)), s_old=_zeros((L, m1)), g_new=_zeros((L, m1)),
+        s_new=_zeros((L, m1)), todo=_zeros((L, m1), dtype=np.int64),
+        found_x=_zeros(max(1, m * n_sub)), found_e=_zeros(max(1, m * n_sub), dtype=np.int64),
+        yd=_zeros(nf), y1=_zeros(nf), k1=_zeros((2, nf)),
+        wait=_deferred(2 * max(L, SIMD_LANES), n))
 
 
 def _deferred(P, n) -> Deferred:
     return Deferred(
-        _zeros(n * P), _zeros(n * P), _zeros((16, n * P)), _zeros((7, n * P)),
-        _zeros(n * P), _zeros(n * P), _zeros(workspace_size(P, n)),
-        _zeros(P), _zeros(n * P), _zeros(n * P), _zeros(P),
-        _zeros(P), _zeros(P), _zeros(P, dtype=np.int64),
-        _zeros(P, dtype=np.int64), _zeros(P, dtype=np.int64),
-        _zeros(1, dtype=np.int64))
+        Y=_zeros(n * P), YN=_zeros(n * P), K=_zeros((16, n * P)), F=_zeros((7, n * P)),
+        HH=_zeros(n * P), YT=_zeros(n * P), W=_zeros(workspace_size(P, n)),
+        x=_zeros(P), XX=_zeros(n * P), S=_zeros(n * P), t=_zeros(P), h=_zeros(P),
+        t_new=_zeros(P), row=_zeros(P, dtype=np.int64), first=_zeros(P, dtype=np.int64),
+        end=_zeros(P, dtype=np.int64), count=_zeros(1, dtype=np.int64))
 
 
 _samples = threading.local()
@@ -987,11 +1037,10 @@ def compile_handoff():
     _adopt(_lanes(1, 2, 2, 0, 0, 1), 0, _lanes(2, 2, 2, 0, 0, 1), 0)
 
 
-def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol, atol,
-           n_err, max_steps, h0, h_max, h_min, events, max_events, n_sub, t_eval, n_eval,
-           renorm_dt, time_limit, t_fine, L, rb, reuse_samples=False):
+def dop853(y0s, rows, model: Model, control: Control, recording: Recording, L: int, rb,
+           reuse_samples=False):
     """Integrate M orbits (+ n_tan tangent vectors each; starts y0s, shape (M, nf)) from t0
-    to t1 in L lanes.
+    to t1 in L lanes (the records: Model, Control, Recording).
 
     rows: (3, M) the row of each job in the event, sample and fine outputs (-1: the job
     does not record them). events: (offsets, records, direction, terminal, guard, watch)
@@ -1020,31 +1069,34 @@ def dop853(y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, megno, rtol,
     loop that turns once, or once per 256 rounds with a time limit.
     """
     M, nf = y0s.shape
+    masses, d = model.masses, model.d
+    t0, n_tan, time_limit = control.t0, control.n_tan, control.time_limit
+    events, max_events, n_sub, t_eval, n_eval, t_fine = recording
     n = state_size(masses, d, rb)
     nfull = 2 * masses.size * d     # samples, fine ones too, are written in full (`put_sample`)
     m = events[0].size - 1
     Me, Ms, Mf = rows[0].max() + 1, rows[1].max() + 1, rows[2].max() + 1
     T, Tf = t_eval.size, t_fine.size
     out = RawOutcome(
-        np.full(M, OK_, dtype=np.int64), np.full(M, t0), y0s.copy(),
-        np.zeros((M, 4), dtype=np.int64), np.zeros((M, 2)),
+        status=np.full(M, OK_, dtype=np.int64), t=np.full(M, t0), y=y0s.copy(),
+        counts=np.zeros((M, 4), dtype=np.int64), h_range=np.zeros((M, 2)),
         # crossings are read only up to the count recorded: no need to touch the rest
-        np.empty((Me, max_events), dtype=np.int64), np.empty((Me, max_events)),
-        np.empty((Me, max_events, n)), np.full((Ms, T, n_eval // n * nfull), np.nan),
-        np.full((Ms, T, n_tan), np.nan), np.zeros((M, n_tan)), np.zeros((M, n_tan)),
-        _reused((Mf, Tf, nfull)) if reuse_samples else np.full((Mf, Tf, nfull), np.nan),
-        np.zeros((M, 2)), np.zeros((M, 2)),
-        np.full((Ms, T, 2), np.nan))
+        ev_index=np.empty((Me, max_events), dtype=np.int64),
+        ev_t=np.empty((Me, max_events)), ev_y=np.empty((Me, max_events, n)),
+        samples=np.full((Ms, T, n_eval // n * nfull), np.nan),
+        sample_log=np.full((Ms, T, n_tan), np.nan), log_growth=np.zeros((M, n_tan)),
+        max_log=np.zeros((M, n_tan)),
+        fine=_reused((Mf, Tf, nfull)) if reuse_samples else np.full((Mf, Tf, nfull), np.nan),
+        wba=np.zeros((M, 2)), megno_sums=np.zeros((M, 2)),
+        sample_megno=np.full((Ms, T, 2), np.nan))
 
     def drive(ln, next_job):
         # with a time limit, back every 256 rounds to read the clock
         rounds = 256 if time_limit > 0.0 else 1 << 62
         while next_job >= 0:
             now = time.perf_counter() if time_limit > 0.0 else 0.0
-            next_job = _run(ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par,
-                            n_tan, megno, rtol, atol, n_err, max_steps, h0, h_max, h_min,
-                            events, max_events, n_sub, t_eval, n_eval, renorm_dt,
-                            time_limit, t_fine, next_job, rounds, now, rb)
+            next_job = _run(ln, out, y0s, rows, model, control, recording, next_job, rounds,
+                            now, rb)
         return next_job
 
     # The SIMD loops cost all L lanes whether they run a job or not: once every job has

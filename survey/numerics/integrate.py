@@ -18,7 +18,7 @@ from ..physics.lanes import SIMD_LANES, SIMD_MIN
 from ..physics.system import System
 from ..physics.terms import AREA, PERIMETER
 from .dop853 import RTOL_MIN
-from .driver import EVAL, EVENTS, FINE, dop853, put_sample
+from .driver import EVAL, EVENTS, FINE, Control, Model, Recording, dop853, put_sample
 from .events import Crossings, Event, encode_events, relative_events
 class Outcome(NamedTuple):
     """What one integration returns; nothing is raised for numerical trouble."""
@@ -127,20 +127,21 @@ def integrate_batch(system: System, starts, t_span, *, tangents=None, record=Non
     n_err = r * (1 + n_tan) if control_tangents else r
     if not events:
         max_events = 0                  # nothing to record: no room for it
-    common = dict(t0=t0, masses=masses, d=d, measure=measure, prof=prof, par=par,
-                  rtol=float(rtol), atol=float(atol), max_steps=int(max_steps),
-                  h0=float(first_step), h_max=float(max_step), h_min=float(min_step),
-                  renorm_dt=float(renorm_interval), L=int(lanes or lanes_for(M)), rb=rb)
+    model = Model(masses=masses, d=d, measure=measure, prof=prof, par=par)
+    control = Control(t0=t0, t1=t1, n_tan=n_tan, megno=megno, rtol=float(rtol),
+                      atol=float(atol), n_err=n_err, max_steps=int(max_steps),
+                      h0=float(first_step), h_max=float(max_step), h_min=float(min_step),
+                      renorm_dt=float(renorm_interval), time_limit=float(time_limit))
+    L = int(lanes or lanes_for(M))
     # (one lane runs its jobs one after another: their order changes nothing)
-    order = _costliest_first(np.ascontiguousarray(y0s[:, :r]), t1, float(time_limit),
-                             common) if M > common["L"] > 1 else np.arange(M)
+    order = _costliest_first(np.ascontiguousarray(y0s[:, :r]), model, control, L, rb) \
+        if M > L > 1 else np.arange(M)
     # (rows[:, order] alone would be Fortran-ordered: a second compilation of the kernel)
-    res = dop853(y0s=y0s[order], rows=np.ascontiguousarray(rows[:, order]), t1=t1,
-                 n_tan=n_tan, megno=megno, n_err=n_err,
-                 events=encode_events(frame.events if frame else events, system),
-                 max_events=int(max_events), n_sub=int(event_substeps), t_eval=t_eval,
-                 n_eval=n_eval, time_limit=float(time_limit), t_fine=t_fine,
-                 reuse_samples=bool(reuse_samples), **common)
+    recording = Recording(events=encode_events(frame.events if frame else events, system),
+                          max_events=int(max_events), n_sub=int(event_substeps),
+                          t_eval=t_eval, n_eval=n_eval, t_fine=t_fine)
+    res = dop853(y0s[order], np.ascontiguousarray(rows[:, order]), model, control,
+                 recording, L, rb, reuse_samples=bool(reuse_samples))
     at = np.empty(M, dtype=np.int64)
     at[order] = np.arange(M)
     if frame is not None:
@@ -267,7 +268,7 @@ def _com_added(y, masses, Q0, V, job, t, t0):
 PILOT = 1.0 / 400.0     # of the span: the step counts that order a batch's jobs
 
 
-def _costliest_first(starts, t1, time_limit, common) -> np.ndarray:
+def _costliest_first(starts, model: Model, control: Control, L: int, rb) -> np.ndarray:
     """The order in which a batch's jobs take the lanes: costliest first, so that its last
     lanes to finish run orbits of about the same length, not the longest ones alone (the
     longest-first rule; orbits differ 4x in steps along a scan, and in grid order the costly
@@ -276,12 +277,11 @@ def _costliest_first(starts, t1, time_limit, common) -> np.ndarray:
     with the whole run's is 0.9), ~0.3% of the run. Only the order changes: each orbit's
     bits are its own whatever its lane."""
     M, n = starts.shape
-    t0 = common["t0"]
-    pilot = dop853(y0s=np.ascontiguousarray(starts), rows=np.full((3, M), -1, dtype=np.int64),
-                   t1=t0 + (t1 - t0) * PILOT, n_tan=0, megno=False, n_err=n,
-                   events=encode_events((), None), max_events=0, n_sub=1,
-                   t_eval=np.zeros(0), n_eval=n, time_limit=time_limit, t_fine=np.zeros(0),
-                   **common)
+    t0, t1 = control.t0, control.t1
+    pilot = dop853(np.ascontiguousarray(starts), np.full((3, M), -1, dtype=np.int64), model,
+                   control._replace(t1=t0 + (t1 - t0) * PILOT, n_tan=0, megno=False, n_err=n),
+                   Recording(events=encode_events((), None), max_events=0, n_sub=1,
+                             t_eval=np.zeros(0), n_eval=n, t_fine=np.zeros(0)), L, rb)
     return np.argsort(-(pilot.counts[:, 0] + pilot.counts[:, 1]), kind="stable")
 
 
