@@ -236,7 +236,7 @@ def _reproduce(args):
                 print(f"made {out}")
             continue
         config = load_config(path)
-        config.tables["survey"]["output"] = str(staging / f"{config.name}.nc")
+        config = config.with_output(staging / f"{config.name}.nc")
         made = _survey(config, command=f"python -m survey reproduce ({path.name})",
                        progress=False if args.no_progress else None)
         print(f"made {made}, its report and figures")
@@ -313,7 +313,7 @@ def _run(args):
         config = load_config(args.config)
     if args.output:
         ensure_writable(Path(args.output), "--output", [args.config] if args.config else [])
-        config.tables["survey"]["output"] = args.output
+        config = config.with_output(args.output)
     _survey(config, command="python -m survey " + " ".join(sys.argv[1:]),
             progress=False if args.no_progress else None, workers=args.workers,
             scheduler=args.scheduler, summary=True, write_report=not args.no_report)

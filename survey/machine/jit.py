@@ -23,8 +23,8 @@ from numba.core.registry import cpu_target
 
 PACKAGE = Path(__file__).parents[1]
 # the modules whose source compiled code depends on, and the folders that hold kernels
-SOURCES = ("catalog/status.py", "machine/*.py", "physics/*.py", "numerics/*.py", "bench.py")
-KERNEL_FOLDERS = (".", "machine", "physics", "numerics")
+SOURCES = ("catalog/status.py", "machine/*.py", "physics/*.py", "numerics/*.py", "bench/*.py")
+KERNEL_FOLDERS = ("bench", "machine", "physics", "numerics")
 
 
 def cache_folder(source_folder: Path) -> Path:

@@ -509,7 +509,7 @@ D7_16 = -149.72683625798564
 
 # Each combination of stages: (the rows of K it reads, their coefficients) in the tableau's
 # order -- stages 2-12 and 14-16, the 8th-order solution B, the 5th-order error ER and the
-# dense output's D4-D7 -- summed by `_dot`.
+# dense output's D4-D7 -- summed by `stage_dot`.
 A2 = ((0,), (A2_1,))
 A3 = ((0, 1), (A3_1, A3_2))
 A4 = ((0, 2), (A4_1, A4_3))
@@ -551,7 +551,7 @@ D7 = _in_two((0, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15),
 
 
 @helper
-def _dot(K, i, comb):
+def stage_dot(K, i, comb):
     """sum_j c_j K[r_j, i] over comb = (rows r, coefficients c), as fused multiply-adds in
     order (the loop has a constant length: the compiler unrolls it, and the loops over i that
     call it run as SIMD instructions)."""
@@ -564,10 +564,10 @@ def _dot(K, i, comb):
 
 @helper
 def _dot_long(K, i, parts):
-    """`_dot` of a combination in two parts (`_in_two`): the same fused multiply-adds in the
+    """`stage_dot` of a combination in two parts (`_in_two`): the same fused multiply-adds in the
     same order."""
     rows, coefs = parts[1]
-    s = _dot(K, i, parts[0])
+    s = stage_dot(K, i, parts[0])
     for j in range(len(rows)):
         s = fma(coefs[j], K[rows[j], i], s)
     return s
@@ -591,40 +591,40 @@ def stages(masses, d, measure, prof, par, n_tan, L, y, hh, K, yt, ynew, W, rb):
     right-hand side is given no time."""
     M = y.size
     for i in range(M):
-        yt[i] = fma(hh[i], _dot(K, i, A2), y[i])
+        yt[i] = fma(hh[i], stage_dot(K, i, A2), y[i])
     _rhs(yt, K[1], L, masses, d, measure, prof, par, n_tan, W, rb)
     for i in range(M):
-        yt[i] = fma(hh[i], _dot(K, i, A3), y[i])
+        yt[i] = fma(hh[i], stage_dot(K, i, A3), y[i])
     _rhs(yt, K[2], L, masses, d, measure, prof, par, n_tan, W, rb)
     for i in range(M):
-        yt[i] = fma(hh[i], _dot(K, i, A4), y[i])
+        yt[i] = fma(hh[i], stage_dot(K, i, A4), y[i])
     _rhs(yt, K[3], L, masses, d, measure, prof, par, n_tan, W, rb)
     for i in range(M):
-        yt[i] = fma(hh[i], _dot(K, i, A5), y[i])
+        yt[i] = fma(hh[i], stage_dot(K, i, A5), y[i])
     _rhs(yt, K[4], L, masses, d, measure, prof, par, n_tan, W, rb)
     for i in range(M):
-        yt[i] = fma(hh[i], _dot(K, i, A6), y[i])
+        yt[i] = fma(hh[i], stage_dot(K, i, A6), y[i])
     _rhs(yt, K[5], L, masses, d, measure, prof, par, n_tan, W, rb)
     for i in range(M):
-        yt[i] = fma(hh[i], _dot(K, i, A7), y[i])
+        yt[i] = fma(hh[i], stage_dot(K, i, A7), y[i])
     _rhs(yt, K[6], L, masses, d, measure, prof, par, n_tan, W, rb)
     for i in range(M):
-        yt[i] = fma(hh[i], _dot(K, i, A8), y[i])
+        yt[i] = fma(hh[i], stage_dot(K, i, A8), y[i])
     _rhs(yt, K[7], L, masses, d, measure, prof, par, n_tan, W, rb)
     for i in range(M):
-        yt[i] = fma(hh[i], _dot(K, i, A9), y[i])
+        yt[i] = fma(hh[i], stage_dot(K, i, A9), y[i])
     _rhs(yt, K[8], L, masses, d, measure, prof, par, n_tan, W, rb)
     for i in range(M):
-        yt[i] = fma(hh[i], _dot(K, i, A10), y[i])
+        yt[i] = fma(hh[i], stage_dot(K, i, A10), y[i])
     _rhs(yt, K[9], L, masses, d, measure, prof, par, n_tan, W, rb)
     for i in range(M):
-        yt[i] = fma(hh[i], _dot(K, i, A11), y[i])
+        yt[i] = fma(hh[i], stage_dot(K, i, A11), y[i])
     _rhs(yt, K[10], L, masses, d, measure, prof, par, n_tan, W, rb)
     for i in range(M):
-        yt[i] = fma(hh[i], _dot(K, i, A12), y[i])
+        yt[i] = fma(hh[i], stage_dot(K, i, A12), y[i])
     _rhs(yt, K[11], L, masses, d, measure, prof, par, n_tan, W, rb)
     for i in range(M):
-        ynew[i] = fma(hh[i], _dot(K, i, B), y[i])
+        ynew[i] = fma(hh[i], stage_dot(K, i, B), y[i])
 
 
 @lanes
@@ -639,9 +639,9 @@ def error_norms(y, ynew, K, L, n_err, rtol, atol, h, err, scratch):
     sq3, sq5 = scratch[:M], scratch[M:2 * M]
     for i in range(M):
         isk = 1.0 / fma(rtol, max(abs(y[i]), abs(ynew[i])), atol)
-        b = _dot(K, i, B)
+        b = stage_dot(K, i, B)
         er3 = fma(-BHH3, K[11, i], fma(-BHH2, K[8, i], fma(-BHH1, K[0, i], b))) * isk
-        er5 = _dot(K, i, ER) * isk
+        er5 = stage_dot(K, i, ER) * isk
         sq3[i] = er3 * er3
         sq5[i] = er5 * er5
     e3, e5 = scratch[2 * M:2 * M + L], scratch[2 * M + L:2 * M + 2 * L]
@@ -679,13 +679,13 @@ def dense_prepare(masses, d, measure, prof, par, L, nd, y, ynew, hh, K, yt, F, W
     nt = nd // state_size(masses, d, rb) - 1
     M = nd * L
     for i in range(M):
-        yt[i] = fma(hh[i], _dot(K, i, A14), y[i])
+        yt[i] = fma(hh[i], stage_dot(K, i, A14), y[i])
     _rhs(yt, K[13], L, masses, d, measure, prof, par, nt, W, rb)
     for i in range(M):
-        yt[i] = fma(hh[i], _dot(K, i, A15), y[i])
+        yt[i] = fma(hh[i], stage_dot(K, i, A15), y[i])
     _rhs(yt, K[14], L, masses, d, measure, prof, par, nt, W, rb)
     for i in range(M):
-        yt[i] = fma(hh[i], _dot(K, i, A16), y[i])
+        yt[i] = fma(hh[i], stage_dot(K, i, A16), y[i])
     _rhs(yt, K[15], L, masses, d, measure, prof, par, nt, W, rb)
     # one view per row stored to: see error_norms
     F0, F1, F2, F3, F4, F5, F6 = F[0], F[1], F[2], F[3], F[4], F[5], F[6]

@@ -226,7 +226,7 @@ def _centre(system: System) -> np.ndarray:
     return rows
 
 
-def _return(system, y, period, tol, tangents=True):
+def flow_map(system, y, period, tol, tangents=True):
     """(y(T), dy(T)/dy(0)) from the orbit with its full tangent block (or y(T) alone)."""
     out = integrate(system, y, period, tangents=np.eye(system.n) if tangents else None,
                     rtol=tol, atol=tol, control_tangents=tangents,
@@ -255,9 +255,9 @@ class _Shooting(NamedTuple):
         energy = p if self.energy is None else self.energy
         R = _rotation(system, theta) if self.rotating else np.eye(n)
         if tangents:
-            yT, phi = _return(system, y, T, self.tol)
+            yT, phi = flow_map(system, y, T, self.tol)
         else:
-            yT, phi = _return(system, y, T, self.tol, tangents=False), None
+            yT, phi = flow_map(system, y, T, self.tol, tangents=False), None
         r = yT - linalg.dot(R, y)
         e = float(system.energy(y))
         F = [r, [0.0, e - energy]]
@@ -370,7 +370,7 @@ def periodic_orbit(system: System, guess, period: float, rotating: bool = False,
                          else 0.0, tol)
     T, theta = float(period), 0.0
     if rotating:    # the angle that best turns the guess's return onto its start
-        yT = _return(system, y, T, tol, tangents=False)
+        yT = flow_map(system, y, T, tol, tangents=False)
         # the angle of sum conj(z0) zT over positions and momenta as z = x + i y
         a, b = y.reshape(-1, 2).T, yT.reshape(-1, 2).T
         theta = float(portable.atan2(linalg.dot(a[0], b[1]) - linalg.dot(a[1], b[0]),

@@ -300,6 +300,12 @@ class Config:
     def sha256(self) -> str:
         return hashlib.sha256(self.text.encode()).hexdigest()
 
+    def with_output(self, path) -> "Config":
+        """The same survey written to another archive (the config itself is never
+        changed: other readers may hold it)."""
+        return replace(self, tables={**self.tables,
+                                     "survey": {**self.tables["survey"], "output": str(path)}})
+
     def system(self, index: int = 0) -> System:
         """The System of flat cell `index` (the same for every cell unless a parameter of
         an interaction term is a grid axis)."""
@@ -368,9 +374,8 @@ class Config:
                 path = Path(survey["output"])
                 survey["output"] = str(defaults.check_archive(path, variant))
             second = validate(raw, _to_toml(raw), f"{self.source} [check] {variant}",
-                              check_output=False)
-            second.tables["survey"]["output"] = str(defaults.check_archive(self.output,
-                                                                           variant))
+                              check_output=False).with_output(
+                defaults.check_archive(self.output, variant))
             ensure_writable(second.output)
             out[variant] = second
         return out

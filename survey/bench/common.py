@@ -1,0 +1,94 @@
+"""What every part of the bench shares: the cases it times, best-of timing, and a command
+run as a user runs it, with its phases."""
+from __future__ import annotations
+
+
+import math
+import time
+
+
+
+
+CASES = [("chaotic 'sides'", "sides", {}),
+         ("regular equilateral d=3", "equilateral", {"delta": 3.0})]
+
+
+def best_time(fn, repeats):
+    best, out = math.inf, None
+    for _ in range(repeats):
+        t = time.perf_counter()
+        out = fn()
+        best = min(best, time.perf_counter() - t)
+    return best, out
+
+
+# The command line run as `python -m survey` runs it, its phases recorded: wall-clock times
+# (comparable across processes) at its first line, after its imports, and at its end, with
+# run_survey's own timings; printed as JSON on the last line.
+_CLI_PHASES = """
+import json, sys, time
+start = time.time()
+from survey import cli
+from survey.pipeline import sweep
+imported = time.time()
+timings, run = {}, sweep.run_survey
+sweep.run_survey = lambda *a, **kw: run(*a, timings=timings, **kw)
+code = cli.main(sys.argv[1:])
+timings.pop("tasks", None)
+print(json.dumps(dict(start=start, imported=imported, end=time.time(), code=code, **timings)))
+"""
+
+
+def user_env(**extra) -> dict:
+    """The environment of a timed command: this one, but Python writing bytecode as it does
+    by default (a development environment may set PYTHONDONTWRITEBYTECODE; survey's own
+    modules, compiled from source on every start, then cost a command 0.05-0.1 s)."""
+    import os
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    return {**env, **extra}
+
+
+def command_phases(argv) -> dict:
+    """Seconds of a `python -m survey` command by phase: the interpreter's start, survey's
+    imports, run_survey's phases (prepare -- the kernels loaded --, cluster, compute,
+    shutdown, archive), and the rest (the regime summary; the exit without teardown is not
+    run here)."""
+    import json
+    import subprocess
+    import sys
+    launched = time.time()
+    done = subprocess.run([sys.executable, "-c", _CLI_PHASES, *argv], check=True,
+                          capture_output=True, text=True, env=user_env())
+    r = json.loads(done.stdout.strip().splitlines()[-1])
+    phases = {"interpreter": r["start"] - launched, "imports": r["imported"] - r["start"]}
+    phases.update({k: r[k] for k in ("prepare", "cluster", "compute", "shutdown", "archive")})
+    phases["rest"] = r["end"] - r["imported"] - r["total"]
+    return phases
+
+
+def timed_command(args, env=None):
+    """(seconds to the first output on stderr, seconds to the end) of a command whose
+    stderr is a terminal (the command line speaks to terminals only)."""
+    import os
+    import pty
+    import subprocess
+    master, slave = pty.openpty()
+    start = time.perf_counter()
+    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=slave, env=env)
+    os.close(slave)
+    first = math.nan
+    while True:
+        try:
+            chunk = os.read(master, 4096)
+        except OSError:         # the command closed its end
+            break
+        if not chunk:
+            break
+        if math.isnan(first):
+            first = time.perf_counter() - start
+    proc.wait()
+    total = time.perf_counter() - start
+    os.close(master)
+    if proc.returncode:
+        raise RuntimeError(f"{' '.join(args)} exited with {proc.returncode}")
+    return first, total

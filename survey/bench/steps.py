@@ -1,0 +1,222 @@
+"""Where a step goes (right-hand sides, stage sums, the rest) in lanes, and one orbit's step
+against the same step in plain scalar code."""
+from __future__ import annotations
+
+
+import math
+
+import numpy as np
+
+from ..numerics.dop853 import (A2, A3, A4, A5, A6, A7, A8, A9, A10, A11, A12, B, BETA_ROOTS,
+                              BHH1, BHH2, BHH3, ER, ERR_FLOOR_ROOT, stage_dot, error_norms, stages)
+from ..numerics.indicators import deviation_vectors
+from ..numerics.integrate import Frame, integrate, integrate_batch
+from ..physics.families import initial_state
+from ..machine import portable
+from ..machine.jit import helper, kernel, leaf
+from ..machine.portable import fma
+from ..physics.lanes import rhs_lanes, state_size, workspace_size
+from ..physics.system import System
+from .common import CASES, best_time
+
+
+@leaf
+def _rhs_loop(Y, K, W, reps, L, masses, d, measure, prof, par, n_tan, rb):
+    """reps times the 12 right-hand-side evaluations of a step of L lanes, at one state (rb:
+    the reduced states' mass ratios, as the driver runs the paper's systems), into K's
+    rows; W: the workspace. Without reference counting, as the driver (the rows' views
+    would each cost an atomic increment and decrement)."""
+    for _ in range(reps):
+        for s in range(12):
+            rhs_lanes(0.0, Y, K[s], L, masses, d, measure, prof, par, n_tan, W, rb)
+    return K[11, 0]
+
+
+@kernel
+def _stage_loop(Y, reps, h, L, masses, d, measure, prof, par, n_tan, rb):
+    """reps times a step's stages and error norms of L lanes, from one state."""
+    nf = Y.size // L
+    K, YT, YN = np.zeros((16, Y.size)), np.zeros(Y.size), np.zeros(Y.size)
+    W, S = np.zeros(workspace_size(L, nf)), np.zeros(2 * (nf + 1) * L)
+    H, err = np.full(L, h), np.zeros(L)
+    HH = np.full(Y.size, h)
+    rhs_lanes(0.0, Y, K[0], L, masses, d, measure, prof, par, n_tan, W, rb)
+    acc = 0.0
+    for _ in range(reps):
+        stages(masses, d, measure, prof, par, n_tan, L, Y, HH, K, YT, YN, W, rb)
+        error_norms(Y, YN, K, L, state_size(masses, d, rb), 1e-12, 1e-12, H, err, S)
+        acc += err[0]
+    return acc
+
+
+@helper
+def _plain_rhs(y, dy):
+    """The paper's system written plainly for the step baseline: three unit masses in the
+    plane, U = P^2/2, the relative motion (bodies 0 and 1 in the centre-of-mass frame, the
+    third at -(q0 + q1)) and one tangent vector; 16 components, as survey integrates it."""
+    ux, uy, vx, vy = y[0], y[1], y[2], y[3]
+    wx, wy = -(ux + vx), -(uy + vy)
+    ax, ay, bx, by, cx, cy = vx - ux, vy - uy, wx - vx, wy - vy, ux - wx, uy - wy
+    L1, L2, L3 = math.sqrt(ax * ax + ay * ay), math.sqrt(bx * bx + by * by), \
+        math.sqrt(cx * cx + cy * cy)
+    r1, r2, r3 = 1.0 / L1, 1.0 / L2, 1.0 / L3
+    e1x, e1y, e2x, e2y, e3x, e3y = ax * r1, ay * r1, bx * r2, by * r2, cx * r3, cy * r3
+    U1 = L1 + L2 + L3                               # U' = P, U'' = 1
+    dy[0], dy[1], dy[2], dy[3] = y[4], y[5], y[6], y[7]
+    dy[4], dy[5] = U1 * (e1x - e3x), U1 * (e1y - e3y)
+    dy[6], dy[7] = U1 * (e2x - e1x), U1 * (e2y - e1y)
+    s1, s2, s3 = U1 * r1, U1 * r2, U1 * r3
+    dux, duy, dvx, dvy = y[8], y[9], y[10], y[11]
+    dwx, dwy = -(dux + dvx), -(duy + dvy)
+    p1x, p1y, p2x, p2y, p3x, p3y = dvx - dux, dvy - duy, dwx - dvx, dwy - dvy, dux - dwx, \
+        duy - dwy
+    d1, d2, d3 = e1x * p1x + e1y * p1y, e2x * p2x + e2y * p2y, e3x * p3x + e3y * p3y
+    dP = d1 + d2 + d3
+    c1, c2, c3 = dP - s1 * d1, dP - s2 * d2, dP - s3 * d3
+    g1x, g1y = c1 * e1x + s1 * p1x, c1 * e1y + s1 * p1y
+    g2x, g2y = c2 * e2x + s2 * p2x, c2 * e2y + s2 * p2y
+    g3x, g3y = c3 * e3x + s3 * p3x, c3 * e3y + s3 * p3y
+    dy[8], dy[9], dy[10], dy[11] = y[12], y[13], y[14], y[15]
+    dy[12], dy[13], dy[14], dy[15] = g1x - g3x, g1y - g3y, g2x - g1x, g2y - g1y
+
+
+@helper
+def _plain_stage(y, yt, K, h, comb, s):
+    """Stage s of `_plain_dop853` from the tableau row comb (a helper, as numba cannot loop
+    over the rows: each is a tuple of its own length)."""
+    for i in range(y.size):
+        yt[i] = fma(h, stage_dot(K, i, comb), y[i])
+    _plain_rhs(yt, K[s])
+
+
+@kernel
+def _plain_dop853(z, t1, tol, h):
+    """The baseline of a scalar step: DOP853 as plain code for one orbit of `_plain_rhs` --
+    one function, fixed sizes, the right-hand side inlined, survey's tableau sums, error
+    norm (over the orbit's 8 components) and step control, the tangent's log norm summed
+    at each step, and nothing else (no events, samples, budgets, statuses or lanes).
+    Returns the attempted steps, the sum (kept so the compiler cannot drop it) and the
+    final state."""
+    n = 16
+    y, yt, yn, K = z.copy(), np.empty(n), np.empty(n), np.empty((13, n))
+    _plain_rhs(y, K[0])
+    t, err_old, attempts, acc = 0.0, ERR_FLOOR_ROOT, 0, 0.0
+    while t < t1:
+        if t + h >= t1:
+            h = t1 - t
+        attempts += 1
+        _plain_stage(y, yt, K, h, A2, 1)
+        _plain_stage(y, yt, K, h, A3, 2)
+        _plain_stage(y, yt, K, h, A4, 3)
+        _plain_stage(y, yt, K, h, A5, 4)
+        _plain_stage(y, yt, K, h, A6, 5)
+        _plain_stage(y, yt, K, h, A7, 6)
+        _plain_stage(y, yt, K, h, A8, 7)
+        _plain_stage(y, yt, K, h, A9, 8)
+        _plain_stage(y, yt, K, h, A10, 9)
+        _plain_stage(y, yt, K, h, A11, 10)
+        _plain_stage(y, yt, K, h, A12, 11)
+        for i in range(n):
+            yn[i] = fma(h, stage_dot(K, i, B), y[i])
+        e3 = e5 = 0.0
+        for i in range(8):
+            isk = 1.0 / fma(tol, max(abs(y[i]), abs(yn[i])), tol)
+            er3 = fma(-BHH3, K[11, i], fma(-BHH2, K[8, i], fma(-BHH1, K[0, i], stage_dot(K, i, B))))
+            er3, er5 = er3 * isk, stage_dot(K, i, ER) * isk
+            e3, e5 = e3 + er3 * er3, e5 + er5 * er5
+        err = abs(h) * e5 / math.sqrt(8 * (e5 + 0.01 * e3)) if e5 + e3 > 0.0 else 0.0
+        r8, r128 = portable.root8(max(err, 1e-10))
+        _plain_rhs(yn, K[12])
+        if err <= 1.0:
+            t += h
+            for i in range(n):
+                y[i], K[0, i] = yn[i], K[12, i]
+            w = 0.0
+            for i in range(8, n):
+                w += y[i] * y[i]
+            acc += portable.log(w) * h
+            fac = 0.9 * r128 / r8 * portable.ipow(err_old, BETA_ROOTS)
+            err_old = r128 if err >= 1e-4 else ERR_FLOOR_ROOT
+            h *= min(6.0, max(1.0 / 3.0, fac))
+        else:
+            h *= max(1.0 / 3.0, 0.9 / r8)
+    return attempts, acc, y
+
+
+def plain_step(t_final, repeats):
+    """ns per attempted step of `_plain_dop853` on the chaotic orbit of CASES, with a
+    tangent vector (best of `repeats`), its steps, and its relative motion and survey's at
+    t_final (8 components each)."""
+    system = System.create()
+    y0 = initial_state(system, CASES[0][1], **CASES[0][2])
+    w = deviation_vectors(system, y0, 1, seed=0)
+    frame = Frame.of(system, y0[None], w[None], [])
+    z = frame.reduce(np.concatenate([y0, w[0]])[None], 1)[0]
+    _plain_dop853(z, 1.0, 1e-12, 1e-3)
+    best, (steps, _, y) = best_time(lambda: _plain_dop853(z, t_final, 1e-12, 1e-3), repeats)
+    ref = integrate(system, y0, t_final)
+    return 1e9 * best / steps, steps, y[:8], frame.reduce(ref.y[None], 0)[0]
+
+
+def step_costs(t_final=2000.0, repeats=5, lanes=(1, 4, 8, 16), out=print):
+    """Where a DOP853 step's time goes, per orbit-step, on the paper's two orbits, for one
+    orbit alone and for lanes of copies of it: the right-hand-side evaluations (12 per
+    accepted step), the stage combinations with the error norm (the same 11 evaluations
+    subtracted), and the rest of the driver (step control, events, samples, tangent
+    renormalisation, MEGNO), as shares of `integrate_batch`'s time; compiled loops over
+    survey's own kernels at the orbit's start, best of `repeats` interleaved runs."""
+    system = System.create()
+    rows = []
+    for label, family, params in CASES:
+        y0 = initial_state(system, family, **params)
+        for n_tan in (0, 1):
+            w = deviation_vectors(system, y0, n_tan, seed=0) if n_tan else None
+            one = integrate(system, y0, t_final, tangents=w, megno=n_tan > 0)
+            steps = one.n_steps + one.n_rejected
+            h = t_final / one.n_steps
+            args = system.kernel_args
+            for L in lanes:
+                starts = np.repeat(y0[None], L, 0)
+                tangents = np.repeat(w[None], L, 0) if n_tan else None
+                # the states the driver integrates: each orbit's relative motion
+                frame = Frame.of(system, starts, np.zeros((L, n_tan, y0.size))
+                                  if tangents is None else tangents, [])
+                Y = np.ascontiguousarray(frame.reduce(
+                    starts if tangents is None else
+                    np.concatenate([starts, tangents.reshape(L, -1)], 1), n_tan).T).ravel()
+                K, W = np.zeros((16, Y.size)), np.zeros(workspace_size(L, Y.size // L))
+                _rhs_loop(Y, K, W, 1, L, *args, n_tan, frame.ratios)
+                _stage_loop(Y, 1, h, L, *args, n_tan, frame.ratios)
+                reps = max(1, steps // L)
+                # interleaved, so a slow spell of the machine does not fall on one of three
+                best = [math.inf] * 3
+                for _ in range(repeats):
+                    for k, go in enumerate((
+                            lambda: _rhs_loop(Y, K, W, reps, L, *args, n_tan,
+                                              frame.ratios),
+                            lambda: _stage_loop(Y, reps, h, L, *args, n_tan,
+                                                frame.ratios),
+                            lambda: integrate_batch(system, starts, t_final, tangents=tangents,
+                                                    megno=n_tan > 0, lanes=L))):
+                        best[k] = min(best[k], best_time(go, 1)[0])
+                t_rhs, t_stage = best[0] * steps / (reps * L), best[1] * steps / (reps * L)
+                t_all = best[2] / L
+                rows.append((label, n_tan, L, steps, t_all, t_rhs, t_stage - t_rhs * 11 / 12))
+    out("")
+    out(f"Where a step goes (t = {t_final:g}, tol 1e-12; per orbit-step, ns; shares of "
+        "integrate_batch's time; L orbits as SIMD lanes)")
+    out(f"{'case':26s} {'tangents':>8s} {'lanes':>5s} {'steps':>7s} {'step ns':>8s} "
+        f"{'12 rhs':>7s} {'stages+norm':>12s} {'rest':>6s}")
+    for label, n_tan, L, steps, t_all, t_rhs, t_comb in rows:
+        ns = 1e9 / steps
+        rest = t_all - t_rhs - t_comb
+        out(f"{label:26s} {n_tan:8d} {L:5d} {steps:7d} {t_all * ns:8.0f} "
+            f"{t_rhs / t_all:7.0%} {t_comb / t_all:12.0%} {rest / t_all:6.0%}")
+    plain, plain_steps, *_ = plain_step(t_final, repeats)
+    alone = next(1e9 * t_all / steps for label, n_tan, L, steps, t_all, *_ in rows
+                 if label == CASES[0][0] and n_tan == 1 and L == 1)
+    out(f"the same orbit with a tangent in plain scalar code (bench.steps._plain_dop853: one "
+        f"function, the right-hand side inlined, no events, samples or lanes): {plain:.0f} ns "
+        f"per attempted step ({plain_steps} steps); survey's one orbit alone {alone:.0f} ns, "
+        f"{alone / plain:.2f}x (target <= 0.45 us)")
+    return rows, plain

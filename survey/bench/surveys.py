@@ -1,0 +1,128 @@
+"""Whole surveys: scaling over workers, how busy a refined map keeps them, the driver's memory."""
+from __future__ import annotations
+
+
+import time
+
+import numpy as np
+
+from ..catalog.variables import V
+
+
+def survey_scaling(cells=200, t_final=2000.0, repeats=2, folder="results/bench", out=print):
+    """End-to-end survey of `cells` cells of the equilateral family on 1 and 2 local
+    workers, interleaved `repeats` times (this kind of machine drifts by 20% from run to
+    run; each worker count keeps its best run). Reports the phases, the 2-vs-1 speed-up,
+    and the per-task overhead: the share of the workers' compute phase not spent inside
+    cells (targets: speed-up >= 1.85, overhead < 5%)."""
+    import xarray as xr
+
+    from ..pipeline.sweep import run_survey
+    rows = {}
+    for _ in range(repeats):
+        for workers in (1, 2):
+            cfg = {"survey": {"name": f"bench-{workers}w",
+                              "output": f"{folder}/bench-{workers}w.nc"},
+                   "initial": {"family": "equilateral",
+                               "delta": {"start": 0.0, "stop": 10.0, "num": cells}},
+                   "integration": {"t_final": t_final},
+                   "indicators": {"perturbations": 1},
+                   "section": {"coordinate": "phi"},
+                   "dask": {"workers": workers}}
+            timings = {}
+            path = run_survey(cfg, progress=False, timings=timings)
+            with xr.open_dataset(path) as ds:
+                timings["in_cells"] = float(ds.wall_time.sum())
+            timings["overhead"] = 1.0 - timings["in_cells"] / (workers * timings["compute"])
+            if workers not in rows or timings["total"] < rows[workers]["total"]:
+                rows[workers] = timings
+    out("")
+    out(f"Survey of {cells} cells (equilateral family, t = {t_final:g}, default chunks; best "
+        f"of {repeats} interleaved runs): seconds")
+    out(f"{'workers':>8s} {'prepare':>8s} {'cluster':>8s} {'compute':>8s} {'shutdown':>8s} "
+        f"{'archive':>8s} {'total':>8s} {'in cells':>9s} {'overhead':>9s}")
+    for w, t in rows.items():
+        out(f"{w:8d} {t['prepare']:8.2f} {t['cluster']:8.2f} {t['compute']:8.2f} "
+            f"{t['shutdown']:8.2f} {t['archive']:8.2f} {t['total']:8.2f} {t['in_cells']:9.2f} "
+            f"{100 * t['overhead']:8.1f}%")
+    out(f"speed-up 2 vs 1 workers: {rows[1]['total'] / rows[2]['total']:.2f}x end to end, "
+        f"{rows[1]['compute'] / rows[2]['compute']:.2f}x in the compute phase "
+        "(targets: >= 1.85x; overhead < 5%)")
+    return rows
+
+
+def refined_map(t_final=300.0, levels=3, folder="results/bench", out=print):
+    """A refined map (equilateral family over (delta, E), 9 x 7 cells refined `levels`
+    times where neighbours disagree) on 2 local workers: how busy the workers were while
+    it ran -- from the scheduler's task stream, each worker's share of the compute phase
+    (first task started to last task ended) spent outside tasks, and its longest idle gap
+    -- and the cells against the finest uniform grid (target: no worker idle more than
+    10% of the time)."""
+    import xarray as xr
+
+    from ..pipeline.sweep import run_survey
+    cfg = {"survey": {"name": "bench-refined", "output": f"{folder}/bench-refined.nc"},
+           "initial": {"family": "equilateral", "delta": {"start": 0.0, "stop": 8.0, "num": 9},
+                       V.energy: {"start": 60.0, "stop": 120.0, "num": 7}},
+           "integration": {"t_final": t_final},
+           "indicators": {"perturbations": 0},
+           "refine": {"max_level": levels},
+           "dask": {"workers": 2}}
+    timings = {}
+    path = run_survey(cfg, progress=False, timings=timings)
+    with xr.open_dataset(path) as ds:
+        cells, level = ds.sizes["cell"], ds["level"].values
+    tasks = timings["tasks"]
+    begin, end = min(t[1] for t in tasks), max(t[2] for t in tasks)
+    out("")
+    out(f"Refined map (equilateral, (delta, E) from 9 x 7 cells, {levels} levels, t = "
+        f"{t_final:g}, 2 workers): {cells} cells ({', '.join(f'level {k}: {n}' for k, n in enumerate(np.bincount(level)))}); "
+        f"the finest uniform grid has {(8 * 2 ** levels + 1) * (6 * 2 ** levels + 1)}")
+    out(f"compute phase {timings['compute']:.2f} s, {len(tasks)} tasks; from the first task's "
+        f"start to the last one's end {end - begin:.2f} s")
+    out(f"{'worker':>28s} {'tasks':>6s} {'busy s':>7s} {'idle':>6s} {'longest gap s':>14s}")
+    idle = {}
+    for worker in sorted({t[0] for t in tasks}):
+        spans = sorted((a, b) for w, a, b in tasks if w == worker)
+        busy = sum(b - a for a, b in spans)
+        gaps = [spans[0][0] - begin] + [c - b for (_, b), (c, _) in zip(spans, spans[1:])] + \
+            [end - spans[-1][1]]
+        idle[worker] = 1.0 - busy / (end - begin)
+        out(f"{worker:>28s} {len(spans):6d} {busy:7.2f} {idle[worker]:6.1%} {max(gaps):14.2f}")
+    out(f"largest idle share {max(idle.values()):.1%} (target <= 10%)")
+    return dict(cells=cells, idle=idle, compute=timings["compute"])
+
+
+def survey_memory(sizes=(10_000, 100_000), folder="results/bench", out=print):
+    """Peak resident memory of the process driving a survey of many tiny cells (the
+    workers are separate processes): finished results stream to checkpoint files, and the
+    archive is written one variable at a time."""
+    import subprocess
+    import sys
+    out("")
+    out("Peak memory of the process driving a survey (cells of t = 0.01, orbit + indicators, "
+        "no section; the workers are separate processes)")
+    for n in sizes:
+        code = f"from survey.bench import _memory_run; print(*_memory_run({n}, {folder!r}))"
+        res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                             check=True)
+        peak, seconds, archive = map(float, res.stdout.split()[-3:])
+        out(f"{n:>8d} cells: peak RSS {peak / 1024:7.1f} MiB, {seconds:6.1f} s, of which "
+            f"writing the archive {archive:5.1f} s")
+
+
+def _memory_run(n, folder):
+    import resource
+
+    from ..pipeline.sweep import run_survey
+    cfg = {"survey": {"name": f"mem-{n}", "output": f"{folder}/mem-{n}.nc"},
+           "initial": {"family": "equilateral",
+                       "delta": {"start": 0.0, "stop": 10.0, "num": n}},
+           "integration": {"t_final": 0.01},
+           "indicators": {"perturbations": 0, "history_points": 2,
+                          "renorm_interval": 0.005},
+           "dask": {"chunk_size": 500}}
+    t, timings = time.perf_counter(), {}
+    run_survey(cfg, progress=False, timings=timings)
+    return (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, time.perf_counter() - t,
+            timings["archive"])
