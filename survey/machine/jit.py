@@ -91,12 +91,10 @@ def vector_width():
     With 512 bits the loop vectoriser puts 8 doubles in a vector, so a loop over SIMD lanes
     runs as SIMD only from 8 lanes and entirely scalar at 4. On AVX-512 cores other than
     FULL_512 (Zen 4, which splits a 512-bit operation; Intel's, where LLVM's tuning does it
-    by itself) LLVM is told to prefer 256 bits (Zen 4, `bench --only step`, an orbit with
-    its tangent: 4 lanes 780 -> 521-531 ns a step, 8 lanes 409-436 -> 399-403, 16 lanes
-    within noise, one 861-907 -> 845-850). On Zen 5 the full width pays (per orbit-step
-    with a tangent, 256 -> 512 bits: 16 lanes 179 -> 136 ns, 8 lanes 220 -> 165, 4 lanes
-    302 -> 448, scalar; the scan's compute phase 1.03 -> 0.87 s). Which instructions run changes, never the arithmetic (IEEE operations
-    lane by lane): the same bits.
+    by itself) LLVM is told to prefer 256 bits: there the narrower vectors are faster at 4
+    and 8 lanes and no slower at 16; on Zen 5 the full width pays from 8 lanes on (`bench
+    --only step` measures both on the machine it runs on). Which instructions run changes,
+    never the arithmetic (IEEE operations lane by lane): the same bits.
 
     numba reads the target's features once, when it makes its code generator (at the first
     function decorated), so this must run before that and makes it at once (numba reloads
@@ -140,8 +138,8 @@ leaf = njit(cache=True, error_model="numpy", _nrt=False)
 # The loops over SIMD lanes read some arrays and write others. Unless the compiler knows
 # that these do not overlap, it checks at run time, and a loop with many streams (the
 # tangent forces: 6 written, 16 read, 36 checks) is vectorised only from 24 lanes, where
-# the checks cost under a tenth of the loop: with 16 lanes the tangent ran scalar, 6.5 ns
-# per lane against 1.6. numba's `noalias` flag (which its parallel backend sets once it
+# the checks cost under a tenth of the loop: with 16 lanes the tangent ran scalar, at about
+# four times the cost of its SIMD loop. numba's `noalias` flag (which its parallel backend sets once it
 # has proven a gufunc's arguments distinct) declares the arrays a function is given
 # disjoint; it is not a decorator option, so it is mapped to one here (a numba without
 # the flag compiles them as leaves: slower, the same bits). Only for functions whose

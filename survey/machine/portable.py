@@ -349,7 +349,7 @@ def _row_dots(a, b, out):
 def _apply(code, *args):
     """The function of `code` over broadcast arrays: an array of their shape (a numpy
     scalar for scalars, as a ufunc gives). A kernel rather than numba's vectorize: a ufunc
-    builds its wrapper anew in every process (~35 ms each), a kernel loads from the cache."""
+    builds its wrapper anew in every process, a kernel loads from the cache."""
     arrays = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in args))
     flat = [np.ascontiguousarray(a).reshape(-1) for a in arrays]
     out = np.empty(flat[0].size)

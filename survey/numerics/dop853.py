@@ -4,7 +4,7 @@ variable-major (component i of lane k at y[i * L + k]; L = 1 is one orbit). The 
 steps the orbits is `driver.dop853`. Sums of products are fused multiply-adds
 (`portable.fma`, correctly rounded, the same bits on every CPU), in the tableau's order: on
 Intel's CPUs, where multiplications and additions share two pipes, the stage combinations
-are bound by them, and fused they run ~1.2-1.3x faster (a scan task 9-12%)."""
+are bound by them, and fused they run faster (`bench --only step` splits a step's time)."""
 from __future__ import annotations
 
 import math
@@ -529,7 +529,7 @@ ER = ((0, 5, 6, 7, 8, 9, 10, 11), (ER1, ER6, ER7, ER8, ER9, ER10, ER11, ER12))
 def _in_two(rows, coefs):
     """A combination of 12 stages as two of 6, summed by `_dot_long`: the compiler unrolls a
     constant-length loop of up to 10 fused multiply-adds, not 11 (the loops over lanes that
-    call it then ran scalar: the dense output's coefficients 6x slower, 200 ns a lane)."""
+    call it then ran scalar: the dense output's coefficients several times slower)."""
     return (rows[:6], coefs[:6]), (rows[6:], coefs[6:])
 
 
@@ -575,8 +575,8 @@ def _dot_long(K, i, parts):
 
 @helper
 def _rhs(y, dy, L, masses, d, measure, prof, par, n_tan, W, rb):
-    """The right-hand side of L lanes; one full orbit straight through `rhs` (a call less:
-    16 ns of a 44 ns evaluation). The systems are autonomous: it is given no time."""
+    """The right-hand side of L lanes; one full orbit straight through `rhs` (a call less,
+    a third of an evaluation). The systems are autonomous: it is given no time."""
     if rb is None and L == 1:
         rhs(0.0, y, dy, masses, d, measure, prof, par, n_tan)
     else:
@@ -635,7 +635,7 @@ def error_norms(y, ynew, K, L, n_err, rtol, atol, h, err, scratch):
     vectorised). scratch: 2 (n_err + 1) L."""
     M = n_err * L
     # two views, not two offsets into scratch: a loop that stores to two places of one
-    # array runs 4x slower (the compiler's overlap checks), 1.03 us for 16 lanes against 0.27
+    # array runs several times slower (the compiler's overlap checks)
     sq3, sq5 = scratch[:M], scratch[M:2 * M]
     for i in range(M):
         isk = 1.0 / fma(rtol, max(abs(y[i]), abs(ynew[i])), atol)
@@ -645,7 +645,7 @@ def error_norms(y, ynew, K, L, n_err, rtol, atol, h, err, scratch):
         sq3[i] = er3 * er3
         sq5[i] = er5 * er5
     e3, e5 = scratch[2 * M:2 * M + L], scratch[2 * M + L:2 * M + 2 * L]
-    if L == 1:                      # one orbit: one loop (a loop per component: ~4 ns)
+    if L == 1:                      # one orbit: one loop (not one per component)
         a3 = a5 = 0.0
         for i in range(n_err):
             a3 += scratch[i]

@@ -61,9 +61,9 @@ class Outcome(NamedTuple):
 def lanes_for(jobs: int) -> int:
     """The lane count for a batch of jobs: SIMD_LANES, or for fewer jobs the largest power
     of two they fill, from SIMD_MIN (the fewest with which the compiler's SIMD loops run),
-    which also takes 2 to SIMD_MIN - 1 jobs (per orbit-step with a tangent, `bench --only
-    step`: 4 lanes of 256 bits 302 ns a lane, one lane 744; 8 lanes of 512 bits 165, one 713);
-    one job runs in one lane, where its state's values stay in registers."""
+    which also takes 2 to SIMD_MIN - 1 jobs (SIMD_MIN lanes cost an orbit-step less than
+    half of one lane's: `bench --only step`); one job runs in one lane, where its state's
+    values stay in registers."""
     L = SIMD_LANES
     while L > jobs and L > SIMD_MIN:
         L //= 2

@@ -94,8 +94,8 @@ def _reduced_rows(y, S, H, Ps, Ph, mu1, mu2, out, args):
     them (body by body), then NumPy's operations on them in NumPy's order (a sum over a
     vector's components starts from 0.0), so the bits are those of the same formulas on
     arrays; the angles' atan2 in SIMD loops of their own over the arguments gathered in
-    args (4, M). 3x faster than arrays on the torus analysis' 10^4 samples of a half orbit,
-    and the angles 4x faster again."""
+    args (4, M): faster than the same formulas on arrays over the torus analysis' samples,
+    and the angles faster again."""
     for r in range(y.shape[0]):
         q0x, q0y, q1x, q1y, q2x, q2y = y[r, 0], y[r, 1], y[r, 2], y[r, 3], y[r, 4], y[r, 5]
         p0x, p0y, p1x, p1y, p2x, p2y = y[r, 6], y[r, 7], y[r, 8], y[r, 9], y[r, 10], y[r, 11]

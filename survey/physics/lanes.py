@@ -51,7 +51,7 @@ SIMD_LANES = 4 * SIMD_MIN
 # apart by the kernels' last argument rb: the mass ratios m0/m2, m1/m2 that rebuild the
 # third body, None for a full state. A type, not a value: numba compiles a kernel once for
 # full states and once for reduced ones, each without the other's code: a survey compiles
-# only the kind it integrates (the default survey's first run in a fresh clone, 74 -> 67 s).
+# only the kind it integrates (a shorter first run).
 
 
 @helper
@@ -114,12 +114,10 @@ def _full_lanes(t, Y, dY, L, masses, d, measure, prof, par, n_tan, W, rb):
 # Any system but the paper's three bodies in the plane under one perimetric or areal term
 # (which _planar_lanes runs) in loops over the lanes: sums of pair and ATM terms (the LJAT
 # clusters, gravity), alone or beside such a term, and perimetric and areal terms of more
-# bodies or in 3-D. Lane by lane through `rhs` (32 lanes, an orbit-step with a tangent
-# vector), a LJAT trimer's cost 1.67 us, 2.23 alone; P^2/2 + Lennard-Jones + gravity 2.40
-# us, 3.42 alone; P^2/2 of three bodies in 3-D 1.15 us, 1.39 alone; of four in the plane
-# 1.83 us, 2.04 alone. A pair term's loops and a triangle's run in functions of their own
-# (_pair_term_lanes, _triplet_term_lanes): in the one that loops over the terms, a LJAT
-# trimer's orbit-step ran 10-25% slower (415-420 -> 460-530 ns in 32 lanes). The
+# bodies or in 3-D: each faster in these loops than lane by lane through `rhs` (`bench
+# --only terms` sets them side by side). A pair term's loops and a triangle's run in
+# functions of their own (_pair_term_lanes, _triplet_term_lanes): in the one that loops
+# over the terms, a LJAT trimer's orbit-step ran 10-25% slower. The
 # workspace's rows: G the gathered coordinates and deviations (18), P a pair's unit vector
 # and distance (4), U the profile's U' and U'' (2), O what is added to the rates (20), T a
 # triangle's geometry (13).
@@ -313,14 +311,13 @@ def _planar_lanes(Y, dY, L, W, masses, measure, prof, par, n_tan, rb):
 
 
 # The loops over the lanes below are separate compiled functions, not inlined helpers:
-# numba vectorises each alone, but not all of them inlined into one function (measured:
-# the tangent loop 1.7 ns per orbit alone, 8 ns inside the whole right-hand side). Each is
-# given distinct arrays (`lanes`: compiled as such, so vectorised from 4 lanes on). The
-# orbits' forces take one loop (geometry, profile, forces, velocities: 7.8 ns per lane and
-# evaluation with a tangent vector's loop, 16 lanes; 11.2 as five loops, whose calls cost
-# more than their arithmetic), but for profiles other than x^2/2 (the paper's P^2/2 and
-# |A|^2/2) and the barrier: a branch on the profile inside a loop keeps it scalar (19 ns),
-# so each of those has a loop of its own, and any other takes three.
+# numba vectorises each alone, but not all of them inlined into one function (the tangent
+# loop ran several times slower inside the whole right-hand side). Each is given distinct
+# arrays (`lanes`: compiled as such, so vectorised from 4 lanes on). The orbits' forces take
+# one loop (geometry, profile, forces, velocities; as five loops, their calls cost more than
+# their arithmetic), but for profiles other than x^2/2 (the paper's P^2/2 and |A|^2/2) and
+# the barrier: a branch on the profile inside a loop keeps it scalar, so each of those has a
+# loop of its own, and any other takes three.
 
 # A reduced state (rb: the mass ratios m0/m2, m1/m2) holds bodies 0 and 1 alone, positions
 # then momenta (8 rows), the centre of mass at rest at 0: body 2 is rebuilt from them where

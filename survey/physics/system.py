@@ -222,7 +222,7 @@ def weighted_sum(weights: np.ndarray, x: np.ndarray) -> np.ndarray:
     """sum_i w_i x_i over the body axis of x (..., N, d), summed body by body in order: a
     matrix product or einsum would sum in the order, and with the fused multiply-adds,
     that the CPU's BLAS or SIMD loops choose, and a chaotic orbit amplifies the last bit.
-    (Also 5x faster than numpy's reduction over a short middle axis.)"""
+    (Also faster than numpy's reduction over a short middle axis.)"""
     total = weights[0] * x[..., 0, :]
     for i in range(1, len(weights)):
         total = total + weights[i] * x[..., i, :]
@@ -319,7 +319,7 @@ def _planar_forces(y, dy, masses, d, measure, prof, par, n_tan):
     """Three bodies in the plane under one perimetric or areal term (every workflow, most
     of the paper) run code written for them: the general path's operations on the same
     values in the same order, without its loops, zero z components and accumulations (bit
-    for bit the same, 1.8x faster; tests/physics/test_system.py)."""
+    for bit the same, and faster: `bench --only terms`; tests/physics/test_system.py)."""
     if measure == PERIMETER:
         _planar_perimetric(y, dy, masses, prof, (par[0], par[1]), n_tan)
     else:
@@ -474,15 +474,15 @@ def _planar_areal(y, dy, masses, prof, par, n_tan):
 def _leading_forces(y, dy, masses, N, d, measure, prof, lead, n_tan):
     """Velocities, and the forces of the leading perimetric or areal term. The measure is
     chosen outside the triplet loop: one branch per call, not per triplet, keeps the loop
-    body small enough for the compiler (2.6x faster). Compiled on its own, not inlined
+    body small enough for the compiler to keep it tight. Compiled on its own, not inlined
     into `rhs`: one call per evaluation costs nothing measurable, and `rhs` with it inlined
-    took 26 s to compile instead of 11."""
+    took over twice as long to compile."""
     nq = N * d
     n = 2 * nq
     # flat loops over views, whose indices the compiler knows are not negative (an index
     # computed from run-time sizes gets a wrap-around fix-up at every access, and loops of
     # d trips): 1/m of each coordinate first, parked in the orbit's force slots (zeroed
-    # below), then every block's velocities (the same bits; this part 35 -> 20 ns)
+    # below), then every block's velocities (the same bits, in fewer operations)
     inv = dy[nq:n]
     for b in range(N):
         x = 1.0 / masses[b]

@@ -75,8 +75,8 @@ def _client(config: Config, workers, address):
                 yield client
             return
         # One numba thread per worker process, and none of the monitoring meant for interactive
-        # dashboards (a 10 ms stack profiler and 1 ms GIL polling in every worker, a 20 ms
-        # event-loop tick): measured, they cost the workers several percent of two cores. Set
+        # dashboards (a stack profiler and GIL polling in every worker, a fast event-loop
+        # tick): they cost the workers several percent of two cores. Set
         # in the environment before the workers start, which they inherit.
         quiet = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
                  "MKL_NUM_THREADS": "1",
@@ -449,9 +449,9 @@ def _start(stack, config, task, first, starts, workers, address, clock, progress
         f"starting {workers or config.tables['dask']['workers']} local dask workers"
     # A first run: the local workers start first (forked without the kernels, which they
     # then load from the disk cache), so that one compiles everything but the integrator
-    # (warm_beside) while this process compiles the integrator -- the second core idled
-    # for that minute (the default survey: 96-104 -> 64-78 s on 2 cores). Otherwise they
-    # are forked after warm_up, with the kernels loaded.
+    # (warm_beside) while this process compiles the integrator -- else the second core
+    # idles for that minute (`bench --only fixed` times a first run). Otherwise they are
+    # forked after warm_up, with the kernels loaded.
     beside = None
     if not address and not kernels_cached():
         with notice(cluster, progress):
@@ -558,9 +558,8 @@ def _compute(client, task, starts, todo, folder, key, config, bar, round_):
     group = max(1, -(-SIMD_LANES // per_cell))
     retries = config.tables["dask"]["retries"]
     # the archive's imports, in a thread of this process while the workers compute: after
-    # them they added ~0.5 s to a scan whose tasks all end together (the 101-orbit bench
-    # scan's command line: 3.42-3.68 -> 3.22-3.30 s; with its default re-runs, which leave
-    # a core idle before the end, the same within noise)
+    # them they add to a scan whose tasks all end together (`bench --only scan` times the
+    # command line)
     threading.Thread(target=archive.prefetch, name="prefetch", daemon=True).start()
     # a chunk by its first cell: its ids, result rows, extensions pending
     chunks = {int(ids[0]): [ids, None, 0] for ids in _chunks(todo, count)}
