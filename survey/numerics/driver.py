@@ -37,18 +37,21 @@ from typing import NamedTuple
 import numpy as np
 from ..catalog.status import Status
 from ..machine import portable
-from ..machine.jit import helper, lanes, leaf
+from ..machine.jit import helper, leaf
 from ..physics.lanes import SIMD_LANES, SIMD_MIN, rhs_lanes, state_size, workspace_size
 from ..physics.system import rhs
+from .tangents import growth_terms, tangent_norm, tangent_norms
 from .dop853 import (
-    BETA_ROOTS,
+    finite_lanes,
+    spread_steps,
+    step_factors,
+    take_steps,
     EPS,
     ERR_FLOOR_ROOT,
     dense_eval,
     dense_eval_lanes,
     dense_prepare,
     error_norms,
-    norm_block,
     stages,
 )
 from .events import (
@@ -137,7 +140,7 @@ class Lanes(NamedTuple):
     W: np.ndarray             # rhs_lanes workspace
     S: np.ndarray             # (2 (nf + 1) L,) the error norms' scratch
     err: np.ndarray           # (L,) error norms
-    grow: np.ndarray          # (L,) the step's factor if it is accepted (`_step_factors`)
+    grow: np.ndarray          # (L,) the step's factor if it is accepted (`step_factors`)
     err_next: np.ndarray      # (L,) err_old's next value then
     cut: np.ndarray           # (L,) the step's factor if it is rejected
     NW: np.ndarray            # ((2 n_tan + 1) L,) tangent vectors' norms, their logs,
@@ -461,12 +464,12 @@ def _flush(ln, out, masses, d, measure, prof, par, t_fine, rb):
     if c == 0:
         return
     n = w.Y.size // P
-    _spread(w.h, w.HH, P, n)
+    spread_steps(w.h, w.HH, P, n)
     dense_prepare(masses, d, measure, prof, par, P, n, w.Y, w.YN, w.HH, w.K, w.YT, w.F, w.W,
                   rb)
     for p in range(P):
         w.x[p] = (t_fine[w.first[p]] - w.t[p]) / w.h[p] if p < c else 0.0
-    _spread(w.x, w.XX, P, n)
+    spread_steps(w.x, w.XX, P, n)
     dense_eval_lanes(w.F, w.Y, w.XX, n * P, w.S)
     for p in range(c):
         F, y, ynew = w.F[:, p::P], w.Y[p::P], w.YN[p::P]
@@ -486,7 +489,7 @@ def _flush(ln, out, masses, d, measure, prof, par, t_fine, rb):
 def _advance(k, ln, out, t0, t1, n, n_tan, megno, renorm_dt, NW):
     """Lane k after its accepted step (its state already the new one): the time, and its
     tangent vectors' growth (FLI), renormalisation, MEGNO and WBA, from their norms, logs
-    and the step's Birkhoff weight in NW (`_growth_terms`).
+    and the step's Birkhoff weight in NW (`growth_terms`).
     Returns OK_ if the job reached t1, else RUNNING."""
     L = ln.job.size
     j = ln.job[k]
@@ -627,14 +630,14 @@ def _run(ln, out, y0s, rows, model, control, recording, next_job, iterations, no
                 _flush(ln, out, masses, d, measure, prof, par, t_fine, rb)
                 return DONE
             continue
-        _spread(ln.h, ln.HH, L, nf)
+        spread_steps(ln.h, ln.HH, L, nf)
         # ---- one attempt of every lane's step
         stages(masses, d, measure, prof, par, n_tan, L, ln.Y, ln.HH, ln.K, ln.YT, ln.YN,
                ln.W, rb)
         error_norms(ln.Y, ln.YN, ln.K, L, n_err, rtol, atol, ln.h, ln.err, ln.S)
-        _step_factors(ln.err, ln.err_old, L, ln.grow, ln.err_next, ln.cut)
+        step_factors(ln.err, ln.err_old, L, ln.grow, ln.err_next, ln.cut)
         rhs_lanes(0.0, ln.YN, ln.K[12], L, masses, d, measure, prof, par, n_tan, ln.W, rb)
-        _finite_lanes(ln.YN, ln.K[12], L, nf, ln.NW)
+        finite_lanes(ln.YN, ln.K[12], L, nf, ln.NW)
         dense = later = 0
         n = state_size(masses, d, rb)
         for k in range(L):
@@ -681,10 +684,10 @@ def _run(ln, out, y0s, rows, model, control, recording, next_job, iterations, no
                     ln.flags[k, 3] = 0
             ln.taken[k] = -ln.flags[k, 3]
         # ---- accepted lanes take their new states, then their tangent vectors' norms
-        _take(ln.Y, ln.YN, ln.K[0], ln.K[12], ln.taken, L, nf)
-        _tangent_norms(ln.Y, L, n, n_tan, ln.NW, rb)
+        take_steps(ln.Y, ln.YN, ln.K[0], ln.K[12], ln.taken, L, nf)
+        tangent_norms(ln.Y, L, n, n_tan, ln.NW, rb)
         if n_tan > 0:
-            _growth_terms(ln.NW, ln.t, ln.h, ln.flags, t0, t1, L, n_tan)
+            growth_terms(ln.NW, ln.t, ln.h, ln.flags, t0, t1, L, n_tan)
         for k in range(L):
             if not ln.flags[k, 3]:
                 continue
@@ -712,114 +715,9 @@ def _run(ln, out, y0s, rows, model, control, recording, next_job, iterations, no
     return next_job
 
 
-# Work on every lane at once: flat loops over all components of all lanes, which the
-# compiler vectorises, then per-lane sums in the components' order (as one orbit sums).
-
-@lanes
-def _spread(h, HH, L, nf):
-    """Each lane's value h[k] at each of its components."""
-    if L == 1:
-        for i in range(nf):
-            HH[i] = h[0]
-        return
-    for i in range(nf):
-        for k in range(L):
-            HH[i * L + k] = h[k]
-
-
-@lanes
-def _finite_lanes(Y, K, L, nf, out):
-    """out[k]: finite iff every component of lane k in Y and K is (x * 0 is NaN for inf and
-    NaN, and NaN survives the sum)."""
-    if L == 1:                 # one orbit: one loop (a loop per component costs more)
-        s = 0.0
-        for i in range(nf):
-            s += Y[i] * 0.0 + K[i] * 0.0
-        out[0] = s
-        return
-    for k in range(L):
-        out[k] = 0.0
-    for i in range(nf):
-        y, dy = Y[i * L:], K[i * L:]
-        for k in range(L):
-            out[k] += y[k] * 0.0 + dy[k] * 0.0
-
-
-@lanes
-def _step_factors(err, err_old, L, grow, err_next, cut):
-    """The step control of every lane at once, from its error norm err and the last accepted
-    step's err_old: the factor of its step if it is accepted, h 0.9 err^-(1/8 - BETA)
-    err_old^BETA in [1/3, 6] (grow), err_old's next value (err_next), and the factor if it
-    is rejected, 0.9 err^-1/8 but at least 1/3 (cut). Seven chained square roots and two
-    divisions, ~200 cycles of latency for one lane, the same in SIMD for 4; lane by lane
-    inside the bookkeeping they took ~3% of a 16-lane step. Meaningful for finite errors
-    only."""
-    for k in range(L):
-        r8, r128 = portable.root8(max(err[k], 1e-10))
-        fac = 0.9 * r128 / r8 * portable.ipow(err_old[k], BETA_ROOTS)
-        grow[k] = min(6.0, max(1.0 / 3.0, fac))
-        err_next[k] = r128 if err[k] >= 1e-4 else ERR_FLOOR_ROOT
-        cut[k] = max(1.0 / 3.0, 0.9 / r8)
-
-
-@lanes
-def _take(Y, YN, K0, K12, take, L, nf):
-    """Lanes with take[k] = -1 adopt their new state YN and its derivative K12, those with 0
-    keep theirs: a select of the bits under the lane's mask, which runs as SIMD
-    instructions (a store under `if` ran lane by lane, at about twice the cost)."""
-    if L == 1:
-        if take[0] != 0:
-            for i in range(nf):
-                Y[i] = YN[i]
-                K0[i] = K12[i]
-        return
-    y, yn, k0, k12 = Y.view(np.int64), YN.view(np.int64), K0.view(np.int64), K12.view(np.int64)
-    for i in range(nf):
-        # views at each component: see dop853.error_norms
-        a, b, c, e = y[i * L:], yn[i * L:], k0[i * L:], k12[i * L:]
-        for k in range(L):
-            a[k] = (b[k] & take[k]) | (a[k] & ~take[k])
-            c[k] = (e[k] & take[k]) | (c[k] & ~take[k])
-
-
-@lanes
-def _tangent_norms(Y, L, n, n_tan, NW, rb):
-    """NW[t * L + k]: the norm of lane k's tangent vector t, summed in its components' order
-    as `tangent_norm` does."""
-    if L == 1:
-        for t in range(n_tan):
-            NW[t] = tangent_norm(Y, n * (1 + t), n, rb)
-        return
-    for t in range(n_tan):
-        nw = NW[t * L:(t + 1) * L]
-        for k in range(L):
-            nw[k] = 0.0
-        if rb is None:
-            for i in range(n * (1 + t), n * (2 + t)):
-                w = Y[i * L:]
-                for k in range(L):
-                    nw[k] += w[k] * w[k]
-        else:           # positions, then momenta, each followed by the third body's
-            for h in range(2):
-                b = n * (1 + t) + 4 * h
-                for i in range(b, b + 4):
-                    w = Y[i * L:]
-                    for k in range(L):
-                        nw[k] += w[k] * w[k]
-                _rebuilt_squares(Y, L, b, rb if h == 0 else (1.0, 1.0), nw)
-        for k in range(L):
-            nw[k] = math.sqrt(nw[k])
-
-
-@helper
-def _rebuilt_squares(Y, L, i0, c, nw):
-    """Add to nw the squares of the third body's rebuilt components -(c0 a + c1 b) from
-    rows i0, i0 + 1 (body 0) and i0 + 2, i0 + 3 (body 1)."""
-    for r in range(2):
-        a, b = Y[(i0 + r) * L:], Y[(i0 + 2 + r) * L:]
-        for k in range(L):
-            x = portable.fma(c[0], a[k], c[1] * b[k])
-            nw[k] += x * x
+# Per lane: a sample written, one lane's right-hand side, a lane moved to a smaller batch,
+# and what of the dense output an accepted step needs (the loops over every lane at once:
+# dop853's step control, tangents' norms and growth terms).
 
 
 @helper
@@ -842,25 +740,6 @@ def put_sample(sample, src, n_eval, rb):
 
 
 @helper
-def tangent_norm(y, off, n, rb):
-    """|w| of the tangent vector at y[off:off + n]; of a reduced one (rb: the mass ratios)
-    with the third body's rebuilt deviations, in the full vector's order: the norm FTLE,
-    MEGNO and FLI measure whatever the state's form."""
-    if rb is None:
-        return norm_block(y, off, n)
-    s = 0.0
-    for h in range(2):                      # positions, then momenta
-        b = off + 4 * h
-        c = rb if h == 0 else (1.0, 1.0)
-        for i in range(b, b + 4):
-            s += y[i] * y[i]
-        for r in range(2):
-            x = portable.fma(c[0], y[b + r], c[1] * y[b + 2 + r])
-            s += x * x
-    return math.sqrt(s)
-
-
-@helper
 def _rhs_one(t, y, dy, masses, d, measure, prof, par, n_tan, W, rb):
     """The right-hand side at one state: `rhs`, or for a reduced state its lane loops at
     L = 1 (W: their workspace). The 1 is given as an int64: a literal one is a type of its
@@ -869,22 +748,6 @@ def _rhs_one(t, y, dy, masses, d, measure, prof, par, n_tan, W, rb):
         rhs(t, y, dy, masses, d, measure, prof, par, n_tan)
     else:
         rhs_lanes(t, y, dy, np.int64(1), masses, d, measure, prof, par, n_tan, W, rb)
-
-
-@lanes
-def _growth_terms(NW, t, h, flags, t0, t1, L, n_tan):
-    """From the tangent vectors' norms NW[:n_tan L], what `_advance` needs of every lane at
-    once: their logs (NW[n_tan L:2 n_tan L]) and each step's weight in the weighted
-    Birkhoff average (NW[2 n_tan L:]): a log and an exp series per lane and step, in loops
-    over the lanes that run as SIMD instructions (inside each lane's bookkeeping, one lane
-    after another, their latency chains took ~8% of a 16-lane step)."""
-    norms, logs, weights = NW[:n_tan * L], NW[n_tan * L:2 * n_tan * L], NW[2 * n_tan * L:]
-    for i in range(n_tan * L):          # views: see dop853.error_norms
-        logs[i] = portable.log(norms[i])
-    for k in range(L):
-        t_new = t1 if flags[k, 2] == 1 else t[k] + h[k]
-        x = (0.5 * (t[k] + t_new) - t0) / (t1 - t0)
-        weights[k] = portable.exp(-1.0 / (x * (1.0 - x))) if 0.0 < x < 1.0 else 0.0
 
 
 @leaf
