@@ -38,7 +38,8 @@ from ..physics.equilibria import (
 from ..physics.system import System
 from .build import build_system
 from .cells import build_starts
-from .config import Key, _decode, check_table, read_toml, validate
+from .config import _decode, check_table, read_toml, validate
+from .schema import Key
 from .resources import ensure_writable
 
 FAMILY = {      # a family's end, for [equilibria] and [periodic] with a parameter
