@@ -14,6 +14,39 @@ from ..machine import portable
 from ..machine.jit import helper, lanes, leaf
 from .terms import BARRIER, LENNARD_JONES, PERIMETER, POWER
 
+# The perimetric and areal forces exist in one reference and hand-specialised copies, each
+# for speed on the paths that run most; every copy is held to what it specialises, bit for
+# bit, by the test named (tests/physics/test_system.py; the reduced states to roundoff).
+# The reference: perimetric_forces and areal_forces here, one triplet of any bodies in any
+# dimension with its tangent vectors, which system._leading_forces runs over the triplets.
+# (copy, what it specialises, the test holding it there)
+SPECIALISED = (
+    ("physics.system._planar_perimetric", "physics.system._leading_forces",
+     "test_the_planar_path_gives_the_general_n_body_path_bit_for_bit"),
+    ("physics.system._planar_areal", "physics.system._leading_forces",
+     "test_the_planar_path_gives_the_general_n_body_path_bit_for_bit"),
+    ("physics.lanes._perimetric_orbits", "physics.system.rhs",
+     "test_the_simd_lanes_give_the_general_path_bit_for_bit"),
+    ("physics.lanes._perimetric_tangent", "physics.system.rhs",
+     "test_the_simd_lanes_give_the_general_path_bit_for_bit"),
+    ("physics.lanes._areal_orbits", "physics.system.rhs",
+     "test_the_simd_lanes_give_the_general_path_bit_for_bit"),
+    ("physics.lanes._areal_tangent", "physics.system.rhs",
+     "test_the_simd_lanes_give_the_general_path_bit_for_bit"),
+    ("physics.forces.perimetric_lanes", "physics.system.rhs",
+     "test_other_systems_in_lanes_give_the_same_bits"),
+    ("physics.forces.perimetric_tangent_lanes", "physics.system.rhs",
+     "test_other_systems_in_lanes_give_the_same_bits"),
+    ("physics.forces.areal_lanes", "physics.system.rhs",
+     "test_other_systems_in_lanes_give_the_same_bits"),
+    ("physics.forces.areal_force_lanes", "physics.system.rhs",
+     "test_other_systems_in_lanes_give_the_same_bits"),
+    ("physics.forces.areal_tangent_lanes", "physics.system.rhs",
+     "test_other_systems_in_lanes_give_the_same_bits"),
+    ("physics.lanes._perimetric_orbits (reduced states)", "physics.system.rhs",
+     "test_a_reduced_state_has_the_full_states_rates_to_roundoff"),
+)
+
 
 @helper
 def vec(a, off, d):

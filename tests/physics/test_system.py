@@ -126,3 +126,36 @@ def test_a_reduced_state_has_the_full_states_rates_to_roundoff(term, shift):
         scale = np.abs(rates[0]).max()
         assert np.all(np.isfinite(rates[1]))
         assert np.abs(rates[0][:, kept] - rates[1]).max() <= 1e-14 * scale, (L, n_tan)
+
+
+def test_every_specialised_copy_of_the_forces_is_named_with_its_test():
+    """physics.forces.SPECIALISED names every hand-specialised copy of the perimetric and
+    areal forces, what it specialises and the test of this file that holds it there: each
+    name must exist and each test must be here; and every compiled function of the physics
+    layer named for these forces is the reference, a listed copy, or a part of one (a new
+    copy left out of the table fails here)."""
+    import importlib
+
+    from survey.physics import forces, lanes, system
+    here = {name for name in globals() if name.startswith("test_")}
+    listed = set()
+    for copy, reference, test in forces.SPECIALISED:
+        for dotted in (copy.split(" ")[0], reference):
+            module, name = dotted.rsplit(".", 1)
+            assert hasattr(importlib.import_module(f"survey.{module}"), name), dotted
+        assert test in here, test
+        listed.add(copy.split(" ")[0])
+    reference = {"physics.forces.perimetric_forces", "physics.forces.areal_forces"}
+    parts = {   # pieces of the reference or of a listed copy, held by the same tests
+        "physics.forces._perimetric_sides", "physics.forces._perimetric_tangent",
+        "physics.forces._areal_vector", "physics.forces._areal_gradients",
+        "physics.forces._areal_tangent", "physics.lanes._perimetric_lane",
+        "physics.lanes._areal_lane", "physics.lanes._areal_sides"}
+    for module in (forces, lanes, system):
+        for name, value in vars(module).items():
+            func = getattr(value, "py_func", None)
+            if func is None or func.__module__ != module.__name__ or not (
+                    "perimetric" in name or "areal" in name):
+                continue
+            dotted = f"{module.__name__.removeprefix('survey.')}.{name}"
+            assert dotted in listed | reference | parts, f"{dotted} is not in SPECIALISED"
