@@ -189,7 +189,7 @@ def cis(x):
     """(cos x, sin x), the bits of `cos` and `sin`, as a call: where a kernel takes them a
     few times per call rather than in a SIMD loop, inlining both series at every use made
     its compilation several times longer (the torus analysis's `_take_from_spectrum`,
-    `_phases` and `_window`: ~7 s in every worker on a first run, 1.5 s so)."""
+    `_phases` and `_window`, in every worker on a first run)."""
     return cos(x), sin(x)
 
 

@@ -29,8 +29,6 @@ is then built in SIMD loops over the batch, not over every lane at every round.
 from __future__ import annotations
 
 import math
-import mmap
-import threading
 import time
 from typing import NamedTuple
 
@@ -38,8 +36,9 @@ import numpy as np
 from ..catalog.status import Status
 from ..machine import portable
 from ..machine.jit import helper, leaf
-from ..physics.lanes import SIMD_LANES, SIMD_MIN, rhs_lanes, state_size, workspace_size
+from ..physics.lanes import SIMD_MIN, rhs_lanes, state_size
 from ..physics.system import rhs
+from .lanestate import RawOutcome, lane_state, reused_samples
 from .tangents import growth_terms, tangent_norm, tangent_norms
 from .dop853 import (
     finite_lanes,
@@ -74,100 +73,6 @@ DENSE_LATER, DENSE_ORBIT, DENSE_ALL = 1, 2, 3
 # what a job records besides its end state: crossings of the watched events, samples at
 # t_eval, orbit samples at t_fine
 EVENTS, EVAL, FINE = 1, 2, 4
-
-
-class RawOutcome(NamedTuple):
-    """What the compiled driver returns, one row per job (`integrate_batch` turns it into
-    Outcomes). Rows of the event, sample and fine arrays belong to the jobs that record
-    them, in job order."""
-
-    status: np.ndarray        # (M,)
-    t: np.ndarray             # (M,) time reached
-    y: np.ndarray             # (M, nf) full state at t
-    counts: np.ndarray        # (M, 4) accepted steps, rejected, rhs evaluations, events found
-    h_range: np.ndarray       # (M, 2) smallest and largest accepted step
-    ev_index: np.ndarray      # (Me, max_events) recorded crossings: event, time, orbit state
-    ev_t: np.ndarray
-    ev_y: np.ndarray
-    samples: np.ndarray       # (Ms, T, n_eval) states at t_eval
-    sample_log: np.ndarray    # (Ms, T, n_tan) accumulated log growth at t_eval
-    log_growth: np.ndarray    # (M, n_tan) accumulated log growth at t (vectors rescaled)
-    max_log: np.ndarray       # (M, n_tan) largest ln(|w|/|w0|) at step ends (the FLI)
-    fine: np.ndarray          # (Mf, Tf, n) orbit states at t_fine
-    wba: np.ndarray           # (M, 2) (sum of g dL, sum of g dt) over the steps, first
-    #                           vector: their ratio is the weighted Birkhoff average of the
-    #                           growth rate (g(s) = exp(-1/(s(1-s))) at the step's mid-time
-    #                           s; Sander & Meiss 2025)
-    megno_sums: np.ndarray    # (M, 2) (s L - int L, int Y) at t: ratios to s are Y/2, <Y>
-    sample_megno: np.ndarray  # (Ms, T, 2) the same at t_eval
-
-
-class Deferred(NamedTuple):
-    """Accepted steps whose orbit samples at t_fine wait for their dense output: P slots,
-    variable-major like Lanes over the orbit's n components (slot p of component i at
-    Y[i * P + p]), each with what `dense_prepare` reads -- the states at the step's ends and
-    stages 1 and 6-13 -- and which samples it holds."""
-
-    Y: np.ndarray             # (n P,) state at the step's start
-    YN: np.ndarray            # (n P,) at its end
-    K: np.ndarray             # (16, n P) stages (14-16 computed when the batch is built)
-    F: np.ndarray             # (7, n P) dense-output coefficients
-    HH: np.ndarray            # (n P,) each slot's step at each of its components
-    YT: np.ndarray            # (n P,) stage states
-    W: np.ndarray             # rhs_lanes workspace
-    x: np.ndarray             # (P,) each slot's first sample time in units of its step
-    XX: np.ndarray            # (n P,) the same at each of its components
-    S: np.ndarray             # (n P,) the states there
-    t: np.ndarray             # (P,) the step's start, size, end
-    h: np.ndarray
-    t_new: np.ndarray
-    row: np.ndarray           # (P,) the job's row of the fine output
-    first: np.ndarray         # (P,) its samples first .. end - 1
-    end: np.ndarray
-    count: np.ndarray         # (1,) slots filled
-
-
-class Lanes(NamedTuple):
-    """The driver's per-lane state: variable-major buffers of L orbits, and one entry (or
-    row) per lane of every scalar the one-orbit driver keeps."""
-
-    Y: np.ndarray             # (nf L,) states
-    K: np.ndarray             # (16, nf L) stage derivatives
-    YT: np.ndarray            # (nf L,) stage states
-    YN: np.ndarray            # (nf L,) candidate states
-    F: np.ndarray             # (7, nf L) dense-output coefficients
-    HH: np.ndarray            # (nf L,) each lane's step at each of its components
-    W: np.ndarray             # rhs_lanes workspace
-    S: np.ndarray             # (2 (nf + 1) L,) the error norms' scratch
-    err: np.ndarray           # (L,) error norms
-    grow: np.ndarray          # (L,) the step's factor if it is accepted (`step_factors`)
-    err_next: np.ndarray      # (L,) err_old's next value then
-    cut: np.ndarray           # (L,) the step's factor if it is rejected
-    NW: np.ndarray            # ((2 n_tan + 1) L,) tangent vectors' norms, their logs,
-                              # the steps' Birkhoff weights; (L,) finiteness
-    taken: np.ndarray         # (L,) int64 -1 (every bit set) where the lane takes its new
-                              # state, 0 where it keeps its old one
-    job: np.ndarray           # (L,) the job a lane runs, -1: idle
-    t: np.ndarray
-    h: np.ndarray
-    h_max: np.ndarray
-    err_old: np.ndarray       # (L,) max(err, 1e-4)^(1/128) of the last accepted step
-    flags: np.ndarray         # (L, 4) rejected last, nonfinite last, last step, tried
-    i_eval: np.ndarray        # (L,) next t_eval / t_fine sample
-    i_fine: np.ndarray
-    t_next_renorm: np.ndarray
-    acc: np.ndarray           # (L, 4) MEGNO: L at the last step end, int L, Y; clock start
-    g_old: np.ndarray         # (L, m) watched events at the last step end, and slopes
-    s_old: np.ndarray
-    g_new: np.ndarray         # (L, m) the same at the accepted step's end (`_screen`)
-    s_new: np.ndarray
-    todo: np.ndarray          # (L, m) may_cross of each: the events the step scans
-    found_x: np.ndarray
-    found_e: np.ndarray
-    yd: np.ndarray            # (nf,) scratch of one lane
-    y1: np.ndarray            # (nf,) contiguous copy of one lane (starts)
-    k1: np.ndarray            # (2, nf)
-    wait: Deferred
 
 
 @helper
@@ -723,9 +628,9 @@ def _run(ln, out, y0s, rows, model, control, recording, next_job, iterations, no
 @helper
 def put_sample(sample, src, n_eval, rb):
     """A sample of the state src (n_eval components): as it is, or a reduced one (rb: the
-    mass ratios) in full blocks of 12, the third body rebuilt as `integrate.Frame.full` rebuilds it
-    (the centre of mass's motion is added afterwards, `_com_added`): rebuilt in a second
-    array, the samples' fresh memory cost a sampled scan task 0.5 s."""
+    mass ratios) in full blocks of 12, the third body rebuilt as `integrate.Frame.full`
+    rebuilds it (the centre of mass's motion is added afterwards, `_com_added`): rebuilt in
+    a second array, the samples' fresh memory cost a sampled scan task dearly."""
     if rb is None:
         for i in range(n_eval):
             sample[i] = src[i]
@@ -743,7 +648,8 @@ def put_sample(sample, src, n_eval, rb):
 def _rhs_one(t, y, dy, masses, d, measure, prof, par, n_tan, W, rb):
     """The right-hand side at one state: `rhs`, or for a reduced state its lane loops at
     L = 1 (W: their workspace). The 1 is given as an int64: a literal one is a type of its
-    own, and compiled a second copy of the lanes' right-hand sides (~7 s of a first run)."""
+    own, and compiled a second copy of the lanes' right-hand sides (seconds of a first
+    run)."""
     if rb is None:
         rhs(t, y, dy, masses, d, measure, prof, par, n_tan)
     else:
@@ -822,82 +728,11 @@ def _needs_dense(k, ln, rows, t1, direction, events, t_eval, t_fine, tangent_sam
     return need
 
 
-CACHE_LINE = 64
-
-
-def _zeros(shape, dtype=np.float64) -> np.ndarray:
-    """np.zeros starting on a cache line (numpy's own start on 16 bytes): a lane row of
-    the SIMD loops -- a multiple of 64 bytes -- is then never split across two lines, nor a
-    vector load or store within it. numpy's start varies with the process's heap, and so
-    did the speed: a 51-orbit scan task to t = 1000 ran 1.02-1.05 s (best of 3, in each of
-    5 processes) against 1.05-1.21 s with numpy's arrays, and to t = 500, interleaved with
-    them in 10 processes each, 0.06 s (10%) faster on average; once, in a profile, a load
-    in the tangent forces made a whole run a third slower."""
-    size = int(np.prod(shape)) * np.dtype(dtype).itemsize
-    raw = np.zeros(size + CACHE_LINE, dtype=np.uint8)
-    start = -raw.ctypes.data % CACHE_LINE
-    return raw[start:start + size].view(dtype).reshape(shape)
-
-
-def _lanes(L, n, nf, n_tan, m, n_sub) -> Lanes:
-    """A driver's state for L lanes of orbits of n components with n_tan tangent vectors
-    each (nf in all), m watched events scanned in n_sub parts of a step."""
-    m1 = max(m, 1)
-    return Lanes(
-        Y=_zeros(nf * L), K=_zeros((16, nf * L)), YT=_zeros(nf * L), YN=_zeros(nf * L),
-        F=_zeros((7, nf * L)), HH=_zeros(nf * L), W=_zeros(workspace_size(L, nf)),
-        S=_zeros(2 * (nf + 1) * L),
-        err=_zeros(L), grow=_zeros(L), err_next=_zeros(L), cut=_zeros(L),
-        NW=_zeros((2 * n_tan + 1) * L), taken=_zeros(L, dtype=np.int64),
-        job=np.full(L, -1, dtype=np.int64), t=_zeros(L), h=_zeros(L), h_max=_zeros(L),
-        err_old=_zeros(L), flags=_zeros((L, 4), dtype=np.int64),
-        i_eval=_zeros(L, dtype=np.int64), i_fine=_zeros(L, dtype=np.int64),
-        t_next_renorm=_zeros(L), acc=_zeros((L, 4)),
-        g_old=_zeros((L, m1)), s_old=_zeros((L, m1)), g_new=_zeros((L, m1)),
-        s_new=_zeros((L, m1)), todo=_zeros((L, m1), dtype=np.int64),
-        found_x=_zeros(max(1, m * n_sub)), found_e=_zeros(max(1, m * n_sub), dtype=np.int64),
-        yd=_zeros(nf), y1=_zeros(nf), k1=_zeros((2, nf)),
-        wait=_deferred(2 * max(L, SIMD_LANES), n))
-
-
-def _deferred(P, n) -> Deferred:
-    return Deferred(
-        Y=_zeros(n * P), YN=_zeros(n * P), K=_zeros((16, n * P)), F=_zeros((7, n * P)),
-        HH=_zeros(n * P), YT=_zeros(n * P), W=_zeros(workspace_size(P, n)),
-        x=_zeros(P), XX=_zeros(n * P), S=_zeros(n * P), t=_zeros(P), h=_zeros(P),
-        t_new=_zeros(P), row=_zeros(P, dtype=np.int64), first=_zeros(P, dtype=np.int64),
-        end=_zeros(P, dtype=np.int64), count=_zeros(1, dtype=np.int64))
-
-
-_samples = threading.local()
-
-
-def _reused(shape) -> np.ndarray:
-    """A NaN-filled array of `shape` in this thread's buffer of orbit samples, kept for its
-    next batch and grown as needed. A task's torus analysis samples ~100 MB: a fresh array
-    faults that memory in at every task, in the huge pages numpy asks for, which cost
-    0.01-0.2 s by the state of the machine's memory (a 51-orbit task of the bench scan
-    integrated in 0.87-1.07 s, mean 0.95, against 0.86-1.03, mean 0.90, reused; twelve
-    runs each). Anonymous private memory, in the kernel's default pages."""
-    size = int(np.prod(shape))
-    if size == 0:
-        return np.zeros(shape)
-    buf = getattr(_samples, "buf", None)
-    if buf is None or buf.size < size:
-        _samples.buf = None             # the old buffer freed before the new one is made
-        flags = mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS
-        buf = _samples.buf = np.frombuffer(mmap.mmap(-1, size * 8, flags=flags),
-                                           dtype=np.float64)
-    out = buf[:size].reshape(shape)
-    out.fill(np.nan)
-    return out
-
-
 def compile_handoff():
     """Compile (or load) `_adopt`, the move of a lane to a batch of fewer, which a survey
     first calls in its first real task (warm_up's short run ends before any): its types
     are those of every Lanes, whatever the sizes (cells.warm_beside)."""
-    _adopt(_lanes(1, 2, 2, 0, 0, 1), 0, _lanes(2, 2, 2, 0, 0, 1), 0)
+    _adopt(lane_state(1, 2, 2, 0, 0, 1), 0, lane_state(2, 2, 2, 0, 0, 1), 0)
 
 
 def dop853(y0s, rows, model: Model, control: Control, recording: Recording, L: int, rb,
@@ -916,7 +751,7 @@ def dop853(y0s, rows, model: Model, control: Control, recording: Recording, L: i
     unit norm every renorm_dt (<= 0: every step), their logs accumulated in log_growth,
     which starts at -ln|w(t0)|. time_limit: wall-clock seconds per job (0: none). rb: None
     for full states, or the mass ratios m0/m2, m1/m2 of reduced ones (`integrate.Frame`).
-    reuse_samples: the t_fine samples go into this thread's reused buffer (`_reused`).
+    reuse_samples: the t_fine samples go into this thread's reused buffer (`reused_samples`).
 
     MEGNO (if megno, for the first tangent vector; Cincotta & Simo 2000): with
     L(t) = ln(|w(t)|/|w0|) and s = t - t0, Y(s) = (2/s) int_0^s u dL(u) and <Y> =
@@ -949,7 +784,7 @@ def dop853(y0s, rows, model: Model, control: Control, recording: Recording, L: i
         samples=np.full((Ms, T, n_eval // n * nfull), np.nan),
         sample_log=np.full((Ms, T, n_tan), np.nan), log_growth=np.zeros((M, n_tan)),
         max_log=np.zeros((M, n_tan)),
-        fine=_reused((Mf, Tf, nfull)) if reuse_samples else np.full((Mf, Tf, nfull), np.nan),
+        fine=reused_samples((Mf, Tf, nfull)) if reuse_samples else np.full((Mf, Tf, nfull), np.nan),
         wba=np.zeros((M, 2)), megno_sums=np.zeros((M, 2)),
         sample_megno=np.full((Ms, T, 2), np.nan))
 
@@ -965,16 +800,16 @@ def dop853(y0s, rows, model: Model, control: Control, recording: Recording, L: i
     # The SIMD loops cost all L lanes whether they run a job or not: once every job has
     # started and at most half the lanes run one (their lengths differ 2x and more), those
     # go on in half as many lanes, down to SIMD_MIN, where the last one goes on alone.
-    ln, next_job = _lanes(L, n, nf, n_tan, m, n_sub), 0
+    ln, next_job = lane_state(L, n, nf, n_tan, m, n_sub), 0
     while drive(ln, next_job) == HANDOFF:
         next_job, running = M, np.flatnonzero(ln.job >= 0)
         if ln.job.size // 2 >= SIMD_MIN:
-            fewer = _lanes(ln.job.size // 2, n, nf, n_tan, m, n_sub)
+            fewer = lane_state(ln.job.size // 2, n, nf, n_tan, m, n_sub)
             for slot, k in enumerate(running):
                 _adopt(fewer, slot, ln, k)
             ln = fewer
             continue
-        one, handed = _lanes(1, n, nf, n_tan, m, n_sub), time.perf_counter()
+        one, handed = lane_state(1, n, nf, n_tan, m, n_sub), time.perf_counter()
         for k in running:
             _adopt(one, 0, ln, k)
             if time_limit > 0.0:    # a job's budget does not run while it waits its turn

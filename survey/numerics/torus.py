@@ -215,7 +215,7 @@ def naff(z: np.ndarray, count: int):
     the FFT peak by Newton steps on the exact derivatives, then subtracted from the signal.
 
     Written here rather than taken from nafflib: nafflib compiles its numba kernels in every
-    process with no disk cache (about 1 s per dask worker and survey, more than the whole
+    process with no disk cache (in every dask worker and survey, more than the whole
     analysis of a short survey), and its sums round by the CPU; the tests check this one
     against it."""
     N = np.size(z)

@@ -117,8 +117,8 @@ def lennard_jones(eps, sigma, x):
 def profile(code, par, x):
     """U(x), U'(x), U''(x) of a profile. The algebraic ones are written in place, those
     with exp, log or a real power are a call: inlined at each of their call sites they
-    made the kernels' code several times larger (a first survey compiled 90 s, 69 s so;
-    `rhs` alone 12.1 s, 4.1 s) for profiles the paper's systems do not use."""
+    made the kernels' code several times larger (and `rhs` three times slower to compile)
+    for profiles the paper's systems do not use."""
     if code == POWER and par[1] == 2.0:
         return power_2(par[0], x)
     if code == BARRIER:

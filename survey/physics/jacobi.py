@@ -162,7 +162,7 @@ def reduced_potential(system: System, sigma, eta, phi):
 @kernel
 def _profile_values(code, par, x, out):
     """out[i] = U(x[i]) of a profile, compiled: a section's starts evaluate it on grids of
-    ~10^4 shapes (one value at a time from Python, 240 seeded starts took 30 s)."""
+    ~10^4 shapes (one value at a time from Python, seeded starts took seconds each)."""
     for i in range(x.size):
         out[i] = profile(code, par, x[i])[0]
 

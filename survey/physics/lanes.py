@@ -92,7 +92,7 @@ def _full_lanes(t, Y, dY, L, masses, d, measure, prof, par, n_tan, W, rb):
     """`rhs_lanes` of full states (rb is None). rb is passed on, not a literal None: where
     rb is a tuple, numba still types this branch that never runs, and a literal None
     compiled a full-state copy of the lanes' right-hand sides into every reduced batch's
-    kernels (~3-5 s of a first run)."""
+    kernels (seconds of a first run)."""
     if L >= SIMD_MIN and masses.size == 3 and d == 2 and par.ndim == 1 and (
             measure == PERIMETER or measure == AREA):
         _planar_lanes(Y, dY, L, W, masses, measure, prof, par, n_tan, rb)

@@ -236,7 +236,7 @@ def _encode(terms, N: int, d: int) -> np.ndarray:
     then one row (measure, profile, weighted, p0, p1) per further term, weighted 1 for a
     pair term multiplied by m_i m_j. The kernels are compiled separately for the two array
     types, so the paper's systems run -- and a first run compiles -- code in which neither
-    the general N-body path nor the further terms exist (a cold start 10 s shorter)."""
+    the general N-body path nor the further terms exist (a shorter cold start)."""
     lead = terms[0] if terms[0].measure in (PERIMETER, AREA) else None
     if lead is not None and len(terms) == 1 and N == 3 and d == 2:
         return lead.par

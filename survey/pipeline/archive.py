@@ -264,8 +264,8 @@ def grid_dims(config) -> tuple[str, ...]:
 
 def prefetch():
     """Import what writing an archive needs (xarray, netCDF4, and the dask.array that
-    xarray loads on its first Variable): 0.5 s of a fresh process, spent here in a thread
-    while the workers compute rather than after them."""
+    xarray loads on its first Variable): a noticeable part of a fresh process, spent here
+    in a thread while the workers compute rather than after them."""
     import netCDF4  # noqa: F401
     import xarray as xr
     xr.Variable(("x",), np.zeros(1))

@@ -87,11 +87,11 @@ def _client(config: Config, workers, address):
                  "DASK_DISTRIBUTED__WORKER__MEMORY__MONITOR_INTERVAL": "1s"}
         # The first workers are forked from this process, with its modules imported and its
         # kernels loaded (warm_up ran here first; on a first run they are forked before it
-        # and load them from the disk cache, see _start): the cluster starts in 0.5 s
-        # instead of 1.4 s, which spawned workers spend importing numpy, numba, dask and
-        # survey again. Forked while this process only waits for them; a worker restarted
-        # later (one that died) is spawned, as this process then runs threads whose locks a
-        # fork would copy held.
+        # and load them from the disk cache, see _start): the cluster starts in a third of
+        # the time spawned workers spend importing numpy, numba, dask and survey again.
+        # Forked while this process only waits for them; a worker restarted later (one that
+        # died) is spawned, as this process then runs threads whose locks a fork would copy
+        # held.
         fork = "fork" in multiprocessing.get_all_start_methods()
         quiet["DASK_DISTRIBUTED__WORKER__MULTIPROCESSING_METHOD"] = "fork" if fork else "spawn"
         os.environ.update(quiet)
