@@ -19,7 +19,7 @@ from survey.pipeline import orbits
 from survey.pipeline.special import special_table
 from survey.pipeline.config import _to_toml, load_config
 from survey.pipeline.sweep import run_survey
-from survey.presentation import orbit_plots, plots, report
+from survey.presentation import orbit_plots, plots, report, sections
 
 ROOT = Path(__file__).parents[2]
 
@@ -475,13 +475,13 @@ def test_a_slice_grid_draws_only_the_crossings_in_its_slab(tmp_path):
     assert slice_at == {"eta": 3.0, "p_eta": 0.0}
     figs = plots.figures(ds, slice_at=slice_at)
     ax = figs["map_megno_section"].axes[0]
-    keep, _ = plots._slice_slab(ds, slice_at)
+    keep, _ = sections.slice_slab(ds, slice_at)
     total = int(np.isfinite(ds.crossing_sigma.values).sum())
     assert 0 < keep.sum() < total
     assert len(ax.collections[-1].get_offsets()) == keep.sum()
     for q, q0 in (("eta", 3.0), ("p_eta", 0.0)):
         values = ds[f"crossing_{q}"].values.ravel()
-        width = plots.SLAB * (np.nanmax(values) - np.nanmin(values))
+        width = sections.SLAB * (np.nanmax(values) - np.nanmin(values))
         assert np.all(np.abs(values[keep] - q0) <= width)
     assert "the grid is a 2-D slice of the 4-D section" in ax.get_xlabel()
     assert f"{int(keep.sum())} of {total})" in ax.get_xlabel().replace("\n", " ")
@@ -510,7 +510,7 @@ def test_one_shell_is_drawn_as_3d_slices_and_a_projection_coloured_by_the_fourth
     views = [a for a in fig.axes if a.name == "3d"]
     assert len(views) == 3
     p_eta = ds.crossing_p_eta.values
-    width = plots.SLAB * (np.nanmax(p_eta) - np.nanmin(p_eta))
+    width = sections.SLAB * (np.nanmax(p_eta) - np.nanmin(p_eta))
     inside = np.abs(p_eta) <= width
     total = int(np.isfinite(p_eta).sum())
     assert 0 < inside.sum() < total
@@ -616,12 +616,12 @@ def test_a_section_panel_of_one_point_is_drawn_as_a_point():
     ax = Figure().subplots()
     xs, ys = 3.4641016 + 1e-14 * rng.normal(size=(1, 50)), 1e-14 * rng.normal(size=(1, 50))
     ax.scatter(xs, ys)
-    plots._one_point(ax, xs, ys)
+    sections._one_point(ax, xs, ys)
     assert np.diff(ax.get_xlim())[0] == pytest.approx(1.0)
     assert "every crossing within" in ax.texts[0].get_text()
     ax = Figure().subplots()
     ax.scatter(xs + 0.1 * rng.normal(size=xs.shape), ys)
-    plots._one_point(ax, xs + 0.1 * rng.normal(size=xs.shape), ys)
+    sections._one_point(ax, xs + 0.1 * rng.normal(size=xs.shape), ys)
     assert not ax.texts and np.diff(ax.get_xlim())[0] < 1.0
 
 
