@@ -338,7 +338,7 @@ def _survey(config, command, summary=False, write_report=True, **kw) -> Path:
     checks = {}
     for variant, second in config.checks().items():
         print("checking: the same survey with " + defaults.check_change(
-            variant, second.tables["indicators"], second.tables["integration"]))
+            variant, vars(second.settings.indicators), vars(second.settings.integration)))
         checks[variant] = run_survey(second, command=f"{command} [check] {variant}", **kw)
         if summary:
             print(f"wrote {checks[variant]}")

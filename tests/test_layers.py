@@ -217,3 +217,22 @@ def test_archive_variables_are_named_through_the_catalog(tmp_path):
     assert named_variables(PACKAGE) == []
     (tmp_path / "plots.py").write_text('def f(ds):\n    """ftle"""\n    return ds["ftle"]\n')
     assert named_variables(tmp_path) == ["plots.py:3: 'ftle'"]
+
+
+def test_config_tables_are_read_through_typed_records_outside_the_config_module():
+    """Code outside pipeline/config.py reads the validated config through its typed records
+    (config.settings.integration.rtol: pipeline.records, generated from the schema), never
+    `config.tables[...]`, so a reader and a tool can follow a key from the TOML to its use;
+    and records.py is what the schema generates."""
+    from survey.pipeline.schema import records_source
+    found = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        if path.relative_to(PACKAGE).as_posix() == "pipeline/config.py":
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Subscript) and isinstance(node.value, ast.Attribute) \
+                    and node.value.attr == "tables":
+                found.append(f"{path.relative_to(PACKAGE)}:{node.lineno}")
+    assert found == [], found
+    assert (PACKAGE / "pipeline" / "records.py").read_text() == records_source(), \
+        "pipeline/records.py is stale: python -m survey.pipeline.schema regenerates it"

@@ -365,7 +365,7 @@ def _torus_parts(cfg, repeats) -> dict:
         runs[analyse] = (task, ids, starts)
     task, _, starts = runs[True]
     system = config.system()
-    T, dt = config.tables["integration"]["t_final"], task.tori["sample_interval"]
+    T, dt = config.settings.integration.t_final, task.tori.sample_interval
     outs = integrate_batch(system, starts, T, t_fine=(np.arange(int(T / dt)) + 0.5) * dt)
     errors = [abs(system.energy(o.y) / system.energy(y0) - 1.0) for o, y0 in zip(outs, starts)]
 

@@ -55,8 +55,8 @@ class Indicator:
     def computed_in(self, config) -> bool:
         """Whether a survey config computes it."""
         if self.source == TANGENT:
-            return self.name in config.tables["indicators"]["which"]
-        return bool(config.tables["tori"]["analyse"])
+            return self.name in config.settings.indicators.which
+        return bool(config.settings.tori.analyse)
 
 
 REGISTRY = (

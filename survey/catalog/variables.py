@@ -93,17 +93,17 @@ class Var:
 
 
 def _section(c):
-    return c.tables["section_enabled"]
+    return c.settings.section_enabled
 
 
 def _decided(c):
     """Whether a config's cells carry evidence to decide their regime by."""
-    return bool(c.tables["indicators"]["which"]) or bool(c.tables["tori"]["analyse"])
+    return bool(c.settings.indicators.which) or bool(c.settings.tori.analyse)
 
 
 def _planar3(c):
-    s = c.tables["system"]
-    return s["bodies"] == 3 and s["dim"] == 2
+    s = c.settings.system
+    return s.bodies == 3 and s.dim == 2
 
 
 def _measured(name, long_name, value=None, dtype="f8", extra=(), symbol=""):
@@ -206,7 +206,7 @@ VARIABLES = [
     Var("frequency_labelled", "the fundamental frequencies of the regular cells, the shape "
                               "frequencies ordered to continue their grid neighbours' (one "
                               "column follows one frequency through the grid)", None, ALL,
-        extra=("fundamental",), derived=True, when=lambda c: c.tables["tori"]["analyse"]),
+        extra=("fundamental",), derived=True, when=lambda c: c.settings.tori.analyse),
     _measured("frequency_change", "change of each fundamental frequency from the first half "
                                   "of the orbit to the second",
               lambda r: r.tori.frequencies.change, extra=("fundamental",)),
@@ -238,7 +238,7 @@ VARIABLES = [
     *[_reduced_crossing(q) for q in ("sigma", "p_sigma", "eta", "p_eta", "phi", "p_phi")],
     Var("crossing_state", "phase-space state at each kept section crossing",
         lambda r: r.crossing_state, extra=("crossing", "component"),
-        when=lambda c: _section(c) and c.tables["section"]["store_state"]),
+        when=lambda c: _section(c) and c.settings.section.store_state),
     _history("ftle", "FTLE"),
     _history("megno", "<Y>"),
     _history("fli", "FLI"),

@@ -46,7 +46,7 @@ def variables(config) -> list[Var]:
     for v in VARIABLES:
         if not v.when(config) or v.name in axes:
             continue
-        if v.name == V.angular_momentum and config.tables["system"]["dim"] == 3:
+        if v.name == V.angular_momentum and config.settings.system.dim == 3:
             v = replace(v, long_name="total angular momentum at t = 0", extra=("spatial",))
         out.append(v)
     return out
@@ -54,17 +54,16 @@ def variables(config) -> list[Var]:
 
 def cell_shape(config, v: Var) -> tuple[int, ...]:
     """The shape of one cell's value of v (its own dimensions' sizes)."""
-    s = config.tables["system"]
-    tori = config.tables["tori"]
-    sizes = {"crossing": config.tables["section"]["max_crossings"],
-             "history_time": history_grid(config.tables["integration"]["t_final"],
-                                          config.tables["indicators"]["history_points"],
-                                          tori["extend"], tori["extend_rounds"]).size,
-             "horizon": len(horizon_factors(tori["extend"], tori["extend_rounds"])),
-             "component": 2 * s["bodies"] * s["dim"], "spatial": 3,
-             "observable": len(config.tables["tori"]["observables"]),
+    s, tori = config.settings.system, config.settings.tori
+    sizes = {"crossing": config.settings.section.max_crossings,
+             "history_time": history_grid(config.settings.integration.t_final,
+                                          config.settings.indicators.history_points,
+                                          tori.extend, tori.extend_rounds).size,
+             "horizon": len(horizon_factors(tori.extend, tori.extend_rounds)),
+             "component": 2 * s.bodies * s.dim, "spatial": 3,
+             "observable": len(tori.observables),
              "ensemble_statistic": len(ENSEMBLE_STATISTICS),
-             "fundamental": len(fundamental_names(s["bodies"], s["dim"]))}
+             "fundamental": len(fundamental_names(s.bodies, s.dim))}
     return tuple(sizes[d] for d in v.extra)
 
 
@@ -168,9 +167,9 @@ def git_commit() -> str:
 
 
 def _component_labels(config):
-    s = config.tables["system"]
-    axes = "xyz"[:s["dim"]]
-    q = [f"{c}{b}" for b in range(s["bodies"]) for c in axes]
+    s = config.settings.system
+    axes = "xyz"[:s.dim]
+    q = [f"{c}{b}" for b in range(s.bodies) for c in axes]
     return q + [f"p{c}" for c in q]
 
 
@@ -179,7 +178,7 @@ def coordinates(config, cells=None) -> dict:
     component and spatial dimensions as auxiliary coordinates (CF section 6.1). A refined
     survey's cells (sorted lattice ids) lie along a `cell` dimension, each grid parameter
     and the cell's refinement level an auxiliary coordinate along it."""
-    terms = system_terms(config.tables["system"])
+    terms = system_terms(config.system_table)
     dims = grid_dims(config)
     if cells is not None:
         lattice = config.lattice()
@@ -198,37 +197,37 @@ def coordinates(config, cells=None) -> dict:
         coords["level"] = ("cell", lattice.level(cells), {
             "long_name": "refinement level of the cell (0: the grid; each level halves the "
                          "spacing of the cells it splits)", "units": "1"})
-    tori = config.tables["tori"]
+    tori = config.settings.tori
     coords["history_time"] = ("history_time", history_grid(
-        config.tables["integration"]["t_final"], config.tables["indicators"]["history_points"],
-        tori["extend"], tori["extend_rounds"]),
+        config.settings.integration.t_final, config.settings.indicators.history_points,
+        tori.extend, tori.extend_rounds),
         {"long_name": "time of the convergence history points (a cell's history ends at "
                       "its regime_horizon)", "units": "1"})
     if V.regime_history in {v.name for v in variables(config)}:
-        coords["horizon_factor"] = ("horizon", horizon_factors(tori["extend"],
-                                                               tori["extend_rounds"]),
+        coords["horizon_factor"] = ("horizon", horizon_factors(tori.extend,
+                                                               tori.extend_rounds),
                                     {"long_name": "horizon of each verdict of "
                                                   "regime_history, in units of t_final",
                                      "units": "1"})
     coords["component_name"] = ("component", _component_labels(config),
                                 {"long_name": "phase-space component (positions, then "
                                               "momenta)"})
-    if config.tables["section_enabled"]:
-        n = config.tables["section"]["max_crossings"]
+    if config.settings.section_enabled:
+        n = config.settings.section.max_crossings
         coords["crossing"] = ("crossing", np.arange(n), {"long_name": "index of the kept "
                                                                       "section crossing",
                                                          "units": "1"})
-    if config.tables["indicators"]["which"]:
+    if config.settings.indicators.which:
         coords["ensemble_statistic_name"] = ("ensemble_statistic", list(ENSEMBLE_STATISTICS), {
             "long_name": "statistic over the ensemble of the cell's orbit and its perturbed "
                          "starts (q05: the 5% quantile)"})
-    if config.tables["system"]["dim"] == 3:
+    if config.settings.system.dim == 3:
         coords["spatial_axis"] = ("spatial", ["x", "y", "z"], {"long_name": "spatial axis"})
-    if config.tables["tori"]["analyse"]:
-        s = config.tables["system"]
-        coords["observable_name"] = ("observable", config.tables["tori"]["observables"],
+    if config.settings.tori.analyse:
+        s = config.settings.system
+        coords["observable_name"] = ("observable", config.settings.tori.observables,
                                      {"long_name": "observable of the Birkhoff averages"})
-        coords["fundamental_name"] = ("fundamental", fundamental_names(s["bodies"], s["dim"]),
+        coords["fundamental_name"] = ("fundamental", fundamental_names(s.bodies, s.dim),
                                       {"long_name": "fundamental frequency: a basis of shape "
                                                     "frequencies, then the rotation"})
     return coords
@@ -237,14 +236,14 @@ def coordinates(config, cells=None) -> dict:
 def attributes(config, command: str) -> dict:
     ver = versions()
     now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
-    init = config.tables["initial"]
+    family = config.settings.initial.family
     return {
         "Conventions": "CF-1.10",
-        "title": f"survey '{config.name}': chaos indicators of the {init['family']} family "
-                 f"under {' + '.join(name for _, name, _ in system_terms(config.tables['system']))}",
+        "title": f"survey '{config.name}': chaos indicators of the {family} family under "
+                 f"{' + '.join(name for _, name, _ in system_terms(config.system_table))}",
         "history": f"{now}: {command} (survey {ver['survey']})",
         "source": f"survey {ver['survey']}: numba DOP853 (rtol "
-                  f"{config.tables['integration']['rtol']:g}) with variational equations",
+                  f"{config.settings.integration.rtol:g}) with variational equations",
         "references": "J.D. Meiss, Hamiltonian Triplet Interactions: Areal and Perimetric "
                       "Forces",
         "config": config.text,

@@ -57,12 +57,12 @@ def build_system(s: dict, at: dict | None = None) -> System:
     return System(np.array(masses, dtype=float), s["dim"], tuple(terms))
 
 
-def indicator_options(i: dict) -> IndicatorOptions:
-    """The IndicatorOptions of a validated [indicators] table."""
-    return IndicatorOptions(**{f.name: i[f.name] for f in fields(IndicatorOptions)})
+def indicator_options(i) -> IndicatorOptions:
+    """The IndicatorOptions of a validated [indicators] table (records.IndicatorsTable)."""
+    return IndicatorOptions(**{f.name: getattr(i, f.name) for f in fields(IndicatorOptions)})
 
 
-def section_event_for(tables: dict, system: System):
-    sec = tables["section"]
-    return section_event(system, sec["coordinate"], sec["value"], sec["direction"],
-                         tuple(sec["triplet"]), sec["coefficients"])
+def section_event_for(sec, system: System):
+    """The surface of section of a validated [section] table (records.SectionTable)."""
+    return section_event(system, sec.coordinate, sec.value, sec.direction,
+                         tuple(sec.triplet), sec.coefficients)

@@ -35,6 +35,7 @@ from ..physics.jacobi import reduced
 from . import archive
 from .build import build_system, indicator_options, section_event_for
 from .config import Config
+from .records import IndicatorsTable, IntegrationTable, SectionTable, ToriTable
 
 
 def build_starts(config: Config, ids=None) -> np.ndarray:
@@ -43,7 +44,7 @@ def build_starts(config: Config, ids=None) -> np.ndarray:
     ConfigError naming the cell."""
     system = config.system()
     varies = any(a.term >= 0 for a in config.axes)
-    family = config.tables["initial"]["family"]
+    family = config.settings.initial.family
     ids = range(config.n_cells) if ids is None else [int(i) for i in ids]
     starts = np.full((len(ids), system.n), np.nan)
     for row, index in enumerate(ids):
@@ -66,22 +67,22 @@ class CellTask:
     """What a worker needs to integrate cells -- the result-determining tables and the
     archive's layout -- and nothing of the grid or the config text, which can be large."""
 
-    system: dict
-    integration: dict
-    indicators: dict
-    section: dict | None
-    tori: dict
+    system: dict                # the [system] table as build_system takes it
+    integration: IntegrationTable
+    indicators: IndicatorsTable
+    section: SectionTable | None
+    tori: ToriTable
     slots: tuple
     term_axes: tuple = ()   # (name, values, stride in flat cell index) of the terms' axes
 
     @classmethod
     def of(cls, config: Config) -> "CellTask":
-        t = config.tables
+        t = config.settings
         strides = np.cumprod((config.shape + (1,))[:0:-1])[::-1]
         terms = tuple((a.name, tuple(a.values.tolist()), int(stride))
                       for a, stride in zip(config.axes, strides) if a.term >= 0)
-        return cls(t["system"], t["integration"], t["indicators"],
-                   t["section"] if t["section_enabled"] else None, t["tori"],
+        return cls(config.system_table, t.integration, t.indicators,
+                   t.section if t.section_enabled else None, t.tori,
                    archive.layout(config), terms)
 
     def term_values(self, cell: int) -> tuple:
@@ -93,9 +94,9 @@ class CellTask:
     def short(self) -> "CellTask":
         """The same task with a tiny t_final: compiles (or loads) every kernel a cell uses."""
         ind = self.indicators
-        return replace(self, integration={**self.integration, "t_final": 1e-3},
-                       indicators={**ind, "renorm_interval": 1e-3,
-                                   "perturbations": min(1, ind["perturbations"])})
+        return replace(self, integration=replace(self.integration, t_final=1e-3),
+                       indicators=replace(ind, renorm_interval=1e-3,
+                                          perturbations=min(1, ind.perturbations)))
 
 
 def run_cells(task: CellTask, cell_ids, starts) -> dict[str, np.ndarray]:
@@ -119,8 +120,8 @@ def first_runs(task: CellTask, cell_ids, starts) -> tuple[dict, np.ndarray]:
     clock = time.perf_counter()
     results = [CellResult(Status.INACCESSIBLE, 0.0)] * len(cell_ids)
     doubt = []
-    decide = bool(task.indicators["which"] or task.tori["analyse"])
-    longer = len(horizon_factors(task.tori["extend"], task.tori["extend_rounds"])) > 2
+    decide = bool(task.indicators.which or task.tori.analyse)
+    longer = len(horizon_factors(task.tori.extend, task.tori.extend_rounds)) > 2
     for system, events, rows in _systems(task, cell_ids, starts):
         ran = _run(task, system, events, [starts[k] for k in rows], 1)
         if decide:
@@ -161,7 +162,7 @@ def _systems(task: CellTask, cell_ids, starts):
         groups.setdefault(task.term_values(int(cell)), []).append(k)
     for at, rows in groups.items():
         system = build_system(task.system, dict(at))
-        events = [section_event_for({"section": task.section}, system)] if task.section \
+        events = [section_event_for(task.section, system)] if task.section \
             else []
         rows = [k for k in rows if not np.isnan(starts[k][0])]
         if rows:
@@ -180,17 +181,17 @@ def _rows(task: CellTask, results, clock) -> dict[str, np.ndarray]:
 def jobs_per_cell(task: CellTask) -> int:
     """The orbits a cell integrates (lanes of its chunk's batch)."""
     ind = task.indicators
-    if not ind["which"]:
+    if not ind.which:
         return 1
-    nominal = 1 if task.integration["control_tangents"] else ind["deviations"]
-    return nominal + ind["perturbations"]
+    nominal = 1 if task.integration.control_tangents else ind.deviations
+    return nominal + ind.perturbations
 
 
 def _first_verdicts(task: CellTask, system, results):
     """Each cell's verdicts from its first run, at T/2 and T (-1 at the longer horizons),
     and whether it is in doubt: its verdict changed class between them, or its evidence did
     not all vote for it (a line between its thresholds, or against it)."""
-    factors = horizon_factors(task.tori["extend"], task.tori["extend_rounds"])
+    factors = horizon_factors(task.tori.extend, task.tori.extend_rounds)
     half, _ = _verdicts(task, system, results, half=True)
     end, confidence = _verdicts(task, system, results)
     verdicts = np.full((len(results), len(factors)), -1, dtype=np.int8)
@@ -204,7 +205,7 @@ def _extend(task: CellTask, system, events, starts, verdicts) -> list[CellResult
     extend x T, are decided there, and run again while still in doubt, up to extend_rounds
     times. Every cell carries its verdicts (regime_history) and the horizon of the run its
     evidence comes from."""
-    factors = horizon_factors(task.tori["extend"], task.tori["extend_rounds"])
+    factors = horizon_factors(task.tori.extend, task.tori.extend_rounds)
     results = [None] * len(starts)
     todo = list(range(len(starts)))
     for level in range(2, len(factors)):
@@ -242,34 +243,34 @@ def classify_rows(task: CellTask, system, arrays: dict, half: bool = False):
     checkpoint's), as the archive derives them."""
     tor, ind = task.tori, task.indicators
     table = Table(arrays, history_time=history_grid(
-        task.integration["t_final"], ind["history_points"], tor["extend"],
-        tor["extend_rounds"]), fundamental_name=np.array(fundamental_names(
+        task.integration.t_final, ind.history_points, tor.extend,
+        tor.extend_rounds), fundamental_name=np.array(fundamental_names(
             system.n_bodies, system.dim)))
-    return classify(table, Thresholds.from_table(tor), half=half)
+    return classify(table, Thresholds.from_table(vars(tor)), half=half)
 
 
 def _run(task: CellTask, system, events, starts, factor: int) -> list[CellResult]:
     """Integrate cells to factor x t_final, their orbits as lanes of one batch, and compute
     everything a cell stores from those runs."""
     integ, ind, tor = task.integration, task.indicators, task.tori
-    t_final = factor * integ["t_final"]
-    points = factor * ind["history_points"]
-    run = dict(rtol=integ["rtol"], atol=integ["atol"], max_steps=integ["max_steps"],
-               time_limit=integ["cell_time_limit"], events=events)
-    dt = tor["sample_interval"]
-    if tor["analyse"]:    # midpoints of equal intervals: the Birkhoff sums' quadrature;
+    t_final = factor * integ.t_final
+    points = factor * ind.history_points
+    run = dict(rtol=integ.rtol, atol=integ.atol, max_steps=integ.max_steps,
+               time_limit=integ.cell_time_limit, events=events)
+    dt = tor.sample_interval
+    if tor.analyse:    # midpoints of equal intervals: the Birkhoff sums' quadrature;
         # each batch's samples are analysed before this thread's next batch reuses them
         run.update(t_fine=(np.arange(int(t_final / dt)) + 0.5) * dt, reuse_samples=True)
     if task.section:
-        run["max_events"] = task.section["max_crossings"]
-    if ind["which"]:
+        run["max_events"] = task.section.max_crossings
+    if ind.which:
         options = replace(indicator_options(ind), history_points=points)
-        jobs = [ensemble(system, y0, options, integ["control_tangents"]) for y0 in starts]
+        jobs = [ensemble(system, y0, options, integ.control_tangents) for y0 in starts]
         outcomes = integrate_batch(
             system, np.concatenate([j.starts for j in jobs]), t_final,
             tangents=np.concatenate([j.tangents for j in jobs]),
             record=np.concatenate([j.record for j in jobs]),
-            **batch_options(t_final, options, control_tangents=integ["control_tangents"],
+            **batch_options(t_final, options, control_tangents=integ.control_tangents,
                             **run))
         first = np.cumsum([0] + [len(j.starts) for j in jobs])
         indicators = [combine(system, y0, t_final, options, j, outcomes[a:b])
@@ -289,7 +290,7 @@ def _run(task: CellTask, system, events, starts, factor: int) -> list[CellResult
     results = []
     for y0, ind_k, (out, status, errors) in zip(starts, indicators, ends):
         evidence = None
-        if tor["analyse"] and status.finished:
+        if tor.analyse and status.finished:
             evidence = torus_evidence(task, system, out.fine, errors[0])
         results.append(CellResult(
             status=status, wall_time=0.0, n_steps=out.n_steps,
@@ -308,8 +309,8 @@ def _run(task: CellTask, system, events, starts, factor: int) -> list[CellResult
 def torus_evidence(task: CellTask, system, fine, energy_error) -> torus.TorusEvidence:
     """The torus analysis of one orbit's samples, as the task's [tori] table asks."""
     tor = task.tori
-    return torus.analyse(system, fine, tor["sample_interval"], energy_error,
-                         tor["observables"], tor["lines"], tor["resonance_order"])
+    return torus.analyse(system, fine, tor.sample_interval, energy_error,
+                         tor.observables, tor.lines, tor.resonance_order)
 
 
 def warm_up(task: CellTask, first, starts):
@@ -332,7 +333,7 @@ def warm_beside(task: CellTask, first, starts):
     system = next(_systems(task, first, starts))[0]
     y0 = np.asarray(starts[0], dtype=np.float64)
     rng = np.random.default_rng(0)
-    dt = task.tori["sample_interval"]
+    dt = task.tori.sample_interval
     # samples enough for every path: NAFF updates its spectrum in place on halves of over
     # 4 x SPECTRUM_BINS samples (a long run, or a cell in doubt extended)
     t = (np.arange(16 * torus.SPECTRUM_BINS) + 0.5) * dt
@@ -348,9 +349,9 @@ def warm_beside(task: CellTask, first, starts):
         conservation_errors(system, y0, states)
         system.scale_free_energy(y0)
         portable.vlog(portable.vnorm(states))
-        if task.tori["analyse"]:
-            torus.analyse(system, states, dt, 1e-12, task.tori["observables"],
-                          task.tori["lines"], task.tori["resonance_order"])
+        if task.tori.analyse:
+            torus.analyse(system, states, dt, 1e-12, task.tori.observables,
+                          task.tori.lines, task.tori.resonance_order)
     a = rng.standard_normal((6, 6))
     linalg.eig(a)
     linalg.svd(a)

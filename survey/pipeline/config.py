@@ -7,6 +7,7 @@ allowed range and meaning; validation happens before any work and each problem i
 from __future__ import annotations
 
 import difflib
+import functools
 import hashlib
 import json
 import math
@@ -37,10 +38,18 @@ from ..physics.terms import (
 )
 from .build import build_system, section_event_for, term_axis_names
 from .resources import check_address, check_memory, ensure_writable
-from .schema import SCHEMA, Key
+from . import records
+from .records import Settings
+from .schema import FLAGS, SCHEMA, Key, record_name
 
 INT64_MAX = 2 ** 63 - 1
 TERM_KEYS = ("kind", "potential", "params", "mass_weighted")   # an interactions entry
+
+
+def settings_of(tables: dict) -> Settings:
+    """Validated tables as typed records (pipeline.records)."""
+    return Settings(**{table: getattr(records, record_name(table))(**tables[table])
+                       for table in SCHEMA}, **{f: tables[f] for f in FLAGS})
 
 
 def markdown_tables() -> str:
@@ -104,6 +113,18 @@ class Config:
     @property
     def sha256(self) -> str:
         return hashlib.sha256(self.text.encode()).hexdigest()
+
+    @functools.cached_property
+    def settings(self) -> Settings:
+        """Every table as a typed record (pipeline.records): what code outside this module
+        reads -- config.settings.integration.rtol -- rather than string-keyed tables."""
+        return settings_of(self.tables)
+
+    @property
+    def system_table(self) -> dict:
+        """The [system] table as build_system takes it (the form a [[plane]] table and a
+        family's systems share)."""
+        return self.tables["system"]
 
     def with_output(self, path) -> "Config":
         """The same survey written to another archive (the config itself is never
@@ -471,7 +492,7 @@ def validate(raw: dict, text: str, where: str = "<config>", check_output: bool =
     tables["check_enabled"] = "check" in raw
     tables["refine_enabled"] = "refine" in raw
     _validate_names(tables)
-    check_memory(tables, math.prod(_axis_size(v) for v in initial_raw.values())
+    check_memory(settings_of(tables), math.prod(_axis_size(v) for v in initial_raw.values())
                  * tables["initial"]["starts_per_cell"])
 
     term_axes = _validate_terms(tables["system"], raw.get("system", {}))
@@ -807,6 +828,6 @@ def _validate_cross(tables: dict, system: System):
         if sec["value"] is None:
             sec["value"] = math.pi / 2 if coord == "phi" else 0.0
         try:
-            section_event_for(tables, system)
+            section_event_for(records.SectionTable(**sec), system)
         except ValueError as exc:
             raise ConfigError("[section]", str(exc)) from None

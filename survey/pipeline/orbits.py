@@ -178,11 +178,11 @@ def from_survey_config(path, cells=(), t_final=None, zoom_until=0.0) -> OrbitSpe
     config = load_config(path, check_output=False)
     raw = tomllib.loads(config.text)
     initial = dict(raw.get("initial", {}))
-    integration = config.tables["integration"]
+    integration = config.settings.integration
     spec = OrbitSpec(name=config.name, family=initial.pop("family"), params=initial,
                      system=raw.get("system", {}),
-                     t_final=integration["t_final"] if t_final is None else t_final,
-                     tol=integration["rtol"], zoom_until=zoom_until, cells=tuple(cells))
+                     t_final=integration.t_final if t_final is None else t_final,
+                     tol=integration.rtol, zoom_until=zoom_until, cells=tuple(cells))
     return check(spec, "orbit", cli=True)
 
 

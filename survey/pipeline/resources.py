@@ -47,30 +47,29 @@ def memory_needed(n_cells, n, deviations, crossings, store_state, history, chunk
     return 8 * (starts + workers * (chunk * row + integration)) + max(GROUP_BYTES, 8 * variable)
 
 
-def check_memory(tables: dict, n_cells: int):
+def check_memory(settings, n_cells: int):
     """Refuse, before anything is allocated, a survey that cannot fit in this machine's
-    memory, naming the setting whose reduction would help most."""
-    s, sec, ind, dsk = tables["system"], tables["section"], tables["indicators"], tables["dask"]
-    tori = tables["tori"]
+    memory, naming the setting whose reduction would help most (settings: a validated
+    config's records.Settings)."""
+    s, sec, ind, dsk = settings.system, settings.section, settings.indicators, settings.dask
+    tori, t_final = settings.tori, settings.integration.t_final
     # an extended cell runs to the longest horizon, and the histories span it
-    longest = int(horizon_factors(tori["extend"], tori["extend_rounds"])[-1])
-    size = dict(n_cells=n_cells, n=2 * s["bodies"] * s["dim"], deviations=ind["deviations"],
-                crossings=sec["max_crossings"] if tables["section_enabled"] else 0,
-                store_state=sec["store_state"], history=ind["history_points"] * longest,
-                chunk=dsk["chunk_size"] or 256, workers=dsk["workers"],
-                samples=int(longest * tables["integration"]["t_final"] / tori["sample_interval"])
-                if tori["analyse"] else 0)
+    longest = int(horizon_factors(tori.extend, tori.extend_rounds)[-1])
+    size = dict(n_cells=n_cells, n=2 * s.bodies * s.dim, deviations=ind.deviations,
+                crossings=sec.max_crossings if settings.section_enabled else 0,
+                store_state=sec.store_state, history=ind.history_points * longest,
+                chunk=dsk.chunk_size or 256, workers=dsk.workers,
+                samples=int(longest * t_final / tori.sample_interval) if tori.analyse else 0)
     total = memory_needed(**size)
     if total <= 0.8 * machine_memory():
         return
-    t_final = tables["integration"]["t_final"]
     smaller = {"[initial] (the grid)": dict(n_cells=1),
                "[integration].t_final": dict(samples=size["samples"] * min(
-                   1.0, defaults.T_FINAL / t_final), history=ind["history_points"] * longest),
+                   1.0, defaults.T_FINAL / t_final), history=ind.history_points * longest),
                "[system].bodies": dict(n=6),
                "[section].max_crossings": dict(crossings=1),
                "[indicators].history_points": dict(history=2),
-               "[tori].extend": dict(history=ind["history_points"],
+               "[tori].extend": dict(history=ind.history_points,
                                      samples=size["samples"] // longest),
                "[indicators].deviations": dict(deviations=1),
                "[tori].sample_interval": dict(samples=0),

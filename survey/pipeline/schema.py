@@ -207,3 +207,47 @@ SCHEMA: dict[str, dict[str, Key]] = {
                        hint="a task that fails 100 times will fail again"),
     },
 }
+
+
+FLAGS = ("section_enabled", "check_enabled", "refine_enabled")   # whether a table was given
+TYPES = {"str": "str", "int": "int", "float": "float", "bool": "bool",
+         "floats": "list[float] | None", "ints": "list[int] | None", "strs": "list[str]",
+         "table": "dict", "terms": "list[dict] | None", "axis": "Any"}
+
+
+def record_name(table: str) -> str:
+    return f"{table.title()}Table"
+
+
+def records_source() -> str:
+    """The text of pipeline/records.py: a frozen record per table of SCHEMA, its fields the
+    table's keys with their types and meanings, and `Settings`, every table by name (what
+    Config.settings holds, so that code outside the config module reads
+    config.settings.integration.rtol, which a reader and a tool can follow, never a
+    string-keyed table)."""
+    out = ['"""The validated config as typed records, one per table of pipeline.schema.SCHEMA.',
+           "",
+           "Generated from the schema (python -m survey.pipeline.schema writes this file; the",
+           'tests check it is current): edit the schema, not this file."""',
+           "from __future__ import annotations", "", "from dataclasses import dataclass",
+           "from typing import Any", ""]
+    for table, keys in SCHEMA.items():
+        out += ["", "@dataclass(frozen=True)", f"class {record_name(table)}:",
+                f'    """[{table}]"""', ""]
+        for key, spec in keys.items():
+            field = f"    {key}: {TYPES[spec.kind]}".ljust(40)
+            doc, room = " ".join(spec.doc.split()), 98 - len(field)
+            out.append(field + "# " + (doc if len(doc) <= room else
+                                       doc[:room - 3].rstrip() + "..."))
+        out.append("")
+    out += ["", "@dataclass(frozen=True)", "class Settings:",
+            '    """Every table of a validated config, and whether the optional ones were',
+            '    given."""', ""]
+    out += [f"    {table}: {record_name(table)}" for table in SCHEMA]
+    out += [f"    {flag}: bool" for flag in FLAGS]
+    return "\n".join(out) + "\n"
+
+
+if __name__ == "__main__":     # regenerate records.py beside this module
+    from pathlib import Path
+    Path(__file__).with_name("records.py").write_text(records_source())

@@ -187,7 +187,7 @@ def _equilibrium_family(path, config, system, start, table):
                                                     "angular_momentum: give it, not "
                                                     "rotation_rate")
     p0, systems = (table["angular_momentum"], lambda p: system) if spin else \
-        _family_systems(config.tables["system"], table["parameter"])
+        _family_systems(config.system_table, table["parameter"])
     _reachable(systems, table["to"], "equilibria")
     if table["to"] == p0:
         raise ConfigError("[equilibria].to", f"equals the parameter's start value {p0:g}; "
@@ -442,7 +442,7 @@ def _periodic_family(path, config, system, table, orbit) -> Family:
                                                       "orbit's J is its own")
         p0, systems = orbit.angular_momentum, lambda p: system
     else:
-        p0, systems = _family_systems(config.tables["system"], name, "periodic")
+        p0, systems = _family_systems(config.system_table, name, "periodic")
         _reachable(systems, table["to"], "periodic")
     if table["to"] == p0:
         raise ConfigError("[periodic].to", f"equals the parameter's start value {p0:g}; "
@@ -762,7 +762,7 @@ def homographic_cells(ds, most: int = 8) -> list[dict]:
     if V.initial_state not in ds or V.status not in ds:
         return []
     config = parse_config(ds.attrs["config"], check_output=False)
-    horizon = float(config.tables["integration"]["t_final"])
+    horizon = float(config.settings.integration.t_final)
     axes = list(ds[V.status].dims)
     starts = ds[V.initial_state].values.reshape(-1, ds[V.initial_state].shape[-1])
     out = []
@@ -792,7 +792,7 @@ def _cell_system(config, ds, idx) -> System:
     the cell's values of any interaction-term axes (read from the archive's coordinates,
     so a refined survey's cells are read too)."""
     values = cell_values(ds, idx)
-    return build_system(config.tables["system"], {a.name: values[a.name] for a in config.axes
+    return build_system(config.system_table, {a.name: values[a.name] for a in config.axes
                                                   if a.term >= 0})
 
 

@@ -64,13 +64,13 @@ def _client(config: Config, workers, address):
     with _quiet_interrupt():
         from dask.distributed import Client, LocalCluster
         if address:
-            with Client(address, timeout=f"{config.tables['dask']['connect_timeout']}s") as client:
+            with Client(address, timeout=f"{config.settings.dask.connect_timeout}s") as client:
                 try:
-                    client.wait_for_workers(1, timeout=config.tables["dask"]["connect_timeout"])
+                    client.wait_for_workers(1, timeout=config.settings.dask.connect_timeout)
                 except TimeoutError:
                     raise SurveyError(
                         f"the dask scheduler at {address} has no workers after "
-                        f"{config.tables['dask']['connect_timeout']:g} s: start some "
+                        f"{config.settings.dask.connect_timeout:g} s: start some "
                         f"(`dask worker {address}`) or raise [dask] connect_timeout") from None
                 yield client
             return
@@ -99,7 +99,7 @@ def _client(config: Config, workers, address):
         dask.config.refresh()
         # no dashboard; the scheduler's plain HTTP endpoints on a free loopback port, not 8787
         # (which warns "port 8787 is already in use" whenever another cluster runs)
-        with LocalCluster(n_workers=workers or config.tables["dask"]["workers"],
+        with LocalCluster(n_workers=workers or config.settings.dask.workers,
                           threads_per_worker=1, processes=True, dashboard_address=None,
                           scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
                           preload=[__name__], silence_logs=logging.ERROR) as cluster:
@@ -206,7 +206,7 @@ def _chunks(ids: np.ndarray, count: int):
 
 def _task_count(config: Config, cells: int, counted: int) -> int:
     """Tasks for `cells`: `counted` unless [dask] chunk_size fixes the cells per task."""
-    size = config.tables["dask"]["chunk_size"]
+    size = config.settings.dask.chunk_size
     return -(-cells // size) if size else counted
 
 
@@ -221,9 +221,9 @@ def run_survey(source, *, workers: int | None = None, scheduler: str | None = No
     clock = {"start": time.perf_counter(), "stream": timings is not None}
     workers, scheduler, progress = _api_arguments(workers, scheduler, progress)
     config = source if isinstance(source, Config) else load_config(source)
-    address = scheduler or config.tables["dask"]["scheduler"]
+    address = scheduler or config.settings.dask.scheduler
     if address:       # before any work: a wrong address is an input error
-        _reach(address, config.tables["dask"]["connect_timeout"])
+        _reach(address, config.settings.dask.connect_timeout)
     if progress is None:
         progress = sys.stderr.isatty()
     key = config.result_key()
@@ -374,7 +374,7 @@ def _refined(config, key, folder, workers, address, clock, progress):
                     for ids in _chunks(todo, count):
                         future = client.submit(run_cells, task, ids, starts(ids), pure=False,
                                                key=f"cells-{key}-{ids[0]}-{ids[-1]}-{ids.size}",
-                                               retries=config.tables["dask"]["retries"])
+                                               retries=config.settings.dask.retries)
                         flight[future] = ids
                         queue.add(future)
                 if bar is not None:
@@ -446,7 +446,7 @@ def _start(stack, config, task, first, starts, workers, address, clock, progress
     starts: every cell's start, or a function giving given cells' starts)."""
     at = (starts(first) if callable(starts) else starts[first])
     cluster = f"connecting to the dask scheduler at {address}" if address else \
-        f"starting {workers or config.tables['dask']['workers']} local dask workers"
+        f"starting {workers or config.settings.dask.workers} local dask workers"
     # A first run: the local workers start first (forked without the kernels, which they
     # then load from the disk cache), so that one compiles everything but the integrator
     # (warm_beside) while this process compiles the integrator -- else the second core
@@ -556,7 +556,7 @@ def _compute(client, task, starts, todo, folder, key, config, bar, round_):
     count = _task_count(config, todo.size, chunk_count(todo.size, len(slots), per_cell))
     # an extension task holds about one round of SIMD lanes
     group = max(1, -(-SIMD_LANES // per_cell))
-    retries = config.tables["dask"]["retries"]
+    retries = config.settings.dask.retries
     # the archive's imports, in a thread of this process while the workers compute: after
     # them they add to a scan whose tasks all end together (`bench --only scan` times the
     # command line)

@@ -722,7 +722,7 @@ def test_gali2_has_no_cancellation_floor(paper_system):
 def test_one_set_of_indicator_defaults(tmp_path):
     config = load_config({"survey": {"output": str(tmp_path / "x.nc")},
                           "initial": {"family": "equilateral"}})
-    assert indicator_options(config.tables["indicators"]) == IndicatorOptions()
+    assert indicator_options(config.settings.indicators) == IndicatorOptions()
 
 
 def test_the_code_fingerprint_covers_subpackages(tmp_path):
