@@ -80,10 +80,14 @@ def test_each_archive_stores_its_workflow_and_verifies(archive):
     and the last) agree with the archive bit for bit, on any machine
     (tests/pipeline/test_portable_archives.py); an archive of an isosceles plane's
     manifolds stores its [[plane]] table and verifies its orbits, two points and its first
-    homoclinic point."""
+    homoclinic point. A survey archive stores its special cells and section slice
+    (pipeline.special.report_attributes), which its report reads whoever writes it."""
     with xr.open_dataset(archive) as ds:
         assert ds.attrs["config"] == stored_text(archive)
         assert not ds.attrs["git_commit"].endswith("-dirty")
+        if "family" not in ds.attrs:    # what its report needs from a solver, stored: the
+            #                             command and ds.survey.report() write the same
+            assert {"special_cells", "section_slice"} <= set(ds.attrs), archive.name
     ok, lines = verify_family(archive, cells=2) if is_family(archive) else \
         verify(archive, cells=2)
     assert ok, lines
