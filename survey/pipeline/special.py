@@ -854,30 +854,26 @@ def verify_family(path, cells: int = 8) -> tuple[bool, list[str]]:
            f"{machine()})"
     if kind == "manifolds":
         from .orbits import verify_manifolds
-        lines = verify_manifolds(stored, cells)
-        if lines:
-            return False, [f"{path}: the manifolds computed again differ {made}:"] + \
-                [f"  {line}" for line in lines]
-        return True, [f"{path}: {stored.sizes['orbit']} orbits, {min(cells, stored.sizes['point'])} "
-                      f"of {stored.sizes['point']} points and "
-                      f"{min(1, stored.sizes.get('homoclinic', 0))} homoclinic point computed "
-                      f"again agree bit for bit {made}"]
-    with tempfile.TemporaryDirectory() as folder:
-        config = Path(folder) / "family.toml"
-        config.write_text(text)
-        if kind == "periodic":
-            _, table, family = solve_periodic(config)
-            fresh = family_dataset(table, family, text)
-        else:
-            _, table, family = solve_equilibria(config)
-            fresh = equilibrium_dataset(table, family, text)
-    lines = _family_differences(stored, fresh)
+        lines, what = verify_manifolds(stored, cells), "manifolds computed again differ"
+        agree = (f"{stored.sizes['orbit']} orbits, {min(cells, stored.sizes['point'])} of "
+                 f"{stored.sizes['point']} points and "
+                 f"{min(1, stored.sizes.get('homoclinic', 0))} homoclinic point")
+    else:
+        with tempfile.TemporaryDirectory() as folder:
+            config = Path(folder) / "family.toml"
+            config.write_text(text)
+            if kind == "periodic":
+                _, table, family = solve_periodic(config)
+                fresh = family_dataset(table, family, text)
+            else:
+                _, table, family = solve_equilibria(config)
+                fresh = equilibrium_dataset(table, family, text)
+        lines, what = _family_differences(stored, fresh), "family computed again differs"
+        agree = (f"{stored.sizes['member']} members and "
+                 f"{stored.sizes.get('bifurcation', 0)} bifurcations")
     if lines:
-        return False, [f"{path}: the family computed again differs {made}:"] + \
-            [f"  {line}" for line in lines]
-    return True, [f"{path}: {stored.sizes['member']} members and "
-                  f"{stored.sizes.get('bifurcation', 0)} bifurcations computed again agree "
-                  f"bit for bit {made}"]
+        return False, [f"{path}: the {what} {made}:"] + [f"  {line}" for line in lines]
+    return True, [f"{path}: {agree} computed again agree bit for bit {made}"]
 
 
 def _family_differences(stored, fresh) -> list[str]:
