@@ -39,7 +39,8 @@ from ..machine.jit import helper, leaf
 from ..physics.lanes import SIMD_MIN, rhs_lanes, state_size
 from ..physics.system import rhs
 from .lanestate import RawOutcome, lane_state, reused_samples
-from .tangents import growth_terms, tangent_norm, tangent_norms
+from .tangents import (accumulate, begin, growth_terms, offsets, sample_at, tangent_norms,
+                       width)
 from .dop853 import (
     finite_lanes,
     spread_steps,
@@ -139,7 +140,6 @@ def _start(k, j, ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_ta
         y[i] = y0s[j, i]
         ln.Y[i * L + k] = y[i]
     out.h_range[j, 0] = np.inf
-    ln.acc[k, 0] = ln.acc[k, 1] = ln.acc[k, 2] = 0.0
     ln.acc[k, 3] = now
     ln.i_eval[k] = 0
     ln.i_fine[k] = 0
@@ -151,8 +151,7 @@ def _start(k, j, ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_ta
     if not _finite(y):
         _finish(k, ln, out, NONFINITE_, rows)
         return False
-    for tt in range(n_tan):
-        out.log_growth[j, tt] = -portable.log(tangent_norm(y, n * (1 + tt), n, rb))
+    begin(out.ends[j], ln.acc[k], y, n, n_tan, rb)
     _rhs_one(t0, y, K[0], masses, d, measure, prof, par, n_tan, ln.W, rb)
     out.counts[j, 2] += 1
     for i in range(nf):
@@ -164,8 +163,8 @@ def _start(k, j, ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_ta
     if r >= 0:
         while ln.i_eval[k] < t_eval.size and t_eval[ln.i_eval[k]] == t0:
             put_sample(out.samples[r, ln.i_eval[k]], y, n_eval, rb)
-            for tt in range(n_tan):
-                out.sample_log[r, ln.i_eval[k], tt] = out.log_growth[j, tt]
+            sample_at(out.sampled[r, ln.i_eval[k]], out.ends[j], ln.acc[k], y, n, n_tan, rb,
+                      0.0, 0.0, False)
             ln.i_eval[k] += 1
     r = rows[2, j]
     if r >= 0:
@@ -204,8 +203,8 @@ def _lane(ln, k):
 
 
 @helper
-def _record(k, ln, out, rows, t0, t1, masses, d, n, rb, megno, events, max_events, n_sub,
-            t_eval, n_eval, t_fine, later):
+def _record(k, ln, out, rows, t0, t1, masses, d, n, n_tan, rb, megno, events, max_events,
+            n_sub, t_eval, n_eval, t_fine, later):
     """What lane k's accepted step [t, t + h] records, before the lane takes its new state
     (its dense output prepared if it needs one now): counters, event crossings, samples;
     with `later`, its samples at t_fine wait in ln.wait. Returns EVENT_ at a terminal event
@@ -271,9 +270,6 @@ def _record(k, ln, out, rows, t0, t1, masses, d, n, rb, megno, events, max_event
         need = max(need, n)
     if need > nd_ready:
         counts[2] += 3
-    log_growth = out.log_growth[j]
-    L_prev, int_L, Y_prev = ln.acc[k, 0], ln.acc[k, 1], ln.acc[k, 2]
-    megno_sums = out.megno_sums[j]
     while rs >= 0 and i_eval < t_eval.size and direction * (t_eval[i_eval] - t_stop) <= 0.0:
         y, ynew, F = _lane(ln, k)
         src = ynew
@@ -281,16 +277,8 @@ def _record(k, ln, out, rows, t0, t1, masses, d, n, rb, megno, events, max_event
             dense_eval(F, y, (t_eval[i_eval] - t) / h, n_eval, yd)
             src = yd
         put_sample(out.samples[rs, i_eval], src, n_eval, rb)
-        for tt in range(log_growth.size):
-            out.sample_log[rs, i_eval, tt] = log_growth[tt]
-        if megno and n_eval >= 2 * n:
-            part = t_eval[i_eval] - t
-            L_at = log_growth[0] + portable.log(tangent_norm(src, n, n, rb))
-            elapsed = t_eval[i_eval] - t0
-            int_at = int_L + 0.5 * part * (L_prev + L_at)
-            Y_at = 2.0 * (elapsed * L_at - int_at) / elapsed if elapsed != 0.0 else 0.0
-            out.sample_megno[rs, i_eval, 0] = elapsed * L_at - int_at
-            out.sample_megno[rs, i_eval, 1] = megno_sums[1] + 0.5 * part * (Y_prev + Y_at)
+        sample_at(out.sampled[rs, i_eval], out.ends[j], ln.acc[k], src, n, n_tan, rb,
+                  t_eval[i_eval] - t, t_eval[i_eval] - t0, megno and n_eval >= 2 * n)
         i_eval += 1
     if later:
         first = i_fine
@@ -392,10 +380,10 @@ def _flush(ln, out, masses, d, measure, prof, par, t_fine, rb):
 
 @helper
 def _advance(k, ln, out, t0, t1, n, n_tan, megno, renorm_dt, NW):
-    """Lane k after its accepted step (its state already the new one): the time, and its
-    tangent vectors' growth (FLI), renormalisation, MEGNO and WBA, from their norms, logs
-    and the step's Birkhoff weight in NW (`growth_terms`).
-    Returns OK_ if the job reached t1, else RUNNING."""
+    """Lane k after its accepted step (its state already the new one): the time, the
+    step-end indicators (`tangents.accumulate`, from the tangent vectors' norms, logs and
+    the step's Birkhoff weight in NW: `growth_terms`), and the vectors' renormalisation
+    when due. Returns OK_ if the job reached t1, else RUNNING."""
     L = ln.job.size
     j = ln.job[k]
     last = ln.flags[k, 2] == 1
@@ -403,39 +391,22 @@ def _advance(k, ln, out, t0, t1, n, n_tan, megno, renorm_dt, NW):
     t_old = ln.t[k]
     t = t1 if last else t_old + ln.h[k]
     ln.t[k] = t
-    log_growth = out.log_growth[j]
-    L_prev, int_L, Y_prev = ln.acc[k, 0], ln.acc[k, 1], ln.acc[k, 2]
-    megno_sums = out.megno_sums[j]
-    # ---- tangent vectors: track growth (FLI) and renormalise when due
     if n_tan > 0:
+        ends = out.ends[j]
+        accumulate(ends, ln.acc[k], NW, L, k, n_tan, t0, t_old, t, megno)
+        LOG = offsets(n_tan)[0]
         due = direction * (t - ln.t_next_renorm[k]) >= 0.0
         if due:
             ln.t_next_renorm[k] = t + direction * renorm_dt
         for tt in range(n_tan):
-            off = n * (1 + tt)
-            wn, log_wn = NW[tt * L + k], NW[(n_tan + tt) * L + k]
-            Lw = log_growth[tt] + log_wn
-            out.max_log[j, tt] = max(out.max_log[j, tt], Lw)
-            if tt == 0:
-                g = NW[2 * n_tan * L + k]
-                out.wba[j, 0] += g * (Lw - L_prev)
-                out.wba[j, 1] += g * (t - t_old)
-                if megno:
-                    int_L += 0.5 * (t - t_old) * (L_prev + Lw)
-                    elapsed = t - t0
-                    Y_new = 2.0 * (elapsed * Lw - int_L) / elapsed
-                    megno_sums[0] = elapsed * Lw - int_L
-                    megno_sums[1] += 0.5 * (t - t_old) * (Y_prev + Y_new)
-                    Y_prev = Y_new
-                L_prev = Lw
+            wn = NW[tt * L + k]
             if due or wn > 1e100 or wn < 1e-100:
                 inv = 1.0 / wn
                 y, K0 = ln.Y[k::L], ln.K[0, k::L]
-                for a in range(off, off + n):
+                for a in range(n * (1 + tt), n * (2 + tt)):
                     y[a] *= inv
                     K0[a] *= inv
-                log_growth[tt] += log_wn
-    ln.acc[k, 0], ln.acc[k, 1], ln.acc[k, 2] = L_prev, int_L, Y_prev
+                ends[LOG + tt] += NW[(n_tan + tt) * L + k]
     return OK_ if last else RUNNING
 
 
@@ -581,8 +552,8 @@ def _run(ln, out, y0s, rows, model, control, recording, next_job, iterations, no
             _flush(ln, out, masses, d, measure, prof, par, t_fine, rb)   # room for the steps
         for k in range(L):
             if ln.flags[k, 3]:
-                ended = _record(k, ln, out, rows, t0, t1, masses, d, n, rb, megno, events,
-                                max_events, n_sub, t_eval, n_eval, t_fine,
+                ended = _record(k, ln, out, rows, t0, t1, masses, d, n, n_tan, rb, megno,
+                                events, max_events, n_sub, t_eval, n_eval, t_fine,
                                 dense == DENSE_LATER)
                 if ended == EVENT_:
                     _finish(k, ln, out, EVENT_, rows)
@@ -782,11 +753,8 @@ def dop853(y0s, rows, model: Model, control: Control, recording: Recording, L: i
         ev_index=np.empty((Me, max_events), dtype=np.int64),
         ev_t=np.empty((Me, max_events)), ev_y=np.empty((Me, max_events, n)),
         samples=np.full((Ms, T, n_eval // n * nfull), np.nan),
-        sample_log=np.full((Ms, T, n_tan), np.nan), log_growth=np.zeros((M, n_tan)),
-        max_log=np.zeros((M, n_tan)),
-        fine=reused_samples((Mf, Tf, nfull)) if reuse_samples else np.full((Mf, Tf, nfull), np.nan),
-        wba=np.zeros((M, 2)), megno_sums=np.zeros((M, 2)),
-        sample_megno=np.full((Ms, T, 2), np.nan))
+        ends=np.zeros((M, width(n_tan))), sampled=np.full((Ms, T, width(n_tan, True)), np.nan),
+        fine=reused_samples((Mf, Tf, nfull)) if reuse_samples else np.full((Mf, Tf, nfull), np.nan))
 
     def drive(ln, next_job):
         # with a time limit, back every 256 rounds to read the clock

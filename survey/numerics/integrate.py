@@ -19,6 +19,7 @@ from ..physics.system import System
 from ..physics.terms import AREA, PERIMETER
 from .dop853 import RTOL_MIN
 from .driver import EVAL, EVENTS, FINE, Control, Model, Recording, dop853, put_sample
+from .tangents import outcome_fields
 from .events import Crossings, Event, encode_events, relative_events
 class Outcome(NamedTuple):
     """What one integration returns; nothing is raised for numerical trouble."""
@@ -289,19 +290,12 @@ def _outcome(res, j, rows, n, n_tan, tan, megno, max_events, t_eval, n_eval, t_f
              sample_tangents) -> Outcome:
     y = res.y[j]
     tans = y[n:n * (1 + n_tan)].reshape(n_tan, n)
-    norms = portable.vnorm(tans)
     re, rs, rf = rows
-    if rs >= 0:
-        samples, s_log, s_megno = res.samples[rs], res.sample_log[rs], res.sample_megno[rs]
-    else:
-        samples = np.zeros((0, n_eval))
-        s_log, s_megno = np.zeros((0, n_tan)), np.zeros((0, 2))
+    samples = res.samples[rs] if rs >= 0 else np.zeros((0, n_eval))
+    sample_norms = None
     if n_tan and sample_tangents and rs >= 0:
-        w = samples[:, n:n * (1 + n_tan)].reshape(-1, n_tan, n)
-        s_log = s_log + portable.vlog(portable.vnorm(w))
-    else:
-        s_log = np.full((samples.shape[0], n_tan), np.nan)
-    counts, wba, log_g = res.counts[j], res.wba[j], res.log_growth[j]
+        sample_norms = portable.vnorm(samples[:, n:n * (1 + n_tan)].reshape(-1, n_tan, n))
+    counts = res.counts[j]
     kept = min(int(counts[3]), int(max_events))
     crossings = Crossings(res.ev_index[re, :kept].copy(), res.ev_t[re, :kept].copy(),
                           res.ev_y[re, :kept].copy()) if re >= 0 else \
@@ -309,13 +303,12 @@ def _outcome(res, j, rows, n, n_tan, tan, megno, max_events, t_eval, n_eval, t_f
     return Outcome(
         status=Status(int(res.status[j])), t=float(res.t[j]), y=y[:n].copy(),
         tangents=tans.copy(), tangent_norms0=portable.vnorm(tan),
-        megno_sums=res.megno_sums[j] if megno else np.zeros(0), sample_megno=s_megno,
-        log_growth=log_g + portable.vlog(norms), fli=np.maximum(res.max_log[j], log_g + portable.vlog(norms)),
         n_steps=int(counts[0]), n_rejected=int(counts[1]), n_rhs=int(counts[2]),
         h_min=float(res.h_range[j, 0]), h_max=float(res.h_range[j, 1]), crossings=crossings,
-        n_crossings=int(counts[3]), t_eval=t_eval, samples=samples, sample_log_growth=s_log,
+        n_crossings=int(counts[3]), t_eval=t_eval, samples=samples,
         fine=res.fine[rf] if rf >= 0 else np.zeros((0, n)),
-        ftle_wba=float(wba[0] / wba[1]) if wba[1] != 0 else np.nan)
+        **outcome_fields(res.ends[j], res.sampled[rs] if rs >= 0 else None, n_tan,
+                         portable.vnorm(tans), sample_norms, megno))
 
 
 def integrate(system: System, y0, t_span, *, tangents=None, **options) -> Outcome:

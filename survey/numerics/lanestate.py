@@ -27,16 +27,10 @@ class RawOutcome(NamedTuple):
     ev_t: np.ndarray
     ev_y: np.ndarray
     samples: np.ndarray       # (Ms, T, n_eval) states at t_eval
-    sample_log: np.ndarray    # (Ms, T, n_tan) accumulated log growth at t_eval
-    log_growth: np.ndarray    # (M, n_tan) accumulated log growth at t (vectors rescaled)
-    max_log: np.ndarray       # (M, n_tan) largest ln(|w|/|w0|) at step ends (the FLI)
     fine: np.ndarray          # (Mf, Tf, n) orbit states at t_fine
-    wba: np.ndarray           # (M, 2) (sum of g dL, sum of g dt) over the steps, first
-    #                           vector: their ratio is the weighted Birkhoff average of the
-    #                           growth rate (g(s) = exp(-1/(s(1-s))) at the step's mid-time
-    #                           s; Sander & Meiss 2025)
-    megno_sums: np.ndarray    # (M, 2) (s L - int L, int Y) at t: ratios to s are Y/2, <Y>
-    sample_megno: np.ndarray  # (Ms, T, 2) the same at t_eval
+    ends: np.ndarray          # (M, W) the step-end indicators at t (tangents.STEP_END; the
+    #                           logs of vectors as rescaled: their norms are added outside)
+    sampled: np.ndarray       # (Ms, T, Ws) those sampled at t_eval
 
 
 class Deferred(NamedTuple):
@@ -93,7 +87,8 @@ class Lanes(NamedTuple):
     i_eval: np.ndarray        # (L,) next t_eval / t_fine sample
     i_fine: np.ndarray
     t_next_renorm: np.ndarray
-    acc: np.ndarray           # (L, 4) MEGNO: L at the last step end, int L, Y; clock start
+    acc: np.ndarray           # (L, 4) MEGNO's running L at the last step end, int L, Y
+    #                           (`tangents.accumulate`); the job's clock start
     g_old: np.ndarray         # (L, m) watched events at the last step end, and slopes
     s_old: np.ndarray
     g_new: np.ndarray         # (L, m) the same at the accepted step's end (`_screen`)
