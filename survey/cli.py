@@ -131,9 +131,10 @@ def orbit_workflow(path, folder) -> list:
             written += plots.save({"plane": orbit_plots.plane_figure(spec.name, spec, run)},
                                   folder, spec.name)
             if spec.manifolds:
-                from .pipeline.special import write_archive
-                written.append(write_archive(
-                    orbits.manifold_dataset(spec, run.manifolds, orbits.plane_text(spec)),
+                from .pipeline.archive import write_family
+                from .pipeline.families import manifold_dataset
+                written.append(write_family(
+                    manifold_dataset(spec, run.manifolds, orbits.plane_text(spec)),
                     Path(folder) / f"{spec.name}_plane.nc", f"python -m survey orbit {path}"))
             print("\n".join(orbits.describe_plane(spec, run)))
             continue
@@ -209,9 +210,9 @@ def _reproduce(args):
     is 1."""
     import shutil
 
-    from .pipeline import orbits, special
+    from .pipeline import families, orbits
     from .pipeline.config import load_config
-    from .presentation import plots
+    from .presentation import families as family_words
     from .catalog.errors import ConfigError
     from .pipeline.resources import ensure_folder
     if not Path(args.workflows).is_dir():
@@ -228,8 +229,11 @@ def _reproduce(args):
     staging.mkdir(parents=True, exist_ok=True)
     for path in paths:
         print(f"== {path}")
-        if special.special_table(path):
-            print(f"made {special.write_report(path, staging, plots.family_diagram)}")
+        if families.special_table(path):
+            solved = families.solve(path)
+            diagram = families.dataset(solved) if solved.is_family and \
+                solved.kind == "periodic" else None
+            print(f"made {family_words.write_report(solved, staging, diagram)}")
             continue
         if orbits.is_orbit_workflow(path):
             for out in orbit_workflow(path, staging):
@@ -356,16 +360,22 @@ def _survey(config, command, summary=False, write_report=True, **kw) -> Path:
 
 
 def _special(args):
-    """`equilibria` and `periodic`: the special solutions of a config's system."""
-    from .pipeline import special
-    command = {"equilibria": special.print_equilibria, "periodic": special.print_periodic}
-    return command[args.command](args.config, args.json, args.output,
-                                 "python -m survey " + " ".join(sys.argv[1:]))
+    """`equilibria` and `periodic`: the special solutions of a config's system, or with a
+    parameter their family (and with --output, its archive)."""
+    from .pipeline import archive, families
+    from .presentation import families as family_words
+    solved = families.solve(args.config, args.command, args.output)
+    if args.output:
+        written = archive.write_family(families.dataset(solved), args.output,
+                                       "python -m survey " + " ".join(sys.argv[1:]))
+        print(f"wrote {written}")
+    print(family_words.as_json(solved) if args.json else family_words.as_text(solved))
+    return 0
 
 
 def _verify(args):
     from .catalog.errors import ConfigError
-    from .pipeline.special import is_family, verify_family
+    from .pipeline.families import is_family, verify_family
     from .pipeline.sweep import verify
     if args.cells < 1:
         raise ConfigError("--cells", f"must be >= 1, got {args.cells}")

@@ -51,7 +51,7 @@ out = dict(
 # families: a Lyapunov family from a relative equilibrium's normal mode (rotating, in the
 # energy), the figure-eight in a mass with its bifurcations bisected, and a family of
 # relative equilibria with its Routh bifurcation
-from survey.pipeline.special import solve_equilibria, solve_periodic
+from survey.pipeline.families import solve_equilibria, solve_periodic
 for name in ("rotating_triangle_breathing", "figure_eight_mass_family"):
     family = solve_periodic(f"{sys.argv[2]}/{name}.toml")[2]
     out[name] = np.concatenate([family.parameters, [b.parameter for b in family.bifurcations]]

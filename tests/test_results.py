@@ -4,12 +4,14 @@ import re
 import tomllib
 from pathlib import Path
 
+import numpy as np
 import pytest
 import xarray as xr
 
 from survey.pipeline import orbits
 from survey.pipeline.config import parse_config
-from survey.pipeline.special import is_family, special_table, verify_family
+from survey.catalog.families import FAMILY_VARIABLES
+from survey.pipeline.families import is_family, special_table, verify_family
 from survey.pipeline.sweep import verify
 from survey.presentation.results_text import PLACEHOLDER, render
 
@@ -88,6 +90,12 @@ def test_each_archive_stores_its_workflow_and_verifies(archive):
         if "family" not in ds.attrs:    # what its report needs from a solver, stored: the
             #                             command and ds.survey.report() write the same
             assert {"special_cells", "section_slice"} <= set(ds.attrs), archive.name
+        else:                           # a family's variables are the catalog's
+            declared = {v.name: v for v in FAMILY_VARIABLES[ds.attrs["family"]]}
+            assert set(ds.data_vars) == set(declared) - set(ds.coords)
+            for name in ds.data_vars:
+                assert ds[name].dims == declared[name].dims
+                assert ds[name].attrs.get("long_name", "") == declared[name].long_name
     ok, lines = verify_family(archive, cells=2) if is_family(archive) else \
         verify(archive, cells=2)
     assert ok, lines
@@ -206,3 +214,20 @@ def test_every_check_run_moves_the_orbits_not_only_the_ensembles(archive):
         assert np.any(a[V.birkhoff_digits].values[chaotic] != b[V.birkhoff_digits].values[chaotic])
         assert np.any(np.any(a[V.frequency].values[chaotic] != b[V.frequency].values[chaotic],
                              axis=-1))
+
+
+def test_a_family_dataset_holds_what_the_catalog_declares():
+    """pipeline.archive.family_dataset refuses a variable the catalog does not declare for
+    the family, and one it declares that is not given."""
+    from survey.pipeline.archive import family_dataset
+    names = [v.name for v in FAMILY_VARIABLES["equilibria"]]
+    values = {name: [] for name in names}
+    values["positions"] = np.zeros((0, 3, 2))
+    values["eigenvalue_real"] = values["eigenvalue_imag"] = np.zeros((0, 4))
+    ds = family_dataset("equilibria", values, "mass_1", attrs={"config": ""})
+    assert list(ds.data_vars) == names and ds.attrs["family"] == "equilibria"
+    assert ds["bifurcation_parameter"].attrs["long_name"].startswith("mass_1 where")
+    with pytest.raises(ValueError, match="period"):
+        family_dataset("equilibria", {**values, "period": []})
+    with pytest.raises(ValueError, match="stable"):
+        family_dataset("equilibria", {k: v for k, v in values.items() if k != "stable"})

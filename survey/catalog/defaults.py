@@ -14,6 +14,8 @@ SAMPLE_INTERVAL = 0.1       # time between the orbit samples of the torus analys
 NAFF_LINES = 5              # NAFF lines per shape signal and half orbit
 EXTEND = 4                  # a verdict in doubt at T is decided again at EXTEND * T ...
 EXTEND_ROUNDS = 1           # ... up to this many times
+EXCURSION = 1e3             # a periodic orbit leaves its start by this times its return error
+TURNING = 0.99              # ... and its velocity turns through this much of 2 pi at least
 
 # what each [check] variant changes: together with the grid's own step they make up an
 # onset's uncertainty (report: the budget)

@@ -23,6 +23,7 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
+from ..catalog.defaults import EXCURSION, TURNING
 from ..machine import linalg, portable
 from ..physics.equilibria import (
     Bifurcation,
@@ -60,6 +61,11 @@ class PeriodicOrbit(NamedTuple):
         """Per stability index: whether its pair lies on the unit circle (b real, |b| <= 1)."""
         b = self.indices
         return (np.abs(b.imag) <= UNIT_CIRCLE) & (np.abs(b.real) <= 1.0)
+
+    @property
+    def polar(self) -> tuple[np.ndarray, np.ndarray]:
+        """The multipliers' moduli and angles, with the same bits on every machine."""
+        return linalg.modulus(self.multipliers), linalg.argument(self.multipliers)
 
     @property
     def stable(self) -> bool:
@@ -148,8 +154,6 @@ class Motion(NamedTuple):
         return ""
 
 
-EXCURSION = 1e3         # a periodic orbit leaves its start by this times its return error
-TURNING = 0.99          # ... and its velocity turns through this much of 2 pi at least
 SAMPLES = 4096          # points of the period where both are measured
 SHORTEST = 1e3          # a period guess below 1/SHORTEST of the flow's time scale is refused
 

@@ -3,6 +3,7 @@ declarations in survey.catalog.variables), the CF coordinates, attributes and pr
 atomic NetCDF write, and the checks `verify` runs on a file."""
 from __future__ import annotations
 
+import contextlib
 import datetime
 import hashlib
 import os
@@ -18,7 +19,8 @@ import numpy as np
 from ..analysis.classify import classify, stable, stored_table
 from ..analysis.frequencies import labelled
 from ..catalog import defaults
-from ..catalog.errors import ArchiveError
+from ..catalog.errors import ArchiveError, SurveyError
+from ..catalog.families import FAMILY_VARIABLES
 from ..catalog.regimes import Thresholds
 from ..catalog.status import Status
 from ..catalog.variables import (
@@ -353,6 +355,51 @@ def derive(ds) -> dict:
            "regime:attrs": {"thresholds": thresholds.describe()}}
     if V.frequency in ds:
         out[V.frequency_labelled] = labelled(ds, regime)
+    return out
+
+
+def family_dataset(kind: str, values: dict, parameter: str = "", coords=None,
+                   attrs=None):
+    """A family's Dataset (catalog.families): every variable declared for `kind`, in the
+    declared order, from `values` (name -> array) -- one declared and not given, or given
+    and not declared, is an error -- with its long name (`{parameter}` filled in) and
+    units; labels (dtype str) as object arrays."""
+    import xarray as xr
+    declared = FAMILY_VARIABLES[kind]
+    names = [v.name for v in declared]
+    if set(values) != set(names):
+        raise ValueError(f"a {kind} family's variables are {names}: "
+                         f"{sorted(set(values) ^ set(names))} given or missing")
+    data = {}
+    for v in declared:
+        if v.name in (coords or {}):       # the parameter labels the members in its place
+            continue
+        array = np.array(values[v.name], dtype=object if v.dtype == "str" else v.dtype)
+        declared_attrs = {"long_name": v.long_name.format(parameter=parameter)} \
+            if v.long_name else {}
+        if v.units:
+            declared_attrs["units"] = v.units
+        data[v.name] = (v.dims, array, declared_attrs)
+    return xr.Dataset(data, coords=coords, attrs={"family": kind, **(attrs or {})})
+
+
+def write_family(ds, path, command: str) -> Path:
+    """A family's Dataset in NetCDF with its provenance (command, commit, machine,
+    versions) and its config's sha256, written atomically."""
+    out = Path(path)
+    ds = ds.assign_attrs(config_sha256=hashlib.sha256(ds.attrs["config"].encode()).hexdigest(),
+                         history=command, git_commit=git_commit(), machine=machine(),
+                         **{f"version_{k}": v for k, v in versions().items()})
+    tmp = out.with_name(f".{out.name}.partial")
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        ds.to_netcdf(tmp, engine="netcdf4")
+        tmp.replace(out)
+    except (OSError, RuntimeError) as exc:     # netCDF4 reports some as RuntimeError
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise SurveyError(f"cannot write {out} ({getattr(exc, 'strerror', None) or exc}); "
+                          "free some space or choose another --output") from None
     return out
 
 

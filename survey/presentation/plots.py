@@ -759,7 +759,7 @@ def frequency_map(ds, order: int = 5) -> Figure:
 
 
 def family_diagram(ds, title: str = "") -> Figure:
-    """The bifurcation diagram of a periodic family (pipeline.special.family_dataset):
+    """The bifurcation diagram of a periodic family (pipeline.families.periodic_dataset):
     period against the parameter in the members' order, stable stretches blue and unstable
     red, folds and multiplier crossings marked; below, Henon's stability indices
     b = (mu + 1/mu)/2, linearly stable where every |b| <= 1 (the grey band; a complex b, a

@@ -208,14 +208,14 @@ def test_the_readme_tables_are_the_declarations():
 def test_shipped_workflows_and_the_embedded_default_validate():
     import pathlib
     root = pathlib.Path(__file__).parents[2]
-    from survey.pipeline import orbits, special
+    from survey.pipeline import orbits, families
     paths = sorted((root / "workflows").glob("*.toml")) + [root / "survey" / "default.toml"]
     assert len(paths) >= 4
     for path in paths:
-        if special.special_table(path) == "equilibria":
-            assert special.load_equilibria(path)
-        elif special.special_table(path) == "periodic":
-            assert special.load_periodic(path)
+        if families.special_table(path) == "equilibria":
+            assert families.load_equilibria(path)
+        elif families.special_table(path) == "periodic":
+            assert families.load_periodic(path)
         elif orbits.is_orbit_workflow(path):
             assert orbits.load_workflow(path)
         else:

@@ -16,7 +16,7 @@ from survey.catalog.status import Status
 from survey.catalog.variables import V
 from survey.cli import main, orbit_workflow
 from survey.pipeline import orbits
-from survey.pipeline.special import special_table
+from survey.pipeline.families import special_table
 from survey.pipeline.config import _to_toml, load_config
 from survey.pipeline.sweep import run_survey
 from survey.presentation import orbit_plots, plots, report, sections
