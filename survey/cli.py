@@ -167,9 +167,14 @@ def _plot(args):
 
 
 def _with_report_attributes(ds):
-    """An archive with what its report needs from a solver (pipeline.special.
-    report_attributes): stored by every survey since they were, computed here for an
-    archive written before."""
+    """An archive with what its report reads beside the cells -- its resolved config
+    (pipeline.config.Config.resolved_text) and what only a solver computes
+    (pipeline.special.report_attributes) -- stored by every survey since they were,
+    computed here for an archive written before."""
+    if "config_resolved" not in ds.attrs:
+        from .pipeline.config import parse_config
+        ds = ds.assign_attrs(config_resolved=parse_config(
+            ds.attrs["config"], check_output=False).resolved_text)
     if "special_cells" in ds.attrs:
         return ds
     from .pipeline.special import report_attributes

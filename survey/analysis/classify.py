@@ -240,11 +240,14 @@ def on_resonance(ds, th: Thresholds) -> np.ndarray:
 
 
 def stored_config(ds) -> dict:
-    """The config stored in an archive as TOML tables ({} where there is none, or it
-    cannot be read: not TOML, or nested deeper than the parser's recursion)."""
+    """The config an archive was run with, as TOML tables: the resolved one, every default
+    filled in (`config_resolved`: pipeline.config.Config.resolved_text), which archives
+    written before it lack -- `python -m survey report` and `plot` fill it in for them --
+    else the config as written. {} where there is none, or it cannot be read (not TOML,
+    or nested deeper than the parser's recursion)."""
     import tomllib
     try:
-        return tomllib.loads(str(ds.attrs.get("config", "")))
+        return tomllib.loads(str(ds.attrs.get("config_resolved", ds.attrs.get("config", ""))))
     except (tomllib.TOMLDecodeError, RecursionError):
         return {}
 

@@ -249,6 +249,7 @@ def attributes(config, command: str) -> dict:
         "references": "J.D. Meiss, Hamiltonian Triplet Interactions: Areal and Perimetric "
                       "Forces",
         "config": config.text,
+        "config_resolved": config.resolved_text,
         "config_sha256": config.sha256,
         "result_key": config.result_key(),
         "grid_axes": " ".join(a.name for a in config.axes),

@@ -121,6 +121,24 @@ class Config:
         return settings_of(self.tables)
 
     @property
+    def resolved_text(self) -> str:
+        """The config as it was run, every default filled in, as TOML: each table given or
+        implied (an optional [section], [check] or [refine] only if enabled; absent
+        values -- none or computed elsewhere -- left out), [initial] with the family's
+        fixed parameters. Archived beside the text as written (`config_resolved`), so a
+        reader needs no defaults of its own."""
+        def plain(v):
+            if isinstance(v, dict):
+                return {k: plain(x) for k, x in v.items() if x is not None}
+            if isinstance(v, (list, tuple)):
+                return [plain(x) for x in v]
+            return v.tolist() if isinstance(v, (np.ndarray, np.generic)) else v
+        tables = {name: plain(body) for name, body in self.tables.items()
+                  if isinstance(body, dict) and self.tables.get(f"{name}_enabled", True)}
+        tables["initial"] = {**tables["initial"], **plain(self.fixed)}
+        return _to_toml(tables)
+
+    @property
     def system_table(self) -> dict:
         """The [system] table as build_system takes it (the form a [[plane]] table and a
         family's systems share)."""

@@ -48,7 +48,6 @@ def equilibrium_cells(ds, most: int = 8) -> list[dict]:
     return out
 
 
-
 def homographic_period(system: System, y, horizon: float) -> float | None:
     """The period of the size of a homographic start -- a central configuration moving
     as a similarity (v_i = a q_i + b e_z x q_i, forces -lambda m_i q_i) keeps its shape
@@ -81,7 +80,6 @@ def homographic_period(system: System, y, horizon: float) -> float | None:
         system.masses[None, :, None] * qs, axis=1, keepdims=True) / m.sum()) ** 2, axis=(1, 2))
     low = np.flatnonzero((inertia[1:-1] < inertia[:-2]) & (inertia[1:-1] <= inertia[2:])) + 1
     return float(times[low[1]] - times[low[0]]) if low.size >= 2 else None
-
 
 
 def homographic_cells(ds, most: int = 8) -> list[dict]:
@@ -120,7 +118,6 @@ def homographic_cells(ds, most: int = 8) -> list[dict]:
     return out
 
 
-
 def _cell_system(config, ds, idx) -> System:
     """The System of an archive's cell at index `idx` of its grid: the [system] table with
     the cell's values of any interaction-term axes (read from the archive's coordinates,
@@ -130,14 +127,12 @@ def _cell_system(config, ds, idx) -> System:
                                                   if a.term >= 0})
 
 
-
 def special_cells(ds) -> list[dict]:
     """The special solutions an archive's cells start on, for its report: relative
     equilibria at its equilibrium cells, relative periodic orbits at its homographic
     ones."""
     ds = as_grid(ds)
     return equilibrium_cells(ds) + homographic_cells(ds)
-
 
 
 def report_attributes(ds) -> dict[str, str]:
@@ -156,7 +151,6 @@ def report_attributes(ds) -> dict[str, str]:
         raise TypeError(f"{type(x).__name__} is not JSON")
     return {"special_cells": json.dumps(special_cells(ds), default=plain),
             "section_slice": json.dumps(section_slice(ds))}
-
 
 
 def section_slice(ds) -> dict:

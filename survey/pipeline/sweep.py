@@ -701,7 +701,8 @@ def _refinement_problem(ds, config, ids) -> str:
             f"{extra} not called for)")
 
 
-REPORT_ATTRIBUTES = ("special_cells", "section_slice")   # special.report_attributes
+# what a report reads beside the cells: the resolved config, special.report_attributes
+REPORT_ATTRIBUTES = ("config_resolved", "special_cells", "section_slice")
 
 
 def same_results(old, new) -> list[str]:
@@ -711,16 +712,15 @@ def same_results(old, new) -> list[str]:
     with archive.open_archive(old) as a, archive.open_archive(new) as b:
         if a.attrs["config"] != b.attrs["config"]:
             return ["the config differs"]
-        stored = [k for k in REPORT_ATTRIBUTES if a.attrs.get(k) != b.attrs.get(k)]
-        if stored:
-            return [f"the {stored[0]} attribute differs"]
+        lines = [f"the {k} attribute differs" for k in REPORT_ATTRIBUTES
+                 if a.attrs.get(k) != b.attrs.get(k)]
         if set(a.variables) != set(b.variables):
-            return ["the variables differ: " + ", ".join(sorted(set(a.variables)
-                                                                ^ set(b.variables)))]
+            return lines + ["the variables differ: " + ", ".join(sorted(set(a.variables)
+                                                                        ^ set(b.variables)))]
         names = [k for k in a.variables if k not in BY_NAME or BY_NAME[k].reproducible]
         stored = {k: a[k].values for k in names}
         fresh = {k: b[k].values for k in names}
-        return compare(stored, fresh)
+        return lines + compare(stored, fresh)
 
 
 def compare(stored: dict, fresh: dict, differences: dict | None = None) -> list[str]:

@@ -23,7 +23,6 @@ from matplotlib.patches import Patch
 
 from ..analysis.classify import horizon, regular_share, stored_config, stored_table
 from ..analysis.refine import as_grid, painted, refined_axes
-from ..catalog import defaults
 from ..catalog.indicators import OWNER, REGISTRY
 from ..catalog.regimes import IRREGULAR, REGULAR, Regime, Thresholds
 from ..catalog.status import Status
@@ -119,26 +118,27 @@ def figures(ds, variables=None, special=None, slice_at=None) -> dict[str, Figure
 
 def survey_title(ds) -> str:
     """What every survey figure is of: the survey, its family and potential, T, and what
-    varies over the grid."""
-    config = stored_config(ds)
-    name = config.get("survey", {}).get("name", "")
-    family = config.get("initial", {}).get("family", "")
-    system = config.get("system", {})
-    if "interactions" in system:
-        potential = " + ".join(t.get("potential", "?") + (" (m_i m_j)" if t.get(
-            "mass_weighted") else "") for t in system["interactions"])
-    else:
-        potential = system.get("potential", "perimetric_power")
-    T = float(config.get("integration", {}).get("t_final", defaults.T_FINAL))
-    longest = float(np.nanmax(ds[V.regime_horizon].values)) if V.regime_horizon in ds and \
-        np.isfinite(ds[V.regime_horizon].values).any() else T
+    varies over the grid (of a Dataset without a stored config: its title and grid)."""
     axes = map_axes(ds)
     varies = (f"; {', '.join(axes)} varied over {ds[V.status].size} cells" if axes
               else "; one cell")
     if "level" in ds.coords:
         varies += f" (refined to level {int(ds['level'].max())})"
+    config = stored_config(ds)
+    if not config:
+        return f"{ds.attrs.get('title', 'survey')}{varies}"
+    system = config["system"]
+    if "interactions" in system:
+        potential = " + ".join(t["potential"] + (" (m_i m_j)" if t.get(
+            "mass_weighted") else "") for t in system["interactions"])
+    else:
+        potential = system["potential"]
+    T = float(config["integration"]["t_final"])
+    longest = float(np.nanmax(ds[V.regime_horizon].values)) if V.regime_horizon in ds and \
+        np.isfinite(ds[V.regime_horizon].values).any() else T
     extended = f" (verdicts in doubt to {longest:g})" if longest > T else ""
-    return f"{name}: {family} family under {potential}, T = {T:g}{extended}{varies}"
+    return (f"{config['survey']['name']}: {config['initial']['family']} family under "
+            f"{potential}, T = {T:g}{extended}{varies}")
 
 
 def save(figs: dict[str, Figure], folder, stem: str) -> list[Path]:

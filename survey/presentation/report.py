@@ -13,7 +13,6 @@ from ..analysis.findings import decorrelated, how_many, islands, regions, twists
 from ..analysis.onset import budget, onset, onset_over_horizons, runs
 from ..analysis.refine import as_grid, boundaries
 from ..catalog import defaults
-from ..catalog.indicators import INDICATORS
 from ..catalog.regimes import IRREGULAR, REGULAR, Regime, Thresholds
 from ..catalog.status import Status
 from ..catalog.variables import ENSEMBLE_MIN, START_COORDINATES, V
@@ -65,9 +64,7 @@ def markdown(ds, figure_names=(), checks=None, special=None) -> str:
     out = [f"# {ds.attrs.get('title', 'survey report')}", ""]
 
     out += ["## What was run", ""]
-    system = config.get("system", {})
-    integ = config.get("integration", {})
-    initial = config.get("initial", {})
+    system, integ, initial = config["system"], config["integration"], config["initial"]
     grid = ", ".join(f"{a} from {float(ds[a].min()):g} to {float(ds[a].max()):g} "
                      f"({np.unique(ds[a].values).size} values)" for a in axes) or "a single cell"
     if "interactions" in system:
@@ -78,20 +75,19 @@ def markdown(ds, figure_names=(), checks=None, special=None) -> str:
             + (" times m_i m_j" if t.get("mass_weighted") else "")
             for t in system["interactions"])
     else:
-        potential = (f"potential `{system.get('potential', defaults.POTENTIAL)}` "
-                     f"{system.get('params', {}) or '(its default parameters)'}")
-    tori = config.get("tori", {})
-    which = config.get("indicators", {}).get("which", INDICATORS)
-    out += [f"- System: {system.get('bodies', defaults.BODIES)} bodies in "
-            f"{system.get('dim', defaults.DIM)}-D, masses {system.get('masses', 'all 1')}, "
+        potential = (f"potential `{system['potential']}` "
+                     f"{system['params'] or '(its default parameters)'}")
+    out += [f"- System: {system['bodies']} bodies in "
+            f"{system['dim']}-D, masses {system.get('masses', 'all 1')}, "
             f"{potential}.",
             f"- Initial conditions: family `{initial.get('family')}`"
-            + "".join(f", {k} = {v}" for k, v in initial.items() if k != "family"
-                      and k not in axes) + f"; grid: {grid}; {n} cell{'s' * (n != 1)}.",
-            f"- Integration: DOP853 to t = {integ.get('t_final', defaults.T_FINAL):g}, rtol = "
-            f"{integ.get('rtol', defaults.RTOL):g}, atol = {integ.get('atol', defaults.ATOL):g}; "
-            f"chaos indicators {', '.join(which)}; torus analysis every "
-            f"{tori.get('sample_interval', defaults.SAMPLE_INTERVAL):g} time units.",
+            + "".join(f", {k} = {v}" for k, v in initial.items() if k not in (
+                "family", "starts_per_cell") and k not in axes)
+            + f"; grid: {grid}; {n} cell{'s' * (n != 1)}.",
+            f"- Integration: DOP853 to t = {integ['t_final']:g}, rtol = "
+            f"{integ['rtol']:g}, atol = {integ['atol']:g}; chaos indicators "
+            f"{', '.join(config['indicators']['which'])}; torus analysis every "
+            f"{config['tori']['sample_interval']:g} time units.",
             *_scale_free(ds, axes),
             f"{PROVENANCE_LINE}{ds.attrs.get('version_survey', '?')}, commit "
             f"`{ds.attrs.get('git_commit', '?')}`; {ds.attrs.get('history', '')}.", ""]
@@ -112,7 +108,7 @@ def markdown(ds, figure_names=(), checks=None, special=None) -> str:
     out += ["", "Confirmed: the verdict is of the class (regular or irregular) decided at the "
                 "horizon before; the others are claimed to their horizon only. "
                 + _sample_share(ds, axes, regime), ""]
-    out += _horizons(ds, regime, steady, integ.get("t_final", defaults.T_FINAL))
+    out += _horizons(ds, regime, steady, integ["t_final"])
 
     out += _ensembles(ds, regime)
     out += _refinement(ds, config, regime, check)
@@ -143,18 +139,18 @@ def _refinement(ds, config, regime, check=None) -> list[str]:
     seed, its own refinement) puts the nearest boundary of the same kind."""
     if "level" not in ds.coords:
         return []
-    r = config.get("refine", {})
+    r = config["refine"]
     level = ds["level"].values
     axes = str(ds.attrs.get("grid_axes", "")).split()
     base = int(np.sum(level == 0))
     top = int(level.max())
-    why = ["their verdict class (regular, irregular, neither) differs" if r.get("by", "class")
-           == "class" else "their regimes differ"]
+    why = ["their verdict class (regular, irregular, neither) differs" if r["by"] == "class"
+           else "their regimes differ"]
     if r.get("indicator"):
         why += [f"{r['indicator']} changes by more than " + " or by ".join(
             x for x in (f"{r['jump']:g}" if r.get("jump") else "",
                         f"a factor {r['ratio']:g}" if r.get("ratio") else "") if x)]
-    limits = [f"at most {r.get('max_level', 4)} levels"]
+    limits = [f"at most {r['max_level']} levels"]
     if r.get("tolerance"):
         limits.append(f"intervals no narrower than {r['tolerance']:g}")
     if r.get("max_cells"):
@@ -340,7 +336,7 @@ def _ensembles(ds, regime) -> list[str]:
     if V.ftle_ensemble not in ds or V.ensemble_orbits not in ds:
         return []
     config = stored_config(ds)
-    size = config.get("indicators", {}).get("perturbation_size", 1e-9)
+    size = config["indicators"]["perturbation_size"]
     orbits = ds[V.ensemble_orbits].values
     finished = orbits > 0
     if not finished.any():
@@ -377,8 +373,7 @@ def _ensembles(ds, regime) -> list[str]:
             row += f" {med(ds[V.megno].values):.3g} | {med(m[..., q95] - m[..., q05]):.2g} |"
         out.append(row)
     horizon = ds[V.regime_horizon].values if V.regime_horizon in ds else \
-        np.full(regime.shape, float(config.get("integration", {}).get("t_final",
-                                                                     defaults.T_FINAL)))
+        np.full(regime.shape, float(config["integration"]["t_final"]))
     found = decorrelated(ds[V.ftle].values, horizon, size,
                          finished & np.isin(regime, IRREGULAR))
     return out + ["", f"{found.text()}.", ""]
@@ -485,7 +480,7 @@ def plus_minus(x: float, error: float) -> str:
 
 def _seed(ds) -> int:
     config = stored_config(ds)
-    return int(config.get("indicators", {}).get("seed", 0))
+    return int(config["indicators"]["seed"])
 
 
 def _lines(ds, a, b):
@@ -597,8 +592,7 @@ NEAR = 0.1      # a vote this close to its threshold (relative) is named beside 
 def _change(variant: str, check) -> str:
     """A [check] run's change, from the config its archive stores."""
     config = stored_config(check)
-    return defaults.check_change(variant, config.get("indicators", {}),
-                                 config.get("integration", {}))
+    return defaults.check_change(variant, config["indicators"], config["integration"])
 
 
 def _near_thresholds(ds, x, where, axis, th) -> list[str]:
@@ -635,7 +629,7 @@ def _second_run(ds, check, regime) -> list[str]:
     orbits = [int(np.max(x[V.ensemble_orbits].values, initial=0)) if V.ensemble_orbits in x
               else 1 for x in (ds, check)]
     other = check[V.regime].values
-    nudge = float(stored_config(check).get("indicators", {}).get("nudge", 0.0))
+    nudge = float(stored_config(check)["indicators"]["nudge"])
     nominal = (f", and each cell's nominal orbit started {nudge:g} (relative) away -- other "
                "last bits, so that every line of evidence can move, the Birkhoff digits and "
                "frequencies too" if nudge else ", the same nominal orbits (only the deviation "
