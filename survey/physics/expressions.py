@@ -1,0 +1,263 @@
+"""Interaction terms a researcher writes as a formula, read as data: a whitelist grammar of
+numbers, the term's variables, its named parameters, + - * / **, parentheses and a fixed
+list of functions. The text is never given to eval, sympify or parse_expr (they run
+Python); anything outside the grammar -- a stray character, an unknown name, a call of
+anything not listed, attribute access, a text too long or nested too deep -- is one
+ValueError naming it and where it stands, before any work.
+
+A parsed formula is a tree of tuples: ("num", value), ("name", name),
+("call", function, argument), ("neg", a), and (op, a, b) for op in + - * / **. The tree
+is evaluated in plain floats here (`evaluate`: the checks before a run, such as a
+triplet term's symmetry) and differentiated exactly to compiled kernels elsewhere.
+"""
+from __future__ import annotations
+
+import difflib
+import math
+import random
+import re
+
+# the functions a formula may call, each with its evaluation in floats (the kernels use
+# machine.portable's, whose bits are the same on every machine)
+FUNCTIONS = {
+    "exp": math.exp, "log": math.log, "sqrt": math.sqrt, "sin": math.sin, "cos": math.cos,
+    "tan": math.tan, "atan": math.atan, "sinh": math.sinh, "cosh": math.cosh,
+    "tanh": math.tanh, "abs": abs,
+}
+CONSTANTS = {"pi": math.pi}
+# what each kind of term is a function of: a pair's distance, a triangle's sides (with
+# its perimeter P and area A = |signed area| as names too), one body's coordinates
+VARIABLES = {
+    "pair": ("r",),
+    "triplet": ("a", "b", "c", "P", "A"),
+    "external": ("x", "y", "z"),
+}
+MAX_LENGTH = 2000          # characters of one formula
+MAX_DEPTH = 40             # nesting of parentheses, calls and operators
+MAX_NODES = 2000
+
+_TOKEN = re.compile(r"\s*(?:(?P<num>(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)"
+                    r"|(?P<name>[A-Za-z_][A-Za-z_0-9]*)|(?P<op>\*\*|[-+*/(),]))")
+
+
+def _tokens(text: str) -> list[tuple[str, str, int]]:
+    """(kind, text, position) of each token; a character outside the grammar is an error
+    naming it."""
+    out, at = [], 0
+    while at < len(text):
+        m = _TOKEN.match(text, at)
+        if m is None or m.end() == at:
+            if text[at:].strip() == "":
+                break
+            bad = text[at:].lstrip()[0]
+            where = len(text) - len(text[at:].lstrip())
+            hint = {"^": " (powers are written **)", ".": " (attribute access is not "
+                    "allowed)", "[": " (indexing is not allowed)", "=": "", ";": "",
+                    "'": " (strings are not allowed)", '"': " (strings are not allowed)"}
+            raise ValueError(f"unexpected {bad!r} at character {where + 1}"
+                             f"{hint.get(bad, '')}: a formula holds numbers, names, "
+                             "+ - * / **, parentheses and calls of " + ", ".join(FUNCTIONS))
+        kind = m.lastgroup
+        out.append((kind, m.group(kind), m.start(kind)))
+        at = m.end()
+    out.append(("end", "", len(text)))
+    return out
+
+
+class _Parser:
+    """Recursive descent, lowest precedence first: sums, products, signs, powers (right
+    associative, binding tighter than a sign on their left: -x**2 is -(x**2)), atoms."""
+
+    def __init__(self, text: str, names: tuple[str, ...]):
+        self.tokens = _tokens(text)
+        self.i = 0
+        self.names = names
+        self.nodes = 0
+
+    def peek(self):
+        return self.tokens[self.i]
+
+    def take(self):
+        token = self.tokens[self.i]
+        self.i += 1
+        return token
+
+    def node(self, *parts) -> tuple:
+        self.nodes += 1
+        if self.nodes > MAX_NODES:
+            raise ValueError(f"is longer than {MAX_NODES} operations")
+        return parts
+
+    def expect(self, text: str, what: str):
+        kind, got, at = self.take()
+        if got != text:
+            raise ValueError(f"expected {what} at character {at + 1}, found "
+                             + (f"{got!r}" if kind != "end" else "the end"))
+
+    def parse(self) -> tuple:
+        tree = self.sum(0)
+        kind, got, at = self.peek()
+        if kind != "end":
+            raise ValueError(f"unexpected {got!r} at character {at + 1}")
+        return tree
+
+    def check_depth(self, depth: int):
+        if depth > MAX_DEPTH:
+            raise ValueError(f"is nested deeper than {MAX_DEPTH} levels")
+
+    def sum(self, depth):
+        self.check_depth(depth)
+        left = self.product(depth + 1)
+        while self.peek()[1] in ("+", "-"):
+            op = self.take()[1]
+            left = self.node(op, left, self.product(depth + 1))
+        return left
+
+    def product(self, depth):
+        self.check_depth(depth)
+        left = self.signed(depth + 1)
+        while self.peek()[1] in ("*", "/"):
+            op = self.take()[1]
+            left = self.node(op, left, self.signed(depth + 1))
+        return left
+
+    def signed(self, depth):
+        self.check_depth(depth)
+        if self.peek()[1] in ("+", "-"):
+            op = self.take()[1]
+            inner = self.signed(depth + 1)
+            return inner if op == "+" else self.node("neg", inner)
+        return self.power(depth + 1)
+
+    def power(self, depth):
+        self.check_depth(depth)
+        base = self.atom(depth + 1)
+        if self.peek()[1] == "**":
+            self.take()
+            return self.node("**", base, self.signed(depth + 1))
+        return base
+
+    def atom(self, depth):
+        self.check_depth(depth)
+        kind, text, at = self.take()
+        if kind == "num":
+            value = float(text)
+            if not math.isfinite(value):
+                raise ValueError(f"the number {text} at character {at + 1} is not finite")
+            return self.node("num", value)
+        if text == "(":
+            inner = self.sum(depth + 1)
+            self.expect(")", "')'")
+            return inner
+        if kind == "name":
+            if self.peek()[1] == "(":
+                if text not in FUNCTIONS:
+                    raise ValueError(f"{text}(...) at character {at + 1} is not a function "
+                                     "a formula may call" + _suggest(text, FUNCTIONS)
+                                     + "; they are " + ", ".join(FUNCTIONS))
+                self.take()
+                argument = self.sum(depth + 1)
+                if self.peek()[1] == ",":
+                    raise ValueError(f"{text} takes one argument (character "
+                                     f"{self.peek()[2] + 1})")
+                self.expect(")", f"')' closing {text}(")
+                return self.node("call", text, argument)
+            if text in CONSTANTS:
+                return self.node("num", CONSTANTS[text])
+            if text not in self.names:
+                known = list(self.names) + list(CONSTANTS)
+                raise ValueError(f"unknown name {text!r} at character {at + 1}"
+                                 + _suggest(text, known) + "; the names are "
+                                 + ", ".join(known) + (
+                                     f" ({text} is a function: call it, {text}(...))"
+                                     if text in FUNCTIONS else ""))
+            return self.node("name", text)
+        if kind == "end":
+            raise ValueError("ends where a number, a name or '(' should follow")
+        raise ValueError(f"unexpected {text!r} at character {at + 1}")
+
+
+def _suggest(word, options) -> str:
+    close = difflib.get_close_matches(word, list(options), n=1)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+def parse(text, names) -> tuple:
+    """The tree of a formula in the given names (variables and parameters); ValueError
+    naming what is wrong with it."""
+    if not isinstance(text, str):
+        raise ValueError(f"must be a string (a formula), got {type(text).__name__}")
+    if len(text) > MAX_LENGTH:
+        raise ValueError(f"is {len(text)} characters long; a formula may have at most "
+                         f"{MAX_LENGTH}")
+    if not text.strip():
+        raise ValueError("is empty: give the formula, e.g. \"P**2 / 2\"")
+    return _Parser(text, tuple(names)).parse()
+
+
+def names_in(tree) -> set[str]:
+    """The names a tree uses."""
+    if tree[0] == "name":
+        return {tree[1]}
+    if tree[0] == "num":
+        return set()
+    return set().union(*(names_in(t) for t in tree[1:] if isinstance(t, tuple)))
+
+
+def evaluate(tree, values: dict) -> float:
+    """The tree's value in floats at `values` (name -> number): the checks before a run."""
+    op = tree[0]
+    if op == "num":
+        return tree[1]
+    if op == "name":
+        return values[tree[1]]
+    if op == "call":
+        return FUNCTIONS[tree[1]](evaluate(tree[2], values))
+    if op == "neg":
+        return -evaluate(tree[1], values)
+    a, b = evaluate(tree[1], values), evaluate(tree[2], values)
+    if op == "+":
+        return a + b
+    if op == "-":
+        return a - b
+    if op == "*":
+        return a * b
+    if op == "/":
+        return a / b
+    return a ** b
+
+
+def triangle(a: float, b: float, c: float) -> dict:
+    """The triplet variables of a triangle with sides a, b, c: they, P and the area (Heron)."""
+    s = 0.5 * (a + b + c)
+    return {"a": a, "b": b, "c": c, "P": a + b + c,
+            "A": math.sqrt(max(s * (s - a) * (s - b) * (s - c), 0.0))}
+
+
+def check_symmetric(tree, params: dict, tries: int = 8, seed: int = 0) -> None:
+    """A triplet formula must not depend on which side is which (the paper's potentials
+    are functions of the triangle): its value under each permutation of a, b, c at random
+    triangles, to 1e-10 relative; ValueError naming a pair of sides it tells apart."""
+    rng = random.Random(seed)
+    swaps = (("a", "b"), ("b", "c"), ("a", "c"))
+    for _ in range(tries):
+        sides = sorted(rng.uniform(0.5, 2.0) for _ in range(3))
+        sides[2] = min(sides[2], 0.95 * (sides[0] + sides[1]))
+        rng.shuffle(sides)
+        values = {**params, **triangle(*sides)}
+        try:
+            here = evaluate(tree, values)
+        except (ValueError, ZeroDivisionError, OverflowError):
+            continue
+        for u, v in swaps:
+            swapped = {**values, u: values[v], v: values[u]}
+            try:
+                there = evaluate(tree, swapped)
+            except (ValueError, ZeroDivisionError, OverflowError):
+                continue
+            if abs(here - there) > 1e-10 * max(abs(here), abs(there), 1e-300):
+                raise ValueError(f"is not symmetric in the sides: exchanging {u} and {v} "
+                                 f"changes it ({here:.6g} -> {there:.6g} at a = "
+                                 f"{values['a']:.3g}, b = {values['b']:.3g}, c = "
+                                 f"{values['c']:.3g}); a triplet term is a function of "
+                                 "the triangle, the same whichever side is called a")
