@@ -16,6 +16,12 @@ import difflib
 import math
 import random
 import re
+from typing import NamedTuple
+
+import numpy as np
+
+from ..machine import portable
+from ..machine.jit import helper, leaf
 
 # the functions a formula may call, each with its evaluation in floats (the kernels use
 # machine.portable's, whose bits are the same on every machine)
@@ -261,3 +267,216 @@ def check_symmetric(tree, params: dict, tries: int = 8, seed: int = 0) -> None:
                                  f"{values['a']:.3g}, b = {values['b']:.3g}, c = "
                                  f"{values['c']:.3g}); a triplet term is a function of "
                                  "the triangle, the same whichever side is called a")
+
+
+# ---------------------------------------------------------------- exact derivatives as programs
+
+# a program's operations: register machine instructions (op, a, b, out), out = op(R[a], R[b])
+(ADD, SUB, MUL, DIV, NEG, IPOW, POW, SQRT, EXP, LOG, SIN, COS, TAN, ATAN, SINH, COSH, TANH,
+ ABS, SIGN) = range(19)
+_CALLS = {"sqrt": SQRT, "exp": EXP, "log": LOG, "sin": SIN, "cos": COS, "tan": TAN,
+          "atan": ATAN, "sinh": SINH, "cosh": COSH, "tanh": TANH, "Abs": ABS, "sign": SIGN}
+POSITIVE = {"r", "a", "b", "c", "P"}     # names sympy may assume positive (A may vanish)
+
+
+class Program(NamedTuple):
+    """Straight-line code for a formula and its derivatives: registers R[0:n_in] hold the
+    inputs (`inputs`, in order), R[n_in:n_in + consts.size] the constants, the rest the
+    instructions' results; `outputs` the registers of U, its gradient in the variables,
+    then the upper triangle of its Hessian (row by row), each as `outputs_named` says."""
+
+    inputs: tuple[str, ...]
+    consts: np.ndarray
+    code: np.ndarray          # (instructions, 4) int64: op, a, b, out
+    outputs: np.ndarray       # int64 registers
+    registers: int
+
+
+def _to_sympy(tree, symbols):
+    import sympy as sp
+    op = tree[0]
+    if op == "num":
+        value = tree[1]
+        return sp.Integer(int(value)) if value == int(value) and abs(value) < 2 ** 53 \
+            else sp.Float(repr(value), 17)
+    if op == "name":
+        return symbols[tree[1]]
+    if op == "call":
+        f = {"abs": sp.Abs}.get(tree[1]) or getattr(sp, tree[1])
+        return f(_to_sympy(tree[2], symbols))
+    if op == "neg":
+        return -_to_sympy(tree[1], symbols)
+    a, b = _to_sympy(tree[1], symbols), _to_sympy(tree[2], symbols)
+    return {"+": lambda: a + b, "-": lambda: a - b, "*": lambda: a * b,
+            "/": lambda: a / b, "**": lambda: a ** b}[op]()
+
+
+def program(tree, variables: tuple[str, ...], params: dict) -> Program:
+    """The formula (with the parameters' values put in) and its exact first and second
+    derivatives in `variables`, differentiated by sympy from the parsed tree (never from
+    the text) and compiled to one straight-line Program over common subexpressions.
+    ValueError if a derivative needs a function outside the program's operations."""
+    import sympy as sp
+    symbols = {v: sp.Symbol(v, positive=True) if v in POSITIVE else sp.Symbol(v, real=True)
+               for v in variables}
+    values = {**symbols, **{k: sp.Float(repr(float(v)), 17) for k, v in params.items()}}
+    U = _to_sympy(tree, values)
+    xs = [symbols[v] for v in variables]
+    grad = [sp.diff(U, x) for x in xs]
+    hess = [sp.diff(grad[i], xs[j]) for i in range(len(xs)) for j in range(i, len(xs))]
+    replacements, reduced = sp.cse([U, *grad, *hess], optimizations="basic")
+    b = _Builder({symbols[v]: ("in", i) for i, v in enumerate(variables)})
+    for sym, expr in replacements:
+        b.known[sym] = b.emit(expr)
+    outputs = [b.emit(e) for e in reduced]
+    n_in, n_const = len(variables), len(b.consts)
+
+    def register(operand):
+        kind, i = operand
+        return i if kind == "in" else n_in + i if kind == "const" else n_in + n_const + i
+    code = [[op, register(x), register(y), n_in + n_const + t]
+            for t, (op, x, y) in enumerate(b.code)]
+    return Program(tuple(variables), np.array(b.consts, dtype=np.float64),
+                   np.array(code, dtype=np.int64).reshape(-1, 4),
+                   np.array([register(o) for o in outputs], dtype=np.int64),
+                   n_in + n_const + len(b.code))
+
+
+class _Builder:
+    """sympy expressions to instructions over operands ("in" | "const" | "tmp", index),
+    numbered into registers when the program is complete."""
+
+    def __init__(self, known):
+        self.known = dict(known)
+        self.consts: list[float] = []
+        self.code: list[tuple] = []
+
+    def const(self, value) -> tuple:
+        value = float(value)
+        if value not in self.consts:
+            self.consts.append(value)
+        return ("const", self.consts.index(value))
+
+    def op(self, code, a, b=None) -> tuple:
+        self.code.append((code, a, a if b is None else b))
+        return ("tmp", len(self.code) - 1)
+
+    def emit(self, e) -> tuple:
+        import sympy as sp
+        if e in self.known:
+            return self.known[e]
+        if e.is_Number or e.is_NumberSymbol:
+            return self.const(e)
+        if e.is_Add:
+            out = self.emit(e.args[0])
+            for t in e.args[1:]:
+                out = self.op(ADD, out, self.emit(t))
+            return out
+        if e.is_Mul:
+            num, den, negative = [], [], False
+            for f in e.args:
+                if f == -1:
+                    negative = not negative
+                elif f.is_Pow and f.exp.is_Number and f.exp < 0:
+                    den.append(self.emit(f.base ** -f.exp))
+                else:
+                    num.append(self.emit(f))
+            out = num[0] if num else self.const(1.0)
+            for f in num[1:]:
+                out = self.op(MUL, out, f)
+            for f in den:
+                out = self.op(DIV, out, f)
+            return self.op(NEG, out) if negative else out
+        if e.is_Pow:
+            base, k = e.base, e.exp
+            if k == sp.Rational(1, 2):
+                return self.op(SQRT, self.emit(base))
+            if k.is_Integer:
+                return self.op(IPOW, self.emit(base), self.const(k))
+            if k.is_Rational and k.q == 2:
+                return self.op(IPOW, self.op(SQRT, self.emit(base)), self.const(k.p))
+            return self.op(POW, self.emit(base), self.emit(k))
+        name = type(e).__name__
+        if name in _CALLS:
+            return self.op(_CALLS[name], self.emit(e.args[0]))
+        if name == "DiracDelta":        # the derivative of sign or abs: zero but at 0
+            return self.const(0.0)
+        raise ValueError(f"its derivatives need {name}, which survey does not compile; "
+                         "write the formula without it")
+
+
+@helper
+def _apply(op, x, y):
+    """One instruction's value, with machine.portable's functions where libm's last bits
+    differ between machines (sqrt and the arithmetic are correctly rounded everywhere)."""
+    if op == ADD:
+        return x + y
+    if op == SUB:
+        return x - y
+    if op == MUL:
+        return x * y
+    if op == DIV:
+        return x / y
+    if op == NEG:
+        return -x
+    if op == IPOW:
+        return portable.ipow(x, int(y))
+    if op == POW:
+        return portable.power(x, y)
+    if op == SQRT:
+        return math.sqrt(x)
+    if op == EXP:
+        return portable.exp(x)
+    if op == LOG:
+        return portable.log(x)
+    if op == SIN:
+        return portable.sin(x)
+    if op == COS:
+        return portable.cos(x)
+    if op == TAN:
+        return portable.sin(x) / portable.cos(x)
+    if op == ATAN:
+        return portable.atan(x)
+    if op == SINH:
+        return 0.5 * (portable.exp(x) - portable.exp(-x))
+    if op == COSH:
+        return 0.5 * (portable.exp(x) + portable.exp(-x))
+    if op == TANH:
+        e = portable.exp(-2.0 * abs(x))
+        return math.copysign((1.0 - e) / (1.0 + e), x)
+    if op == ABS:
+        return abs(x)
+    return 0.0 if x == 0.0 else math.copysign(1.0, x)        # SIGN
+
+
+@helper
+def run(code, R):
+    """A program's instructions over one set of registers R (inputs and constants in
+    place): R[out] = op(R[a], R[b]) in order."""
+    for i in range(code.shape[0]):
+        R[code[i, 3]] = _apply(code[i, 0], R[code[i, 1]], R[code[i, 2]])
+
+
+@leaf
+def run_lanes(code, R, L):
+    """The same over L lanes at once, register r of lane k at R[r L + k]: each
+    instruction a loop over the lanes (one branch per instruction, not per lane)."""
+    for i in range(code.shape[0]):
+        op, a, b, o = code[i, 0], code[i, 1] * L, code[i, 2] * L, code[i, 3] * L
+        for k in range(L):
+            R[o + k] = _apply(op, R[a + k], R[b + k])
+
+
+def values(prog: Program, point: dict) -> np.ndarray:
+    """U, its gradient and Hessian's upper triangle (the program's outputs) at a point
+    (name -> value), computed by the compiled program: the tests' and checks' door."""
+    R = np.zeros(prog.registers)
+    R[:len(prog.inputs)] = [point[v] for v in prog.inputs]
+    R[len(prog.inputs):len(prog.inputs) + prog.consts.size] = prog.consts
+    run_scalar(prog.code, R)
+    return R[prog.outputs]
+
+
+@leaf
+def run_scalar(code, R):
+    run(code, R)

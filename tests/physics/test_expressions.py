@@ -87,3 +87,70 @@ def test_triplet_formulas_must_not_tell_the_sides_apart():
 def test_a_triangles_names():
     t = triangle(3.0, 4.0, 5.0)
     assert t["P"] == 12.0 and t["A"] == pytest.approx(6.0, rel=1e-15)
+
+
+# ----------------------------------------------------------------- exact derivatives
+
+from survey.physics.expressions import program, run_lanes, values  # noqa: E402
+import numpy as np  # noqa: E402
+
+HENON_HEILES = "(x**2 + y**2)/2 + x**2*y - y**3/3"
+TODA = "(exp(2*y + 2*sqrt(3)*x) + exp(2*y - 2*sqrt(3)*x) + exp(-4*y)) / 24 - 1/8"
+
+
+def test_henon_heiles_derivatives_are_its_closed_forms():
+    prog = program(parse(HENON_HEILES, ("x", "y")), ("x", "y"), {})
+    for x, y in ((0.3, -0.2), (-0.1, 0.45), (0.0, 0.0)):
+        expected = [(x * x + y * y) / 2 + x * x * y - y ** 3 / 3, x + 2 * x * y,
+                    y + x * x - y * y, 1 + 2 * y, 2 * x, 1 - 2 * y]
+        np.testing.assert_allclose(values(prog, {"x": x, "y": y}), expected, rtol=1e-15,
+                                   atol=1e-16)
+
+
+@pytest.mark.parametrize("text,variables,params", [
+    (TODA, ("x", "y"), {}),
+    ("k * exp(-g * r) / r", ("r",), {"k": 1.5, "g": 0.7}),
+    ("4*e*((s/r)**12 - (s/r)**6)", ("r",), {"e": 1.0, "s": 1.1}),
+    ("P**2/2 + w / A + A**2", ("a", "b", "c", "P", "A"), {"w": 2.0}),
+    ("sqrt(a*b*c) * tanh(P) + log(a + b + c) + abs(a - b) * abs(b - c) * abs(c - a)",
+     ("a", "b", "c", "P", "A"), {}),
+    ("sin(x) * cosh(y) + atan(z) * sinh(x) / (2 + cos(y)) + tan(z/2)**2 + x**2.5 * y**0.3",
+     ("x", "y", "z"), {}),
+])
+def test_derivatives_against_finite_differences(text, variables, params):
+    """Gradient by central differences of U, Hessian by central differences of the
+    gradient, at random points (variables independent: P and A as names of their own)."""
+    prog = program(parse(text, (*variables, *params)), variables, params)
+    rng = np.random.default_rng(1)
+    n = len(variables)
+    upper = [(i, j) for i in range(n) for j in range(i, n)]
+    for _ in range(5):
+        point = dict(zip(variables, rng.uniform(0.8, 1.6, n)))
+        out = values(prog, point)
+        assert out[0] == pytest.approx(evaluate(parse(text, (*variables, *params)),
+                                                {**point, **params}), rel=1e-13)
+        h = 1e-5
+        for i, v in enumerate(variables):
+            up, down = values(prog, {**point, v: point[v] + h}), \
+                values(prog, {**point, v: point[v] - h})
+            assert out[1 + i] == pytest.approx((up[0] - down[0]) / (2 * h), rel=1e-7,
+                                               abs=1e-9)
+            for k, (a, b) in enumerate(upper):
+                if a == i:
+                    fd = (up[1 + b] - down[1 + b]) / (2 * h)
+                    assert out[1 + n + k] == pytest.approx(fd, rel=1e-6, abs=1e-8)
+
+
+def test_lanes_give_the_bits_of_one_point():
+    prog = program(parse(TODA, ("x", "y")), ("x", "y"), {})
+    L = 8
+    points = np.random.default_rng(2).uniform(-0.5, 0.5, (L, 2))
+    R = np.zeros(prog.registers * L)
+    for i in range(2):
+        R[i * L:(i + 1) * L] = points[:, i]
+    for c, value in enumerate(prog.consts):
+        R[(2 + c) * L:(3 + c) * L] = value
+    run_lanes(prog.code, R, L)
+    for k in range(L):
+        one = values(prog, {"x": points[k, 0], "y": points[k, 1]})
+        assert np.array_equal(R[prog.outputs * L + k], one)
