@@ -60,7 +60,7 @@ def area_rate_form(system, triplet=(0, 1, 2)):
 def full_rhs(system, y, n_tan=0):
     """The compiled right-hand side at state y (orbit, then n_tan tangent vectors)."""
     dy = np.zeros_like(y)
-    rhs(0.0, y, dy, *system.kernel_args, n_tan)
+    rhs(0.0, y, dy, system.model, n_tan)
     return dy
 
 

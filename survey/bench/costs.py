@@ -69,9 +69,9 @@ class GeneralPath(System):
     components integrated, never reduced."""
 
     @property
-    def kernel_args(self):
-        m, d, measure, prof, par = super().kernel_args
-        return m, d, measure, prof, np.concatenate([par, [0.0] * 3]).reshape(1, 5)
+    def model(self):
+        model = super().model
+        return model._replace(par=np.concatenate([model.par, [0.0] * 3]).reshape(1, 5))
 
 
 def interaction_terms(t_final=2000.0, repeats=5, out=print):

@@ -21,30 +21,30 @@ from .common import CASES, best_time
 
 
 @leaf
-def _rhs_loop(Y, K, W, reps, L, masses, d, measure, prof, par, n_tan, rb):
+def _rhs_loop(Y, K, W, reps, L, model, n_tan, rb):
     """reps times the 12 right-hand-side evaluations of a step of L lanes, at one state (rb:
     the reduced states' mass ratios, as the driver runs the paper's systems), into K's
     rows; W: the workspace. Without reference counting, as the driver (the rows' views
     would each cost an atomic increment and decrement)."""
     for _ in range(reps):
         for s in range(12):
-            rhs_lanes(0.0, Y, K[s], L, masses, d, measure, prof, par, n_tan, W, rb)
+            rhs_lanes(0.0, Y, K[s], L, model, n_tan, W, rb)
     return K[11, 0]
 
 
 @kernel
-def _stage_loop(Y, reps, h, L, masses, d, measure, prof, par, n_tan, rb):
+def _stage_loop(Y, reps, h, L, model, n_tan, rb):
     """reps times a step's stages and error norms of L lanes, from one state."""
     nf = Y.size // L
     K, YT, YN = np.zeros((16, Y.size)), np.zeros(Y.size), np.zeros(Y.size)
     W, S = np.zeros(workspace_size(L, nf)), np.zeros(2 * (nf + 1) * L)
     H, err = np.full(L, h), np.zeros(L)
     HH = np.full(Y.size, h)
-    rhs_lanes(0.0, Y, K[0], L, masses, d, measure, prof, par, n_tan, W, rb)
+    rhs_lanes(0.0, Y, K[0], L, model, n_tan, W, rb)
     acc = 0.0
     for _ in range(reps):
-        stages(masses, d, measure, prof, par, n_tan, L, Y, HH, K, YT, YN, W, rb)
-        error_norms(Y, YN, K, L, state_size(masses, d, rb), 1e-12, 1e-12, H, err, S)
+        stages(model, n_tan, L, Y, HH, K, YT, YN, W, rb)
+        error_norms(Y, YN, K, L, state_size(model.masses, model.d, rb), 1e-12, 1e-12, H, err, S)
         acc += err[0]
     return acc
 
@@ -174,7 +174,7 @@ def step_costs(t_final=2000.0, repeats=5, lanes=(1, 4, 8, 16), out=print):
             one = integrate(system, y0, t_final, tangents=w, megno=n_tan > 0)
             steps = one.n_steps + one.n_rejected
             h = t_final / one.n_steps
-            args = system.kernel_args
+            model = system.model
             for L in lanes:
                 starts = np.repeat(y0[None], L, 0)
                 tangents = np.repeat(w[None], L, 0) if n_tan else None
@@ -185,16 +185,16 @@ def step_costs(t_final=2000.0, repeats=5, lanes=(1, 4, 8, 16), out=print):
                     starts if tangents is None else
                     np.concatenate([starts, tangents.reshape(L, -1)], 1), n_tan).T).ravel()
                 K, W = np.zeros((16, Y.size)), np.zeros(workspace_size(L, Y.size // L))
-                _rhs_loop(Y, K, W, 1, L, *args, n_tan, frame.ratios)
-                _stage_loop(Y, 1, h, L, *args, n_tan, frame.ratios)
+                _rhs_loop(Y, K, W, 1, L, model, n_tan, frame.ratios)
+                _stage_loop(Y, 1, h, L, model, n_tan, frame.ratios)
                 reps = max(1, steps // L)
                 # interleaved, so a slow spell of the machine does not fall on one of three
                 best = [math.inf] * 3
                 for _ in range(repeats):
                     for k, go in enumerate((
-                            lambda: _rhs_loop(Y, K, W, reps, L, *args, n_tan,
+                            lambda: _rhs_loop(Y, K, W, reps, L, model, n_tan,
                                               frame.ratios),
-                            lambda: _stage_loop(Y, reps, h, L, *args, n_tan,
+                            lambda: _stage_loop(Y, reps, h, L, model, n_tan,
                                                 frame.ratios),
                             lambda: integrate_batch(system, starts, t_final, tangents=tangents,
                                                     megno=n_tan > 0, lanes=L))):

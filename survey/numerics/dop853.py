@@ -575,17 +575,17 @@ def _dot_long(K, i, parts):
 
 
 @helper
-def _rhs(y, dy, L, masses, d, measure, prof, par, n_tan, W, rb):
+def _rhs(y, dy, L, model, n_tan, W, rb):
     """The right-hand side of L lanes; one full orbit straight through `rhs` (a call less,
     a third of an evaluation). The systems are autonomous: it is given no time."""
     if rb is None and L == 1:
-        rhs(0.0, y, dy, masses, d, measure, prof, par, n_tan)
+        rhs(0.0, y, dy, model, n_tan)
     else:
-        rhs_lanes(0.0, y, dy, L, masses, d, measure, prof, par, n_tan, W, rb)
+        rhs_lanes(0.0, y, dy, L, model, n_tan, W, rb)
 
 
 @lanes
-def stages(masses, d, measure, prof, par, n_tan, L, y, hh, K, yt, ynew, W, rb):
+def stages(model, n_tan, L, y, hh, K, yt, ynew, W, rb):
     """Stages 2..12 of L lanes (variable-major; K[0] holds f(y)) and their 8th-order
     solutions ynew; hh holds each lane's step at each of its components (one flat loop per
     stage vectorises across lanes and components alike). The systems are autonomous: the
@@ -593,37 +593,37 @@ def stages(masses, d, measure, prof, par, n_tan, L, y, hh, K, yt, ynew, W, rb):
     M = y.size
     for i in range(M):
         yt[i] = fma(hh[i], stage_dot(K, i, A2), y[i])
-    _rhs(yt, K[1], L, masses, d, measure, prof, par, n_tan, W, rb)
+    _rhs(yt, K[1], L, model, n_tan, W, rb)
     for i in range(M):
         yt[i] = fma(hh[i], stage_dot(K, i, A3), y[i])
-    _rhs(yt, K[2], L, masses, d, measure, prof, par, n_tan, W, rb)
+    _rhs(yt, K[2], L, model, n_tan, W, rb)
     for i in range(M):
         yt[i] = fma(hh[i], stage_dot(K, i, A4), y[i])
-    _rhs(yt, K[3], L, masses, d, measure, prof, par, n_tan, W, rb)
+    _rhs(yt, K[3], L, model, n_tan, W, rb)
     for i in range(M):
         yt[i] = fma(hh[i], stage_dot(K, i, A5), y[i])
-    _rhs(yt, K[4], L, masses, d, measure, prof, par, n_tan, W, rb)
+    _rhs(yt, K[4], L, model, n_tan, W, rb)
     for i in range(M):
         yt[i] = fma(hh[i], stage_dot(K, i, A6), y[i])
-    _rhs(yt, K[5], L, masses, d, measure, prof, par, n_tan, W, rb)
+    _rhs(yt, K[5], L, model, n_tan, W, rb)
     for i in range(M):
         yt[i] = fma(hh[i], stage_dot(K, i, A7), y[i])
-    _rhs(yt, K[6], L, masses, d, measure, prof, par, n_tan, W, rb)
+    _rhs(yt, K[6], L, model, n_tan, W, rb)
     for i in range(M):
         yt[i] = fma(hh[i], stage_dot(K, i, A8), y[i])
-    _rhs(yt, K[7], L, masses, d, measure, prof, par, n_tan, W, rb)
+    _rhs(yt, K[7], L, model, n_tan, W, rb)
     for i in range(M):
         yt[i] = fma(hh[i], stage_dot(K, i, A9), y[i])
-    _rhs(yt, K[8], L, masses, d, measure, prof, par, n_tan, W, rb)
+    _rhs(yt, K[8], L, model, n_tan, W, rb)
     for i in range(M):
         yt[i] = fma(hh[i], stage_dot(K, i, A10), y[i])
-    _rhs(yt, K[9], L, masses, d, measure, prof, par, n_tan, W, rb)
+    _rhs(yt, K[9], L, model, n_tan, W, rb)
     for i in range(M):
         yt[i] = fma(hh[i], stage_dot(K, i, A11), y[i])
-    _rhs(yt, K[10], L, masses, d, measure, prof, par, n_tan, W, rb)
+    _rhs(yt, K[10], L, model, n_tan, W, rb)
     for i in range(M):
         yt[i] = fma(hh[i], stage_dot(K, i, A12), y[i])
-    _rhs(yt, K[11], L, masses, d, measure, prof, par, n_tan, W, rb)
+    _rhs(yt, K[11], L, model, n_tan, W, rb)
     for i in range(M):
         ynew[i] = fma(hh[i], stage_dot(K, i, B), y[i])
 
@@ -671,23 +671,23 @@ def error_norms(y, ynew, K, L, n_err, rtol, atol, h, err, scratch):
 
 
 @lanes
-def dense_prepare(masses, d, measure, prof, par, L, nd, y, ynew, hh, K, yt, F, W, rb):
+def dense_prepare(model, L, nd, y, ynew, hh, K, yt, F, W, rb):
     """Coefficients of the 7th-order interpolants of L lanes over their last steps for
     components < nd (variable-major, so the first nd * L entries: the orbits', or theirs
     and their tangent vectors'); K[12] must hold f(ynew). No flag or count of tangents
     among the arguments: a literal one (the waiting slots hold orbits alone) compiled a
     second copy of this function and its right-hand sides."""
-    nt = nd // state_size(masses, d, rb) - 1
+    nt = nd // state_size(model.masses, model.d, rb) - 1
     M = nd * L
     for i in range(M):
         yt[i] = fma(hh[i], stage_dot(K, i, A14), y[i])
-    _rhs(yt, K[13], L, masses, d, measure, prof, par, nt, W, rb)
+    _rhs(yt, K[13], L, model, nt, W, rb)
     for i in range(M):
         yt[i] = fma(hh[i], stage_dot(K, i, A15), y[i])
-    _rhs(yt, K[14], L, masses, d, measure, prof, par, nt, W, rb)
+    _rhs(yt, K[14], L, model, nt, W, rb)
     for i in range(M):
         yt[i] = fma(hh[i], stage_dot(K, i, A16), y[i])
-    _rhs(yt, K[15], L, masses, d, measure, prof, par, nt, W, rb)
+    _rhs(yt, K[15], L, model, nt, W, rb)
     # one view per row stored to: see error_norms
     F0, F1, F2, F3, F4, F5, F6 = F[0], F[1], F[2], F[3], F[4], F[5], F[6]
     for i in range(M):

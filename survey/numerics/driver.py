@@ -37,7 +37,7 @@ from ..catalog.status import Status
 from ..machine import portable
 from ..machine.jit import helper, leaf
 from ..physics.lanes import SIMD_MIN, rhs_lanes, state_size
-from ..physics.system import rhs
+from ..physics.system import Model, rhs
 from .lanestate import RawOutcome, lane_state, reused_samples
 from .tangents import (accumulate, begin, growth_terms, offsets, sample_at, tangent_norms,
                        width)
@@ -85,7 +85,7 @@ def _finite(x):
 
 
 @helper
-def _initial_step(masses, d, measure, prof, par, n_tan, nf, n_err, t, y, K, yt, direction,
+def _initial_step(model, n_tan, nf, n_err, t, y, K, yt, direction,
                   h_max, rtol, atol, W, rb):
     """Hairer's hinit: a first step from the sizes of y, f(y) (in K[0]) and an estimate
     of the second derivative (one evaluation, into K[1]), at most h_max."""
@@ -99,7 +99,7 @@ def _initial_step(masses, d, measure, prof, par, n_tan, nf, n_err, t, y, K, yt, 
     h = min(h, h_max)
     for a in range(nf):
         yt[a] = y[a] + direction * h * K[0, a]
-    _rhs_one(t + direction * h, yt, K[1], masses, d, measure, prof, par, n_tan, W, rb)
+    _rhs_one(t + direction * h, yt, K[1], model, n_tan, W, rb)
     der2 = 0.0
     for a in range(n_err):
         sk = atol + rtol * abs(y[a])
@@ -125,12 +125,13 @@ def _finish(k, ln, out, status, rows):
 
 
 @helper
-def _start(k, j, ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_tan, n_err,
+def _start(k, j, ln, out, y0s, rows, t0, t1, model, n_tan, n_err,
            rtol, atol, h0, h_max, events, t_eval, n_eval, t_fine, renorm_dt, now, rb):
     """Job j into lane k: its start, first evaluation, samples at t0, events' first values
     and first step. Returns False if the job ended at once (nonfinite start, zero span)."""
     L = ln.job.size
     nf = y0s.shape[1]
+    masses, d = model.masses, model.d
     n = state_size(masses, d, rb)
     eoff, ep, direc, terminal, guard, watch = events
     y, K = ln.y1, ln.k1
@@ -152,7 +153,7 @@ def _start(k, j, ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_ta
         _finish(k, ln, out, NONFINITE_, rows)
         return False
     begin(out.ends[j], ln.acc[k], y, n, n_tan, rb)
-    _rhs_one(t0, y, K[0], masses, d, measure, prof, par, n_tan, ln.W, rb)
+    _rhs_one(t0, y, K[0], model, n_tan, ln.W, rb)
     out.counts[j, 2] += 1
     for i in range(nf):
         ln.K[0, i * L + k] = K[0, i]
@@ -186,7 +187,7 @@ def _start(k, j, ln, out, y0s, rows, t0, t1, masses, d, measure, prof, par, n_ta
     if h0 > 0.0:
         h = min(h0, ln.h_max[k])
     else:
-        h = _initial_step(masses, d, measure, prof, par, n_tan, nf, n_err, t0, y, K, ln.YT,
+        h = _initial_step(model, n_tan, nf, n_err, t0, y, K, ln.YT,
                           direction, ln.h_max[k], rtol, atol, ln.W, rb)
         out.counts[j, 2] += 1
     ln.h[k] = h * direction
@@ -347,7 +348,7 @@ def _defer(ln, k, row, first, end, t, h, t_new, n):
 
 
 @leaf
-def _flush(ln, out, masses, d, measure, prof, par, t_fine, rb):
+def _flush(ln, out, model, t_fine, rb):
     """The waiting steps' dense output, all P slots in SIMD loops (slots past the count
     hold stale values, computed and ignored), and their samples at t_fine: each slot's
     first (most steps hold one) in a SIMD loop too, any others one by one."""
@@ -358,7 +359,7 @@ def _flush(ln, out, masses, d, measure, prof, par, t_fine, rb):
         return
     n = w.Y.size // P
     spread_steps(w.h, w.HH, P, n)
-    dense_prepare(masses, d, measure, prof, par, P, n, w.Y, w.YN, w.HH, w.K, w.YT, w.F, w.W,
+    dense_prepare(model, P, n, w.Y, w.YN, w.HH, w.K, w.YT, w.F, w.W,
                   rb)
     for p in range(P):
         w.x[p] = (t_fine[w.first[p]] - w.t[p]) / w.h[p] if p < c else 0.0
@@ -410,18 +411,6 @@ def _advance(k, ln, out, t0, t1, n, n_tan, megno, renorm_dt, NW):
     return OK_ if last else RUNNING
 
 
-class Model(NamedTuple):
-    """The system as every kernel takes it (physics.system.System.kernel_args): masses,
-    dimension, the leading perimetric or areal term's measure and profile codes, and the
-    terms' parameters."""
-
-    masses: np.ndarray
-    d: int
-    measure: int
-    prof: int
-    par: np.ndarray
-
-
 class Control(NamedTuple):
     """How every orbit of a batch is stepped: from t0 to t1, with n_tan tangent vectors
     (MEGNO of the first if megno), the error of its first n_err components held to
@@ -465,7 +454,7 @@ def _run(ln, out, y0s, rows, model, control, recording, next_job, iterations, no
     states, the mass ratios for reduced ones (physics.lanes.state_size): two
     compilations, each of the code its kind runs (an argument of its own, not a field of
     the records: numba prunes the branches of the other kind on arguments)."""
-    masses, d, measure, prof, par = model
+    masses, d = model.masses, model.d
     (t0, t1, n_tan, megno, rtol, atol, n_err, max_steps, h0, h_max, h_min, renorm_dt,
      time_limit) = control
     events, max_events, n_sub, t_eval, n_eval, t_fine = recording
@@ -479,9 +468,9 @@ def _run(ln, out, y0s, rows, model, control, recording, next_job, iterations, no
         for k in range(L):
             while ln.job[k] < 0 and next_job < M:
                 next_job += 1
-                _start(k, next_job - 1, ln, out, y0s, rows, t0, t1, masses, d, measure,
-                       prof, par, n_tan, n_err, rtol, atol, h0, h_max, events, t_eval,
-                       n_eval, t_fine, renorm_dt, now, rb)
+                _start(k, next_job - 1, ln, out, y0s, rows, t0, t1, model, n_tan, n_err,
+                       rtol, atol, h0, h_max, events, t_eval, n_eval, t_fine, renorm_dt,
+                       now, rb)
             j = ln.job[k]
             if j < 0:
                 ln.h[k] = 0.0
@@ -503,16 +492,16 @@ def _run(ln, out, y0s, rows, model, control, recording, next_job, iterations, no
                 ln.h[k] = t1 - ln.t[k]
         if active == 0:
             if next_job >= M:
-                _flush(ln, out, masses, d, measure, prof, par, t_fine, rb)
+                _flush(ln, out, model, t_fine, rb)
                 return DONE
             continue
         spread_steps(ln.h, ln.HH, L, nf)
         # ---- one attempt of every lane's step
-        stages(masses, d, measure, prof, par, n_tan, L, ln.Y, ln.HH, ln.K, ln.YT, ln.YN,
+        stages(model, n_tan, L, ln.Y, ln.HH, ln.K, ln.YT, ln.YN,
                ln.W, rb)
         error_norms(ln.Y, ln.YN, ln.K, L, n_err, rtol, atol, ln.h, ln.err, ln.S)
         step_factors(ln.err, ln.err_old, L, ln.grow, ln.err_next, ln.cut)
-        rhs_lanes(0.0, ln.YN, ln.K[12], L, masses, d, measure, prof, par, n_tan, ln.W, rb)
+        rhs_lanes(0.0, ln.YN, ln.K[12], L, model, n_tan, ln.W, rb)
         finite_lanes(ln.YN, ln.K[12], L, nf, ln.NW)
         dense = later = 0
         n = state_size(masses, d, rb)
@@ -546,10 +535,10 @@ def _run(ln, out, y0s, rows, model, control, recording, next_job, iterations, no
             later += need == DENSE_LATER
             dense = max(dense, need)
         if dense >= DENSE_ORBIT:    # the orbits' interpolant where no lane needs more
-            dense_prepare(masses, d, measure, prof, par, L, nf if dense == DENSE_ALL else n,
+            dense_prepare(model, L, nf if dense == DENSE_ALL else n,
                           ln.Y, ln.YN, ln.HH, ln.K, ln.YT, ln.F, ln.W, rb)
         elif dense == DENSE_LATER and ln.wait.count[0] + later > ln.wait.t.size:
-            _flush(ln, out, masses, d, measure, prof, par, t_fine, rb)   # room for the steps
+            _flush(ln, out, model, t_fine, rb)   # room for the steps
         for k in range(L):
             if ln.flags[k, 3]:
                 ended = _record(k, ln, out, rows, t0, t1, masses, d, n, n_tan, rb, megno,
@@ -585,9 +574,9 @@ def _run(ln, out, y0s, rows, model, control, recording, next_job, iterations, no
             # for the last orbit alone (SIMD_MIN lanes cost less than two orbits one after
             # the other in one lane)
             if 0 < running and (2 * running <= L if L // 2 >= SIMD_MIN else running == 1):
-                _flush(ln, out, masses, d, measure, prof, par, t_fine, rb)
+                _flush(ln, out, model, t_fine, rb)
                 return HANDOFF
-    _flush(ln, out, masses, d, measure, prof, par, t_fine, rb)
+    _flush(ln, out, model, t_fine, rb)
     return next_job
 
 
@@ -616,15 +605,15 @@ def put_sample(sample, src, n_eval, rb):
 
 
 @helper
-def _rhs_one(t, y, dy, masses, d, measure, prof, par, n_tan, W, rb):
+def _rhs_one(t, y, dy, model, n_tan, W, rb):
     """The right-hand side at one state: `rhs`, or for a reduced state its lane loops at
     L = 1 (W: their workspace). The 1 is given as an int64: a literal one is a type of its
     own, and compiled a second copy of the lanes' right-hand sides (seconds of a first
     run)."""
     if rb is None:
-        rhs(t, y, dy, masses, d, measure, prof, par, n_tan)
+        rhs(t, y, dy, model, n_tan)
     else:
-        rhs_lanes(t, y, dy, np.int64(1), masses, d, measure, prof, par, n_tan, W, rb)
+        rhs_lanes(t, y, dy, np.int64(1), model, n_tan, W, rb)
 
 
 @leaf

@@ -76,7 +76,7 @@ def _constraints(system: System, y0, project_flow: bool) -> np.ndarray:
         rows += [shift.ravel(), boost.ravel()]
     if project_flow:
         f = np.zeros(n)
-        rhs(0.0, np.ascontiguousarray(y0, dtype=float), f, *system.kernel_args, 0)
+        rhs(0.0, np.ascontiguousarray(y0, dtype=float), f, system.model, 0)
         rows += [f, np.concatenate([-f[n // 2:], f[:n // 2]])]
     return orthonormal(np.array(rows))
 

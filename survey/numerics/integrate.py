@@ -118,7 +118,6 @@ def integrate_batch(system: System, starts, t_span, *, tangents=None, record=Non
     for r, flag in enumerate((EVENTS, EVAL, FINE)):
         which = (record & flag) != 0
         rows[r, which] = np.arange(which.sum())
-    masses, d, measure, prof, par = system.kernel_args
     frame = Frame.of(system, starts, tan, events)
     rb = None
     if frame is not None:               # bodies 0 and 1 in the centre-of-mass frame
@@ -128,7 +127,7 @@ def integrate_batch(system: System, starts, t_span, *, tangents=None, record=Non
     n_err = r * (1 + n_tan) if control_tangents else r
     if not events:
         max_events = 0                  # nothing to record: no room for it
-    model = Model(masses=masses, d=d, measure=measure, prof=prof, par=par)
+    model = system.model
     control = Control(t0=t0, t1=t1, n_tan=n_tan, megno=megno, rtol=float(rtol),
                       atol=float(atol), n_err=n_err, max_steps=int(max_steps),
                       h0=float(first_step), h_max=float(max_step), h_min=float(min_step),
@@ -169,7 +168,7 @@ class Frame(NamedTuple):
 
     @staticmethod
     def of(system, starts, tan, events):
-        masses, d, measure, prof, par = system.kernel_args
+        masses, d, measure, prof, par = system.model
         if masses.size != 3 or d != 2 or par.ndim != 1 or measure not in (PERIMETER, AREA):
             return None
         m = masses[None, :, None]

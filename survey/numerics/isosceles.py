@@ -155,7 +155,7 @@ def _to_collision(system: System, t: float, y: np.ndarray, height: float, way: i
     near side's (smooth) motion reaches there, and (t, b, p_b) where the same step crosses
     h = height upwards (way = 1) or downwards (-1) (None if it does not)."""
     dy = np.zeros_like(y)
-    rhs(t, y, dy, *system.kernel_args, 0)       # unit masses: dq/dt = p, dp/dt = F
+    rhs(t, y, dy, system.model, 0)       # unit masses: dq/dt = p, dp/dt = F
     b, v, a = y[WX] - y[UX], dy[WX] - dy[UX], dy[6 + WX] - dy[6 + UX]
     tau = max(_first_root(b, v, a), 0.0)
     h, w, c = y[VY] - y[UY] - height, dy[VY] - dy[UY], dy[6 + VY] - dy[6 + UY]

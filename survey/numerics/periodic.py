@@ -201,7 +201,7 @@ def _generator(system: System) -> np.ndarray:
 
 def _flow(system: System, y) -> np.ndarray:
     out = np.zeros(system.n)
-    rhs(0.0, np.ascontiguousarray(y, dtype=float), out, *system.kernel_args, 0)
+    rhs(0.0, np.ascontiguousarray(y, dtype=float), out, system.model, 0)
     return out
 
 

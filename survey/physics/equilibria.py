@@ -26,7 +26,7 @@ def forces(system: System, q: np.ndarray, hessian: bool = False):
     tangents = np.concatenate([np.eye(n_tan, nq), np.zeros((n_tan, nq))], axis=1)
     state = np.concatenate([np.ravel(q), np.zeros(nq), tangents.ravel()])
     out = np.zeros_like(state)
-    rhs(0.0, state, out, *system.kernel_args, n_tan)
+    rhs(0.0, state, out, system.model, n_tan)
     if not hessian:
         return out[nq:2 * nq]
     blocks = out[2 * nq:].reshape(nq, 2 * nq)

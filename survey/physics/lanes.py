@@ -30,6 +30,7 @@ from .forces import (
 from .system import (
     _term_params,
     lead_params,
+    par_type,
     rhs,
 )
 from .terms import AREA, BARRIER, DISTANCE, PERIMETER, POWER
@@ -70,7 +71,7 @@ def workspace_size(L, nf):
 
 
 @leaf
-def rhs_lanes(t, Y, dY, L, masses, d, measure, prof, par, n_tan, W, rb):
+def rhs_lanes(t, Y, dY, L, model, n_tan, W, rb):
     """`rhs` for L states at once, stored variable-major (component i of lane k at
     Y[i * L + k]); W: workspace_size(L, nf) floats; rb: None, or the mass ratios of reduced
     states. Three bodies in the plane under one perimetric or areal term (every workflow,
@@ -82,31 +83,32 @@ def rhs_lanes(t, Y, dY, L, masses, d, measure, prof, par, n_tan, W, rb):
     (`general_lanes`: perimetric and areal terms of more bodies or in 3-D, pair and ATM
     terms). Fewer than SIMD_MIN full states run `rhs` lane by lane."""
     if rb is not None:
-        _planar_lanes(Y, dY, L, W, masses, measure, prof, par, n_tan, rb)
+        _planar_lanes(Y, dY, L, W, model, n_tan, rb)
     else:
-        _full_lanes(t, Y, dY, L, masses, d, measure, prof, par, n_tan, W, rb)
+        _full_lanes(t, Y, dY, L, model, n_tan, W, rb)
 
 
 @helper
-def _full_lanes(t, Y, dY, L, masses, d, measure, prof, par, n_tan, W, rb):
+def _full_lanes(t, Y, dY, L, model, n_tan, W, rb):
     """`rhs_lanes` of full states (rb is None). rb is passed on, not a literal None: where
     rb is a tuple, numba still types this branch that never runs, and a literal None
     compiled a full-state copy of the lanes' right-hand sides into every reduced batch's
     kernels (seconds of a first run)."""
+    masses, d, measure, prof, par = model
     if L >= SIMD_MIN and masses.size == 3 and d == 2 and par.ndim == 1 and (
             measure == PERIMETER or measure == AREA):
-        _planar_lanes(Y, dY, L, W, masses, measure, prof, par, n_tan, rb)
+        _planar_lanes(Y, dY, L, W, model, n_tan, rb)
     elif L == 1:
-        rhs(t, Y, dY, masses, d, measure, prof, par, n_tan)
+        rhs(t, Y, dY, model, n_tan)
     elif L >= SIMD_MIN:
-        general_lanes(Y, dY, L, W, masses, d, measure, prof, par, n_tan)
+        general_lanes(Y, dY, L, W, model, n_tan)
     else:
         nf = Y.size // L
         y, dy = W[:nf], W[nf:2 * nf]
         for k in range(L):
             for i in range(nf):
                 y[i] = Y[i * L + k]
-            rhs(t, y, dy, masses, d, measure, prof, par, n_tan)
+            rhs(t, y, dy, model, n_tan)
             for i in range(nf):
                 dY[i * L + k] = dy[i]
 
@@ -124,19 +126,20 @@ def _full_lanes(t, Y, dY, L, masses, d, measure, prof, par, n_tan, W, rb):
 GENERAL_ROWS = 57
 
 
-def general_lanes(Y, dY, L, W, masses, d, measure, prof, par, n_tan):
+def general_lanes(Y, dY, L, W, model, n_tan):
     """`_general_lanes` of a 2-D par (any system but the paper's: see _encode)."""
 
 
 @overload(general_lanes, jit_options=dict(error_model="numpy"), inline="always")
-def _general_lanes_overload(Y, dY, L, W, masses, d, measure, prof, par, n_tan):
-    if par.ndim == 1:       # the paper's systems, which _planar_lanes runs
-        return lambda Y, dY, L, W, masses, d, measure, prof, par, n_tan: None
+def _general_lanes_overload(Y, dY, L, W, model, n_tan):
+    if par_type(model).ndim == 1:       # the paper's systems, which _planar_lanes runs
+        return lambda Y, dY, L, W, model, n_tan: None
 
-    def run(Y, dY, L, W, masses, d, measure, prof, par, n_tan):
+    def run(Y, dY, L, W, model, n_tan):
+        masses, d, measure, prof, par = model
         planar = (measure == PERIMETER or measure == AREA) and masses.size == 3 and d == 2
         if planar:      # the velocities and the leading term's forces, as _leading_forces
-            _planar_lanes(Y, dY, L, W, masses, measure, prof, par, n_tan, None)
+            _planar_lanes(Y, dY, L, W, model, n_tan, None)
         _general_lanes(Y, dY, L, W[:18 * L], W[18 * L:22 * L], W[22 * L:24 * L],
                        W[24 * L:44 * L], W[44 * L:GENERAL_ROWS * L], masses, d, measure, prof,
                        par, n_tan, planar)
@@ -293,9 +296,10 @@ def _add_cyclic_lanes(dY, off, bodies, d, S, V, L):
 
 
 @leaf
-def _planar_lanes(Y, dY, L, W, masses, measure, prof, par, n_tan, rb):
+def _planar_lanes(Y, dY, L, W, model, n_tan, rb):
     """`rhs_lanes` of three bodies in the plane under one perimetric or areal term: full
     states (rb None) or reduced ones (rb: the mass ratios that rebuild the third body)."""
+    masses, measure, prof, par = model.masses, model.measure, model.prof, model.par
     inv = (1.0 / masses[0], 1.0 / masses[1], 1.0 / masses[2])
     nb = 12                                         # a block's components
     if rb is not None:

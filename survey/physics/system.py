@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 from numba.extending import overload
@@ -38,6 +39,18 @@ from .terms import (
     Potential,
     make_potential,
 )
+
+
+class Model(NamedTuple):
+    """The system as every kernel takes it (`System.model`): masses, dimension, the leading
+    perimetric or areal term's measure and profile codes (NONE if there is none) and the
+    terms' parameters (`_encode`)."""
+
+    masses: np.ndarray
+    d: int
+    measure: int
+    prof: int
+    par: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
@@ -103,14 +116,14 @@ class System:
         return 2 * self.n_bodies * self.dim
 
     @property
-    def kernel_args(self):
-        """The arguments every compiled kernel takes to describe the system: masses, d, the
-        measure and profile codes of the leading perimetric or areal term (NONE if there is
-        none) and `par` (see _encode). Fresh writable arrays: a read-only array is another
-        numba type, which would compile every kernel a second time."""
+    def model(self) -> "Model":
+        """The system as every compiled kernel takes it (`Model`). Fresh writable arrays: a
+        read-only array is another numba type, which would compile every kernel a second
+        time."""
         lead = self.terms[0]
         codes = (lead.measure, lead.profile) if lead.measure in (PERIMETER, AREA) else (NONE, 0)
-        return self.masses.copy(), self.dim, *codes, self._par.copy()
+        return Model(masses=self.masses.copy(), d=self.dim, measure=codes[0], prof=codes[1],
+                     par=self._par.copy())
 
     def state(self, positions, momenta) -> np.ndarray:
         """Flat state from positions and momenta of shape (N, d)."""
@@ -134,7 +147,7 @@ class System:
         """Sum over triplets of U, for states (..., n)."""
         q, _ = self.split(y)
         flat = np.ascontiguousarray(q.reshape(-1, self.n // 2))
-        u = _potential_energies(flat, *self.kernel_args)
+        u = _potential_energies(flat, self.model)
         return u.reshape(q.shape[:-2])
 
     def kinetic_energy(self, y):
@@ -260,7 +273,7 @@ def _term_params(par, row):
     return par[row, 3], par[row, 4]
 
 
-def velocities_and_forces(y, dy, masses, d, measure, prof, par, n_tan):
+def velocities_and_forces(y, dy, model, n_tan):
     """dq/dt, dp/dt and the tangent blocks of `rhs` (see _encode)."""
 
 
@@ -280,13 +293,16 @@ def _lead_params(par):
     return lambda par: (par[0, 0], par[0, 1])
 
 
+def par_type(model):
+    """The numba type of a Model's par (typed: the kernels' choice of paths)."""
+    return model.types[Model._fields.index("par")]
+
+
 @overload(velocities_and_forces, jit_options=dict(error_model="numpy"), inline="always")
-def _velocities_and_forces(y, dy, masses, d, measure, prof, par, n_tan):
-    if par.ndim == 1:
-        return lambda y, dy, masses, d, measure, prof, par, n_tan: _planar_forces(
-            y, dy, masses, d, measure, prof, par, n_tan)
-    return lambda y, dy, masses, d, measure, prof, par, n_tan: _general_forces(
-        y, dy, masses, d, measure, prof, par, n_tan)
+def _velocities_and_forces(y, dy, model, n_tan):
+    if par_type(model).ndim == 1:
+        return lambda y, dy, model, n_tan: _planar_forces(y, dy, model, n_tan)
+    return lambda y, dy, model, n_tan: _general_forces(y, dy, model, n_tan)
 
 
 @overload(further_energy, jit_options=dict(error_model="numpy"), inline="always")
@@ -297,16 +313,17 @@ def _further_energy(q, masses, d, par):
 
 
 @kernel
-def _potential_energies(qs, masses, d, measure, prof, par):
+def _potential_energies(qs, model):
     out = np.empty(qs.shape[0])
     for s in range(qs.shape[0]):
-        out[s] = potential_energy(qs[s], masses, d, measure, prof, par)
+        out[s] = potential_energy(qs[s], model)
     return out
 
 
 @leaf
-def potential_energy(q, masses, d, measure, prof, par):
+def potential_energy(q, model):
     """Sum over the terms of U summed over triplets i < j < k or pairs i < j."""
+    masses, d, measure, prof, par = model
     N = masses.size
     total = further_energy(q, masses, d, par)
     if measure != NONE:
@@ -315,11 +332,12 @@ def potential_energy(q, masses, d, measure, prof, par):
 
 
 @leaf
-def _planar_forces(y, dy, masses, d, measure, prof, par, n_tan):
+def _planar_forces(y, dy, model, n_tan):
     """Three bodies in the plane under one perimetric or areal term (every workflow, most
     of the paper) run code written for them: the general path's operations on the same
     values in the same order, without its loops, zero z components and accumulations (bit
     for bit the same, and faster: `bench --only terms`; tests/physics/test_system.py)."""
+    masses, measure, prof, par = model.masses, model.measure, model.prof, model.par
     if measure == PERIMETER:
         _planar_perimetric(y, dy, masses, prof, (par[0], par[1]), n_tan)
     else:
@@ -327,8 +345,9 @@ def _planar_forces(y, dy, masses, d, measure, prof, par, n_tan):
 
 
 @helper
-def _general_forces(y, dy, masses, d, measure, prof, par, n_tan):
+def _general_forces(y, dy, model, n_tan):
     """Any other system: the leading perimetric or areal term, then the further terms."""
+    masses, d, measure, prof, par = model
     N = masses.size
     _leading_forces(y, dy, masses, N, d, measure, prof, (par[0, 0], par[0, 1]), n_tan)
     _rows_forces(y, dy, masses, d, 2 * N * d, n_tan, par)
@@ -367,10 +386,10 @@ def _triplet_energy(q, N, d, measure, prof, par):
 
 
 @leaf
-def rhs(t, y, dy, masses, d, measure, prof, par, n_tan):
+def rhs(t, y, dy, model, n_tan):
     """Hamilton's equations and the variational equations of n_tan tangent vectors
     (d dq/dt = M^-1 dp, d dp/dt = -Hess U dq) at one state y."""
-    velocities_and_forces(y, dy, masses, d, measure, prof, par, n_tan)
+    velocities_and_forces(y, dy, model, n_tan)
 
 
 @helper

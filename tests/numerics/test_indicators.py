@@ -115,8 +115,8 @@ def test_deviation_vectors_are_reproducible_and_carry_no_centre_of_mass_motion(p
     wp = deviation_vectors(paper_system, y0, 3, seed=7, project_flow=True)
     f = np.zeros(12)
     from survey.physics.system import rhs
-    m, d, meas, prof, par = paper_system.kernel_args
-    rhs(0.0, y0, f, m.copy(), d, meas, prof, par, 0)
+    system_model = paper_system.model
+    rhs(0.0, y0, f, system_model, 0)
     gradH = np.concatenate([-f[6:], f[:6]])
     np.testing.assert_allclose(wp @ f, 0, atol=1e-12)
     np.testing.assert_allclose(wp @ gradH, 0, atol=1e-12)
@@ -145,11 +145,11 @@ def test_megno_matches_its_definition(paper_system, family, params, t_final):
     out = integrate(paper_system, y0, t_final, tangents=w0, megno=True, t_eval=t,
                     sample_tangents=True, renorm_interval=1e9)
     n = paper_system.n
-    m, d, meas, prof, par = paper_system.kernel_args
+    system_model = paper_system.model
     rate = np.empty(t.size)
     for k, state in enumerate(out.samples):
         dy = np.zeros(2 * n)
-        rhs(t[k], np.ascontiguousarray(state), dy, m.copy(), d, meas, prof, par, 1)
+        rhs(t[k], np.ascontiguousarray(state), dy, system_model, 1)
         w, wdot = state[n:], dy[n:]
         rate[k] = w @ wdot / (w @ w)
     from scipy.integrate import cumulative_trapezoid

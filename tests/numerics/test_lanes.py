@@ -151,16 +151,15 @@ def test_a_batch_gives_its_lanes_the_costliest_orbits_first():
     """Along the equilateral scan the chaotic orbits (delta >= 5) take 3-4x the steps of the
     regular ones near delta = 0: a batch starts them first, so its last lanes do not run
     them alone."""
-    from survey.numerics.driver import Control, Model
+    from survey.numerics.driver import Control
     from survey.numerics.integrate import _costliest_first
     system = System.create()
     deltas = [0.0, 6.0, 0.5, 7.0, 1.0, 8.0]
     starts = np.array([initial_state(system, "equilateral", delta=x) for x in deltas])
-    masses, d, measure, prof, par = system.kernel_args
     control = Control(t0=0.0, t1=2000.0, n_tan=0, megno=False, rtol=1e-12, atol=1e-12,
                       n_err=starts.shape[1], max_steps=10**6, h0=0.0, h_max=0.0, h_min=0.0,
                       renorm_dt=1.0, time_limit=0.0)
-    model = Model(masses=masses, d=d, measure=measure, prof=prof, par=par)
+    model = system.model
     order = _costliest_first(starts, model, control, 4, None)
     assert sorted(order[:3]) == [1, 3, 5], order
     full = integrate_batch(system, starts, 2000.0, lanes=1)

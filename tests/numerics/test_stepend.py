@@ -69,12 +69,12 @@ def check_megno_sums(runs):
     from scipy.integrate import cumulative_trapezoid
     system, y0, w0, t, out, plain, L = runs
     n = system.n
-    m, d, meas, prof, par = system.kernel_args
+    system_model = system.model
     rate = np.empty(t.size)
     for k, state in enumerate(plain.samples):
         state = np.ascontiguousarray(state[:2 * n])
         dy = np.zeros(2 * n)
-        rhs(t[k], state, dy, m.copy(), d, meas, prof, par, 1)
+        rhs(t[k], state, dy, system_model, 1)
         rate[k] = state[n:] @ dy[n:] / (state[n:] @ state[n:])
     Y = np.divide(2 * cumulative_trapezoid(t * rate, t, initial=0.0), t,
                   out=np.zeros_like(t), where=t > 0)

@@ -38,7 +38,7 @@ def states(rng, nq, n_tan, count):
 
 
 def check(system, rng, trials=60):
-    masses, d, measure, prof, par = system.kernel_args
+    model = system.model
     nq = system.n // 2
     for trial in range(trials):
         n_tan, L = trial % 4, (1, 3, 16, 17)[trial % 4 if trial % 8 < 4 else 3 - trial % 4]
@@ -46,11 +46,11 @@ def check(system, rng, trials=60):
         nf = y.shape[1]
         Y = np.ascontiguousarray(y.T).ravel()
         dY = np.full(Y.size, np.nan)
-        rhs_lanes(0.0, Y, dY, L, masses, d, measure, prof, par, n_tan,
+        rhs_lanes(0.0, Y, dY, L, model, n_tan,
                   np.zeros(workspace_size(L, nf)), None)
         for k in range(L):
             one = np.full(nf, np.nan)
-            rhs(0.0, y[k], one, masses, d, measure, prof, par, n_tan)
+            rhs(0.0, y[k], one, model, n_tan)
             assert dY[k::L].tobytes() == one.tobytes(), (n_tan, L, k, y[k])
 
 
@@ -81,12 +81,12 @@ def test_the_planar_path_gives_the_general_n_body_path_bit_for_bit(term):
     called here directly on the same states."""
     rng = np.random.default_rng(9)
     params = {p.name: 1.1 * p.default + 0.05 for p in term.parameters}
-    masses, d, measure, prof, par = System(rng.uniform(0.5, 2.0, 3), 2,
-                                           make_potential(term.name, params)).kernel_args
+    model = System(rng.uniform(0.5, 2.0, 3), 2, make_potential(term.name, params)).model
+    masses, d, measure, prof, par = model
     for n_tan in range(4):
         for y in states(rng, 6, n_tan, 40):
             own, general = np.full(y.size, np.nan), np.full(y.size, np.nan)
-            rhs(0.0, y, own, masses, d, measure, prof, par, n_tan)
+            rhs(0.0, y, own, model, n_tan)
             _leading_forces(y, general, masses, 3, 2, measure, prof, (par[0], par[1]), n_tan)
             assert own.tobytes() == general.tobytes(), (n_tan, y)
 
@@ -102,7 +102,8 @@ def test_a_reduced_state_has_the_full_states_rates_to_roundoff(term, shift):
     params = {p.name: 1.1 * p.default + 0.05 if shift else p.default
               for p in term.parameters}
     system = System(rng.uniform(0.5, 2.0, 3), 2, make_potential(term.name, params))
-    masses, d, measure, prof, par = system.kernel_args
+    model = system.model
+    masses = model.masses
     m = masses[None, :, None]
     for L, n_tan in ((1, 0), (3, 1), (4, 2), (16, 3), (17, 1)):
         q, p = rng.normal(size=(2, L, 3, 2))
@@ -119,7 +120,7 @@ def test_a_reduced_state_has_the_full_states_rates_to_roundoff(term, shift):
         for y, rb in ((full, None), (part, ratios)):
             Y = np.ascontiguousarray(y.T).ravel()
             dY = np.full(Y.size, np.nan)
-            rhs_lanes(0.0, Y, dY, L, masses, d, measure, prof, par, n_tan,
+            rhs_lanes(0.0, Y, dY, L, model, n_tan,
                       np.zeros(workspace_size(L, full.shape[1])), rb)
             rates.append(dY.reshape(-1, L).T)
         kept = np.concatenate([12 * b + np.r_[0:4, 6:10] for b in range(1 + n_tan)])
