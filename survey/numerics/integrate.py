@@ -168,7 +168,8 @@ class Frame(NamedTuple):
 
     @staticmethod
     def of(system, starts, tan, events):
-        masses, d, measure, prof, par = system.model
+        model = system.model
+        masses, d, measure, par = model.masses, model.d, model.measure, model.par
         if masses.size != 3 or d != 2 or par.ndim != 1 or measure not in (PERIMETER, AREA):
             return None
         m = masses[None, :, None]

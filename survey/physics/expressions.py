@@ -13,6 +13,7 @@ triplet term's symmetry) and differentiated exactly to compiled kernels elsewher
 from __future__ import annotations
 
 import difflib
+import functools
 import math
 import random
 import re
@@ -320,6 +321,10 @@ def program(tree, variables: tuple[str, ...], params: dict) -> Program:
     symbols = {v: sp.Symbol(v, positive=True) if v in POSITIVE else sp.Symbol(v, real=True)
                for v in variables}
     values = {**symbols, **{k: sp.Float(repr(float(v)), 17) for k, v in params.items()}}
+    if tuple(variables) == ("a", "b", "c"):     # a triplet's sides: P and A through them
+        a, b, c = xs3 = [symbols[v] for v in variables]
+        half = sum(xs3) / 2
+        values.update(P=a + b + c, A=sp.sqrt(half * (half - a) * (half - b) * (half - c)))
     U = _to_sympy(tree, values)
     xs = [symbols[v] for v in variables]
     grad = [sp.diff(U, x) for x in xs]
@@ -467,6 +472,65 @@ def run_lanes(code, R, L):
             R[o + k] = _apply(op, R[a + k], R[b + k])
 
 
+class Programs(NamedTuple):
+    """A system's programs packed for the kernels (a field of physics.system.Model): their
+    instructions on one shared register file (`regs`, constants in place), each
+    program's instructions start[t]:start[t + 1], its inputs' registers (up to 3, -1 past
+    its variables) and its outputs' (U, the gradient, the Hessian's upper triangle; -1
+    past them). Empty for a system without formulas: the same types for every system."""
+
+    code: np.ndarray          # (I, 4) int64
+    start: np.ndarray         # (T + 1,) int64
+    inputs: np.ndarray        # (T, 3) int64
+    outputs: np.ndarray       # (T, 10) int64
+    regs: np.ndarray          # (R,) float64
+
+
+def pack(programs) -> Programs:
+    """Programs of a system's formula terms, in order, on one register file: each
+    program's registers moved past those of the ones before."""
+    code, start, inputs, outputs, regs = [], [0], [], [], []
+    for prog in programs:
+        base = len(regs)
+        n_in = len(prog.inputs)
+        block = np.zeros(prog.registers)
+        block[n_in:n_in + prog.consts.size] = prog.consts
+        regs.extend(block)
+        shifted = prog.code.copy()
+        shifted[:, 1:] += base
+        code.extend(shifted.tolist())
+        start.append(start[-1] + len(prog.code))
+        inputs.append([base + i for i in range(n_in)] + [-1] * (3 - n_in))
+        outputs.append([base + int(o) for o in prog.outputs]
+                       + [-1] * (10 - prog.outputs.size))
+    return Programs(np.array(code, dtype=np.int64).reshape(-1, 4),
+                    np.array(start, dtype=np.int64),
+                    np.array(inputs, dtype=np.int64).reshape(-1, 3),
+                    np.array(outputs, dtype=np.int64).reshape(-1, 10),
+                    np.array(regs, dtype=np.float64))
+
+
+@helper
+def run_program(X, t, x0, x1, x2):
+    """Program t of a Programs X at inputs (x0, x1, x2) (those past its variables
+    ignored): its outputs are then in X.regs[X.outputs[t]]."""
+    regs, inputs = X.regs, X.inputs[t]
+    regs[inputs[0]] = x0
+    if inputs[1] >= 0:
+        regs[inputs[1]] = x1
+    if inputs[2] >= 0:
+        regs[inputs[2]] = x2
+    code = X.code
+    for i in range(X.start[t], X.start[t + 1]):
+        regs[code[i, 3]] = _apply(code[i, 0], regs[code[i, 1]], regs[code[i, 2]])
+
+
+@helper
+def output(X, t, k):
+    """Output k of program t after `run_program`."""
+    return X.regs[X.outputs[t, k]]
+
+
 def values(prog: Program, point: dict) -> np.ndarray:
     """U, its gradient and Hessian's upper triangle (the program's outputs) at a point
     (name -> value), computed by the compiled program: the tests' and checks' door."""
@@ -480,3 +544,13 @@ def values(prog: Program, point: dict) -> np.ndarray:
 @leaf
 def run_scalar(code, R):
     run(code, R)
+
+
+@functools.lru_cache(maxsize=256)
+def term_program(kind: str, expression: str, inputs: tuple, param_names: tuple,
+                 params: tuple) -> Program:
+    """The Program of a formula term (physics.terms.make_expression's Potential): its
+    formula in its inputs, the parameters' values put in. Cached: sympy's derivatives take
+    a fraction of a second, and every System of a grid's cells asks again."""
+    names = (*(inputs if kind == "external" else VARIABLES[kind]), *param_names)
+    return program(parse(expression, names), inputs, dict(zip(param_names, params)))

@@ -12,7 +12,8 @@ import math
 
 from ..machine import portable
 from ..machine.jit import helper, lanes, leaf
-from .terms import BARRIER, LENNARD_JONES, PERIMETER, POWER
+from .expressions import output, run_program
+from .terms import BARRIER, GIVEN, LENNARD_JONES, PERIMETER, POWER
 
 # The perimetric and areal forces exist in one reference and hand-specialised copies, each
 # for speed on the paths that run most; every copy is held to what it specialises, bit for
@@ -130,7 +131,10 @@ def profile(code, par, x):
 
 @leaf
 def _transcendental_profile(code, par, x):
-    """The power profile c x^k / k (k != 2; log for k = 0) and Yukawa's."""
+    """The power profile c x^k / k (k != 2; log for k = 0) and Yukawa's; GIVEN: U' and U''
+    as par holds them (a formula's, from its program: `expression_profile`)."""
+    if code == GIVEN:
+        return 0.0, par[0], par[1]
     if code == POWER:
         c, k = par[0], par[1]
         if k == 0.0:
@@ -540,3 +544,65 @@ def areal_tangent_lanes(G, E, U, O, L):
         _put3(O, 1, L, k, Xu)
         _put3(O, 4, L, k, Xv)
         _put3(O, 7, L, k, Xw)
+
+
+# ---------------------------------------------------------------- terms written as formulas
+# (physics.expressions: each a program of a Programs X, here program t). A formula of one
+# measure -- a pair's distance, a triangle's P or |A| -- runs the forces above with its
+# values as the GIVEN profile; one of the three sides and one of a body's position have
+# forces of their own.
+
+@helper
+def expression_profile(X, t, x):
+    """U, U', U'' of program t (a formula of one measure) at x."""
+    run_program(X, t, x, 0.0, 0.0)
+    return output(X, t, 0), output(X, t, 1), output(X, t, 2)
+
+
+@leaf
+def sides_forces(y, dy, i, j, k, d, n, n_tan, X, t):
+    """As perimetric_forces, for a symmetric U(a, b, c) of the sides a = |v - u|,
+    b = |w - v|, c = |u - w| (program t): the force on u is U_a e1 - U_c e3 (cyclic), and
+    each side's term varies by (sum over sides s of U_as (e_s . dr_s)) e1 plus U_a's
+    turning of e1."""
+    nq = n // 2
+    e1, e2, e3, L1, L2, L3 = _perimetric_sides(vec(y, i * d, d), vec(y, j * d, d),
+                                               vec(y, k * d, d))
+    run_program(X, t, L1, L2, L3)
+    Ua, Ub, Uc = output(X, t, 1), output(X, t, 2), output(X, t, 3)
+    Haa, Hab, Hac = output(X, t, 4), output(X, t, 5), output(X, t, 6)
+    Hbb, Hbc, Hcc = output(X, t, 7), output(X, t, 8), output(X, t, 9)
+    _add_cyclic(dy, nq, i, j, k, d, 1.0, (Ua * e1[0], Ua * e1[1], Ua * e1[2]),
+                (Ub * e2[0], Ub * e2[1], Ub * e2[2]), (Uc * e3[0], Uc * e3[1], Uc * e3[2]))
+    for tt in range(n_tan):
+        base = n * (1 + tt)
+        du, dv, dw = vec(y, base + i * d, d), vec(y, base + j * d, d), vec(y, base + k * d, d)
+        r1, r2, r3 = sub(dv, du), sub(dw, dv), sub(du, dw)
+        d1, d2, d3 = dot(e1, r1), dot(e2, r2), dot(e3, r3)
+        g1 = _pair_tangent(e1, L1, r1, Haa * d1 + Hab * d2 + Hac * d3, Ua, 1.0)
+        g2 = _pair_tangent(e2, L2, r2, Hab * d1 + Hbb * d2 + Hbc * d3, Ub, 1.0)
+        g3 = _pair_tangent(e3, L3, r3, Hac * d1 + Hbc * d2 + Hcc * d3, Uc, 1.0)
+        _add_cyclic(dy, base + nq, i, j, k, d, 1.0, g1, g2, g3)
+
+
+@leaf
+def external_forces(y, dy, i, d, n, n_tan, X, t, w):
+    """The force -w grad U(q_i) of an external field U(x, y[, z]) (program t) on body i
+    (w its mass for a mass-weighted term, else 1), and its tangent force -w Hess U dq_i."""
+    nq = n // 2
+    o = i * d
+    run_program(X, t, y[o], y[o + 1], y[o + 2] if d == 3 else 0.0)
+    if d == 2:
+        g = (output(X, t, 1), output(X, t, 2), 0.0)
+        H = (output(X, t, 3), output(X, t, 4), 0.0, output(X, t, 5), 0.0, 0.0)
+    else:
+        g = (output(X, t, 1), output(X, t, 2), output(X, t, 3))
+        H = (output(X, t, 4), output(X, t, 5), output(X, t, 6), output(X, t, 7),
+             output(X, t, 8), output(X, t, 9))
+    add_to(dy, nq + o, d, -w, g)
+    for tt in range(n_tan):
+        base = n * (1 + tt)
+        q = vec(y, base + o, d)
+        add_to(dy, base + nq + o, d, -w, (H[0] * q[0] + H[1] * q[1] + H[2] * q[2],
+                                          H[1] * q[0] + H[3] * q[1] + H[4] * q[2],
+                                          H[2] * q[0] + H[4] * q[1] + H[5] * q[2]))

@@ -94,13 +94,13 @@ def _full_lanes(t, Y, dY, L, model, n_tan, W, rb):
     rb is a tuple, numba still types this branch that never runs, and a literal None
     compiled a full-state copy of the lanes' right-hand sides into every reduced batch's
     kernels (seconds of a first run)."""
-    masses, d, measure, prof, par = model
+    masses, d, measure, par = model.masses, model.d, model.measure, model.par
     if L >= SIMD_MIN and masses.size == 3 and d == 2 and par.ndim == 1 and (
             measure == PERIMETER or measure == AREA):
         _planar_lanes(Y, dY, L, W, model, n_tan, rb)
     elif L == 1:
         rhs(t, Y, dY, model, n_tan)
-    elif L >= SIMD_MIN:
+    elif L >= SIMD_MIN and model.expr.start.size == 1:      # (formulas: lane by lane)
         general_lanes(Y, dY, L, W, model, n_tan)
     else:
         nf = Y.size // L
@@ -136,7 +136,8 @@ def _general_lanes_overload(Y, dY, L, W, model, n_tan):
         return lambda Y, dY, L, W, model, n_tan: None
 
     def run(Y, dY, L, W, model, n_tan):
-        masses, d, measure, prof, par = model
+        masses, d, measure, prof, par = model.masses, model.d, model.measure, model.prof, \
+            model.par
         planar = (measure == PERIMETER or measure == AREA) and masses.size == 3 and d == 2
         if planar:      # the velocities and the leading term's forces, as _leading_forces
             _planar_lanes(Y, dY, L, W, model, n_tan, None)

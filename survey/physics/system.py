@@ -19,6 +19,9 @@ from .forces import (
     areal_forces,
     atm_energy,
     atm_forces,
+    expression_profile,
+    external_forces,
+    sides_forces,
     norm,
     pair_forces,
     perimetric_forces,
@@ -30,11 +33,16 @@ from .forces import (
 from .geometry import cross
 from ..machine.portable import power, vnorm
 from ..machine.jit import helper, kernel, leaf
+from .expressions import Programs, output, pack, run_program, term_program
 from .terms import (
     AREA,
     DISTANCE,
+    EXPRESSION,
+    GIVEN,
     NONE,
     PERIMETER,
+    POSITION,
+    SIDES,
     TRIANGLE,
     Potential,
     make_potential,
@@ -43,14 +51,16 @@ from .terms import (
 
 class Model(NamedTuple):
     """The system as every kernel takes it (`System.model`): masses, dimension, the leading
-    perimetric or areal term's measure and profile codes (NONE if there is none) and the
-    terms' parameters (`_encode`)."""
+    perimetric or areal term's measure and profile codes (NONE if there is none), the
+    terms' parameters (`_encode`) and the programs of its formulas (their registers the
+    kernels' scratch: a Model is one thread's)."""
 
     masses: np.ndarray
     d: int
     measure: int
     prof: int
     par: np.ndarray
+    expr: Programs              # the programs of the terms written as formulas
 
 
 @dataclass(frozen=True, eq=False)
@@ -70,11 +80,12 @@ class System:
         terms = (self.terms,) if isinstance(self.terms, Potential) else tuple(self.terms)
         if not terms or not all(isinstance(t, Potential) for t in terms):
             raise ValueError("a system's terms are one or more Potentials (make_potential)")
-        fewest = 2 if all(t.kind == "pair" for t in terms) else 3
+        kinds = {t.kind for t in terms}
+        fewest = 3 if "triplet" in kinds else 2 if "pair" in kinds else 1
         if m.ndim != 1 or m.size < fewest:
-            raise ValueError(f"a system {'of pair terms ' if fewest == 2 else 'with a triplet '}"
-                             f"{'' if fewest == 2 else 'term '}needs masses for N >= {fewest} "
-                             "bodies")
+            raise ValueError("a system " + {3: "with a triplet term ", 2: "of pair terms ",
+                                            1: ""}[fewest]
+                             + f"needs masses for N >= {fewest} bodies")
         if not np.all(np.isfinite(m)) or np.any(m <= 0):
             raise ValueError("masses must be finite and > 0")
         if self.dim not in (2, 3):
@@ -83,6 +94,9 @@ class System:
         object.__setattr__(self, "masses", m)
         object.__setattr__(self, "terms", terms)
         object.__setattr__(self, "_par", _encode(terms, m.size, self.dim))
+        object.__setattr__(self, "_programs", pack([
+            term_program(t.kind, t.expression, t.variables, t.param_names, t.params)
+            for t in terms if t.profile == EXPRESSION]))
 
     @classmethod
     def create(cls, masses=(1.0, 1.0, 1.0), dim=defaults.DIM, potential=defaults.POTENTIAL,
@@ -121,9 +135,10 @@ class System:
         read-only array is another numba type, which would compile every kernel a second
         time."""
         lead = self.terms[0]
-        codes = (lead.measure, lead.profile) if lead.measure in (PERIMETER, AREA) else (NONE, 0)
+        codes = (lead.measure, lead.profile) if _leads(lead) else (NONE, 0)
+        X = self._programs
         return Model(masses=self.masses.copy(), d=self.dim, measure=codes[0], prof=codes[1],
-                     par=self._par.copy())
+                     par=self._par.copy(), expr=X._replace(regs=X.regs.copy()))
 
     def state(self, positions, momenta) -> np.ndarray:
         """Flat state from positions and momenta of shape (N, d)."""
@@ -242,6 +257,12 @@ def weighted_sum(weights: np.ndarray, x: np.ndarray) -> np.ndarray:
     return total
 
 
+def _leads(term) -> bool:
+    """Whether a term can be a system's leading perimetric or areal term (a formula
+    never is: its forces run with the further terms')."""
+    return term.measure in (PERIMETER, AREA) and term.profile != EXPRESSION
+
+
 def _encode(terms, N: int, d: int) -> np.ndarray:
     """The kernels' `par`. Three bodies in the plane under a single perimetric or areal
     term (the paper's systems): its two parameters, a 1-D array. Otherwise a 2-D array: row
@@ -249,13 +270,18 @@ def _encode(terms, N: int, d: int) -> np.ndarray:
     then one row (measure, profile, weighted, p0, p1) per further term, weighted 1 for a
     pair term multiplied by m_i m_j. The kernels are compiled separately for the two array
     types, so the paper's systems run -- and a first run compiles -- code in which neither
-    the general N-body path nor the further terms exist (a shorter cold start)."""
-    lead = terms[0] if terms[0].measure in (PERIMETER, AREA) else None
+    the general N-body path nor the further terms exist (a shorter cold start). A term
+    written as a formula has the row (measure, EXPRESSION, weighted, its program's index,
+    0)."""
+    lead = terms[0] if _leads(terms[0]) else None
     if lead is not None and len(terms) == 1 and N == 3 and d == 2:
         return lead.par
     rows = [list(lead.par) + [0.0] * 3 if lead is not None else [0.0] * 5]
+    programs = 0
     for term in terms[1:] if lead is not None else terms:
         p = term.par
+        if term.profile == EXPRESSION:
+            p, programs = np.array([programs, 0.0]), programs + 1
         rows.append([term.measure, term.profile, float(term.mass_weighted), p[0],
                      p[1] if p.size > 1 else 0.0])
     return np.array(rows, dtype=np.float64)
@@ -277,7 +303,7 @@ def velocities_and_forces(y, dy, model, n_tan):
     """dq/dt, dp/dt and the tangent blocks of `rhs` (see _encode)."""
 
 
-def further_energy(q, masses, d, par):
+def further_energy(q, masses, d, par, X):
     """Energy of the terms after the leading one (see _encode)."""
 
 
@@ -306,9 +332,9 @@ def _velocities_and_forces(y, dy, model, n_tan):
 
 
 @overload(further_energy, jit_options=dict(error_model="numpy"), inline="always")
-def _further_energy(q, masses, d, par):
+def _further_energy(q, masses, d, par, X):
     if par.ndim == 1:
-        return lambda q, masses, d, par: 0.0
+        return lambda q, masses, d, par, X: 0.0
     return _rows_energy
 
 
@@ -323,9 +349,9 @@ def _potential_energies(qs, model):
 @leaf
 def potential_energy(q, model):
     """Sum over the terms of U summed over triplets i < j < k or pairs i < j."""
-    masses, d, measure, prof, par = model
+    masses, d, measure, prof, par, X = model
     N = masses.size
-    total = further_energy(q, masses, d, par)
+    total = further_energy(q, masses, d, par, X)
     if measure != NONE:
         total += _triplet_energy(q, N, d, measure, prof, lead_params(par))
     return total
@@ -347,19 +373,21 @@ def _planar_forces(y, dy, model, n_tan):
 @helper
 def _general_forces(y, dy, model, n_tan):
     """Any other system: the leading perimetric or areal term, then the further terms."""
-    masses, d, measure, prof, par = model
+    masses, d, measure, prof, par, X = model
     N = masses.size
     _leading_forces(y, dy, masses, N, d, measure, prof, (par[0, 0], par[0, 1]), n_tan)
-    _rows_forces(y, dy, masses, d, 2 * N * d, n_tan, par)
+    _rows_forces(y, dy, masses, d, 2 * N * d, n_tan, par, X)
 
 
-def _rows_energy(q, masses, d, par):
+def _rows_energy(q, masses, d, par, X):
     N = masses.size
     total = 0.0
     for row in range(1, par.shape[0]):
         kind, code, weighted = int(par[row, 0]), int(par[row, 1]), par[row, 2]
         p = _term_params(par, row)
-        if kind == DISTANCE:
+        if code == EXPRESSION:
+            total += _formula_energy(q, masses, d, kind, weighted, X, int(p[0]))
+        elif kind == DISTANCE:
             for i in range(N - 1):
                 for j in range(i + 1, N):
                     u = profile(code, p, norm(sub(vec(q, j * d, d), vec(q, i * d, d))))[0]
@@ -372,6 +400,34 @@ def _rows_energy(q, masses, d, par):
                                             vec(q, k * d, d), p[0])
         else:
             total += _triplet_energy(q, N, d, kind, code, p)
+    return total
+
+
+@leaf
+def _formula_energy(q, masses, d, kind, weighted, X, t):
+    """The energy of a term written as a formula (program t of X)."""
+    N = masses.size
+    total = 0.0
+    if kind == POSITION:
+        for i in range(N):
+            run_program(X, t, q[i * d], q[i * d + 1], q[i * d + 2] if d == 3 else 0.0)
+            total += masses[i] * output(X, t, 0) if weighted != 0.0 else output(X, t, 0)
+    elif kind == DISTANCE:
+        for i in range(N - 1):
+            for j in range(i + 1, N):
+                run_program(X, t, norm(sub(vec(q, j * d, d), vec(q, i * d, d))), 0.0, 0.0)
+                u = output(X, t, 0)
+                total += masses[i] * masses[j] * u if weighted != 0.0 else u
+    else:
+        for i in range(N - 2):
+            for j in range(i + 1, N - 1):
+                for k in range(j + 1, N):
+                    if kind == SIDES:
+                        u, v, w = vec(q, i * d, d), vec(q, j * d, d), vec(q, k * d, d)
+                        run_program(X, t, norm(sub(v, u)), norm(sub(w, v)), norm(sub(u, w)),)
+                    else:
+                        run_program(X, t, triplet_measure(q, i, j, k, d, kind), 0.0, 0.0)
+                    total += output(X, t, 0)
     return total
 
 
@@ -528,13 +584,15 @@ def _leading_forces(y, dy, masses, N, d, measure, prof, lead, n_tan):
 
 
 @leaf
-def _rows_forces(y, dy, masses, d, n, n_tan, par):
+def _rows_forces(y, dy, masses, d, n, n_tan, par, X):
     """Add the forces of the terms after the leading one (par's rows 1, ...)."""
     N = masses.size
     for row in range(1, par.shape[0]):
         kind, code, weighted = int(par[row, 0]), int(par[row, 1]), par[row, 2]
         p = _term_params(par, row)
-        if kind == DISTANCE:
+        if code == EXPRESSION:
+            _formula_forces(y, dy, masses, d, n, n_tan, kind, weighted, X, int(p[0]))
+        elif kind == DISTANCE:
             for i in range(N - 1):
                 for j in range(i + 1, N):
                     w = masses[i] * masses[j] if weighted != 0.0 else 1.0
@@ -554,3 +612,34 @@ def _rows_forces(y, dy, masses, d, n, n_tan, par):
                 for j in range(i + 1, N - 1):
                     for k in range(j + 1, N):
                         areal_forces(y, dy, i, j, k, d, n, n_tan, code, p)
+
+
+@leaf
+def _formula_forces(y, dy, masses, d, n, n_tan, kind, weighted, X, t):
+    """Add the forces of a term written as a formula (program t of X): one of a body's
+    position on every body; one of a single measure through that measure's forces with
+    the program's U' and U'' (the GIVEN profile); one of the sides through sides_forces."""
+    N = masses.size
+    if kind == POSITION:
+        for i in range(N):
+            external_forces(y, dy, i, d, n, n_tan, X, t,
+                            masses[i] if weighted != 0.0 else 1.0)
+    elif kind == DISTANCE:
+        for i in range(N - 1):
+            for j in range(i + 1, N):
+                r = norm(sub(vec(y, j * d, d), vec(y, i * d, d)))
+                _, U1, U2 = expression_profile(X, t, r)
+                pair_forces(y, dy, i, j, d, n, n_tan, GIVEN, (U1, U2),
+                            masses[i] * masses[j] if weighted != 0.0 else 1.0)
+    else:
+        for i in range(N - 2):
+            for j in range(i + 1, N - 1):
+                for k in range(j + 1, N):
+                    if kind == SIDES:
+                        sides_forces(y, dy, i, j, k, d, n, n_tan, X, t)
+                        continue
+                    _, U1, U2 = expression_profile(X, t, triplet_measure(y, i, j, k, d, kind))
+                    if kind == PERIMETER:
+                        perimetric_forces(y, dy, i, j, k, d, n, n_tan, GIVEN, (U1, U2))
+                    else:
+                        areal_forces(y, dy, i, j, k, d, n, n_tan, GIVEN, (U1, U2))

@@ -18,12 +18,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-# what a term depends on: a triangle's perimeter or area, the whole triangle (ATM), or a
-# pair's distance; NONE marks "no perimetric or areal term" in the kernels' arguments
-NONE, PERIMETER, AREA, TRIANGLE, DISTANCE = -1, 0, 1, 2, 3
-# the profiles U(x) the kernels evaluate (physics.forces.profile)
-POWER, YUKAWA, BARRIER, LENNARD_JONES = 0, 1, 2, 3
+# what a term depends on: a triangle's perimeter or area, the whole triangle (ATM), a
+# pair's distance, a triangle's three sides (a formula), one body's position (a formula);
+# NONE marks "no perimetric or areal term" in the kernels' arguments
+NONE, PERIMETER, AREA, TRIANGLE, DISTANCE, SIDES, POSITION = -1, 0, 1, 2, 3, 4, 5
+# the profiles U(x) the kernels evaluate (physics.forces.profile); a term written as a
+# formula is an EXPRESSION: its values come from its program (physics.expressions), and
+# the forces of a formula in one measure take them as the GIVEN profile (U', U'')
+POWER, YUKAWA, BARRIER, LENNARD_JONES, EXPRESSION, GIVEN = 0, 1, 2, 3, 4, 5
 KINDS = ("pair", "triplet")
+EXPRESSION_KINDS = ("pair", "triplet", "external")
 
 
 @dataclass(frozen=True)
@@ -157,10 +161,13 @@ class Potential:
     params: tuple[float, ...]
     param_names: tuple[str, ...]
     mass_weighted: bool = False     # a pair term's U(r_ij) multiplied by m_i m_j
+    expression: str = ""            # a term written as a formula (profile EXPRESSION)
+    variables: tuple[str, ...] = ()     # ... and the variables its program takes
 
     @property
     def kind(self) -> str:
-        return "pair" if self.measure == DISTANCE else "triplet"
+        return ("pair" if self.measure == DISTANCE else "external"
+                if self.measure == POSITION else "triplet")
 
     @property
     def par(self) -> np.ndarray:
@@ -168,6 +175,8 @@ class Potential:
         kernels' YUKAWA profile is the attractive triplet form); gravity as the power
         profile G r^-1 / -1, whose mass weighting makes it -G m_i m_j / r."""
         p = np.array(self.params, dtype=np.float64)
+        if self.profile == EXPRESSION:
+            return np.zeros(2)          # its values are its program's (system._encode)
         if self.kind == "pair" and self.profile == YUKAWA:
             p[0] = -p[0]
         if self.name == "gravity":
@@ -179,7 +188,7 @@ class Potential:
         """k if the term is homogeneous in the positions, U(s q) = s^k U(q), else None (a
         logarithm, a screening length, a barrier or a well sets a scale)."""
         if self.profile != POWER and self.measure != TRIANGLE:
-            return None
+            return None                 # (a formula's degree is not worked out)
         if self.measure == TRIANGLE:
             return -9.0                         # (r_ij r_jk r_ki)^-3
         if self.name == "gravity":
@@ -191,6 +200,11 @@ class Potential:
 
     def describe(self) -> str:
         values = ", ".join(f"{k}={v:g}" for k, v in zip(self.param_names, self.params))
+        if self.expression:
+            return (f"{self.kind} formula U = {self.expression}"
+                    + (", times m_i m_j" if self.mass_weighted and self.kind == "pair" else
+                       ", times m_i" if self.mass_weighted else "")
+                    + (f" with {values}" if values else ""))
         weighted = ("" if term(self.name, self.kind).weighted or not self.mass_weighted
                     else ", times m_i m_j")
         return (f"{self.name} ({self.kind}): U = {term(self.name, self.kind).formula}"
@@ -222,6 +236,51 @@ def make_potential(name: str, params: dict | None = None, kind: str = "triplet",
         values.append(float(value))
     return Potential(name, decl.measure, decl.profile, tuple(values),
                      tuple(p.name for p in decl.parameters), mass_weighted or decl.weighted)
+
+
+def make_expression(kind: str, expression: str, params: dict | None = None,
+                    mass_weighted: bool = False, dim: int = 2) -> Potential:
+    """A term written as a formula (physics.expressions): a pair's U(r), a triplet's
+    symmetric U(a, b, c) of the sides (P and A, the perimeter and the area, as names too)
+    or an external U(x, y[, z]) acting on every body (times its mass with mass_weighted),
+    with named parameters. A triplet formula of P alone, or of A alone, runs on the
+    perimetric or areal term's forces; one of the sides on its own. ValueError naming what
+    is wrong: a token, a name, a parameter, a non-symmetric triplet formula."""
+    from .expressions import VARIABLES, check_symmetric, names_in, parse
+    if kind not in EXPRESSION_KINDS:
+        raise ValueError(f"unknown kind {kind!r} of a formula term; choose one of "
+                         f"{', '.join(EXPRESSION_KINDS)}")
+    if not isinstance(mass_weighted, bool):
+        raise ValueError(f"mass_weighted must be true or false, got {mass_weighted!r}")
+    if mass_weighted and kind == "triplet":
+        raise ValueError("mass_weighted applies to pair and external terms; a triplet "
+                         "formula is a function of its triangle alone")
+    params = dict(params or {})
+    variables = VARIABLES[kind][:dim] if kind == "external" else VARIABLES[kind]
+    for name, value in params.items():
+        if not isinstance(name, str) or not name.isidentifier() or name in variables \
+                or name in ("pi",):
+            raise ValueError(f"parameter name {name!r} must be a name that is not a "
+                             f"variable ({', '.join(variables)}) or pi")
+        if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                or not math.isfinite(value):
+            raise ValueError(f"parameter {name!r} must be a finite number, got {value!r}")
+    tree = parse(expression, (*variables, *params))
+    used = names_in(tree)
+    if not used & set(variables):
+        raise ValueError(f"does not depend on {', '.join(variables)}: a constant exerts no "
+                         "force")
+    measure, inputs = {"pair": (DISTANCE, ("r",)),
+                       "external": (POSITION, variables)}.get(kind, (SIDES, ("a", "b", "c")))
+    if kind == "triplet":
+        check_symmetric(tree, {k: float(v) for k, v in params.items()})
+        if used & set(variables) == {"P"}:
+            measure, inputs = PERIMETER, ("P",)
+        elif used & set(variables) == {"A"}:
+            measure, inputs = AREA, ("A",)
+    return Potential(f"{kind}_formula", measure, EXPRESSION,
+                     tuple(float(v) for v in params.values()), tuple(params),
+                     mass_weighted, expression, inputs)
 
 
 def markdown_table() -> str:
