@@ -105,8 +105,9 @@ class System:
 
     @property
     def is_paper_kind(self) -> bool:
-        """One perimetric or areal triplet term, as in the paper: its closed forms apply."""
-        return len(self.terms) == 1 and self.terms[0].measure in (PERIMETER, AREA)
+        """One built-in perimetric or areal triplet term, as in the paper: its closed forms
+        apply (a formula's profile is its program's, found by the general path)."""
+        return len(self.terms) == 1 and _leads(self.terms[0])
 
     @property
     def potential(self) -> Potential:

@@ -10,19 +10,22 @@ import numpy as np
 from ..catalog.indicators import IndicatorOptions
 from ..numerics.sections import section_event
 from ..physics.system import System
-from ..physics.terms import make_potential, parameter_defaults
+from ..physics.terms import make_expression, make_potential, parameter_defaults
 
 
 def system_terms(s: dict) -> list[tuple[str, str, dict]]:
-    """(kind, potential, params as written) of each term of a [system] table."""
+    """(kind, potential, params as written) of each term of a [system] table; a term
+    written as a formula is named <kind>_formula."""
     if s["interactions"] is None:
         return [("triplet", s["potential"], s["params"])]
-    return [(t["kind"], t["potential"], t.get("params", {})) for t in s["interactions"]]
+    return [(t["kind"], t.get("potential") or f"{t['kind']}_formula", t.get("params", {}))
+            for t in s["interactions"]]
 
 
 def term_axis_names(s: dict) -> list[dict]:
     """Per term, the grid-axis name of each of its parameters: <potential>_<parameter>,
-    or <potential>_<k>_<parameter> (k = 1, 2, ...) when the potential occurs twice."""
+    or <potential>_<k>_<parameter> (k = 1, 2, ...) when the potential occurs twice; a
+    formula's named parameters as <kind>_formula_<parameter>."""
     terms = system_terms(s)
     names = [name for _, name, _ in terms]
     seen: dict[str, int] = {}
@@ -30,7 +33,8 @@ def term_axis_names(s: dict) -> list[dict]:
     for kind, name, params in terms:
         seen[name] = seen.get(name, 0) + 1
         label = name if names.count(name) == 1 else f"{name}_{seen[name]}"
-        out.append({key: f"{label}_{key}" for key in parameter_defaults(name, kind)})
+        keys = params if name.endswith("_formula") else parameter_defaults(name, kind)
+        out.append({key: f"{label}_{key}" for key in keys})
     return out
 
 
@@ -42,15 +46,17 @@ def build_system(s: dict, at: dict | None = None) -> System:
     masses = s["masses"] if s["masses"] is not None else [1.0] * s["bodies"]
     at = at or {}
     terms, used = [], set()
-    weighted = [t.get("mass_weighted", False) for t in s["interactions"] or [{}]]
-    for (kind, name, params), axis_names, w in zip(system_terms(s), term_axis_names(s),
-                                                   weighted):
+    entries = s["interactions"] or [{}]
+    for (kind, name, params), axis_names, entry in zip(system_terms(s), term_axis_names(s),
+                                                       entries):
         values = dict(params)
         for key, axis in axis_names.items():
             if axis in at:
                 values[key] = at[axis]
                 used.add(axis)
-        terms.append(make_potential(name, values, kind, w))
+        w = entry.get("mass_weighted", False)
+        terms.append(make_expression(kind, entry["expression"], values, w, s["dim"])
+                     if "expression" in entry else make_potential(name, values, kind, w))
     if set(at) - used:
         raise ValueError(f"{sorted(set(at) - used)[0]!r} is no parameter of the system's "
                          "terms")

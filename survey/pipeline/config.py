@@ -30,9 +30,11 @@ from ..numerics.torus import resonance_count
 from ..physics.families import FAMILIES, family_parameters
 from ..physics.system import System
 from ..physics.terms import (
+    EXPRESSION_KINDS,
     KINDS,
     PAIR_NAMES,
     TRIPLET_NAMES,
+    make_expression,
     make_potential,
     parameter_defaults,
 )
@@ -43,7 +45,7 @@ from .records import Settings
 from .schema import FLAGS, SCHEMA, Key, record_name
 
 INT64_MAX = 2 ** 63 - 1
-TERM_KEYS = ("kind", "potential", "params", "mass_weighted")   # an interactions entry
+TERM_KEYS = ("kind", "potential", "expression", "params", "mass_weighted")   # an entry
 
 
 def settings_of(tables: dict) -> Settings:
@@ -566,8 +568,11 @@ def _validate_terms(s: dict, given: dict) -> list[Axis]:
             extra = sorted(set(entry) - set(TERM_KEYS))
             if extra:
                 raise ConfigError(f"{where}.{extra[0]}", "unknown key" + _suggest(
-                    extra[0], TERM_KEYS) + "; a term has kind, potential, params and "
-                    "(pair terms) mass_weighted")
+                    extra[0], TERM_KEYS) + "; a term has kind, potential (or expression), "
+                    "params and (pair and external terms) mass_weighted")
+            if "expression" in entry:
+                grids += _validate_formula(entry, where, i, s["dim"])
+                continue
             for key in ("kind", "potential"):
                 if not isinstance(entry.get(key), str):
                     raise ConfigError(f"{where}.{key}", "is required (a string): "
@@ -576,7 +581,9 @@ def _validate_terms(s: dict, given: dict) -> list[Axis]:
             kind, name, params = entry["kind"], entry["potential"], entry.get("params", {})
             if kind not in KINDS:
                 raise ConfigError(f"{where}.kind", f"{kind!r} is not one of "
-                                  f"{', '.join(map(repr, KINDS))}" + _suggest(kind, KINDS))
+                                  f"{', '.join(map(repr, KINDS))}" + _suggest(kind, KINDS)
+                                  + (" (an external field is written as a formula: "
+                                     "expression = \"...\")" if kind == "external" else ""))
             if not isinstance(params, dict):
                 raise ConfigError(f"{where}.params", f"expected a table, got {params!r}")
             weighted = entry.get("mass_weighted", False)
@@ -629,11 +636,49 @@ def _validate_terms(s: dict, given: dict) -> list[Axis]:
     return [Axis(names[i][key], grid, term=i, param=key) for i, key, grid in grids]
 
 
+def _validate_formula(entry: dict, where: str, i: int, dim: int) -> list:
+    """An interactions entry written as a formula: its kind, its expression (parsed by the
+    whitelist grammar of physics.expressions, nothing evaluated), its named parameters
+    (numbers or grid axes) and mass_weighted, each checked at every grid value. Returns
+    its parameters' grid axes as (term, parameter, values)."""
+    if "potential" in entry:
+        raise ConfigError(f"{where}.potential", "give potential (a built-in term) or "
+                                                "expression (a formula), not both")
+    kind, expression = entry.get("kind"), entry["expression"]
+    if kind not in EXPRESSION_KINDS:
+        raise ConfigError(f"{where}.kind", f"{kind!r} is not one of "
+                          f"{', '.join(map(repr, EXPRESSION_KINDS))} (the kinds a formula "
+                          "may be)" + (_suggest(kind, EXPRESSION_KINDS)
+                                       if isinstance(kind, str) else ""))
+    params = entry.get("params", {})
+    if not isinstance(params, dict):
+        raise ConfigError(f"{where}.params", f"expected a table of named numbers, got "
+                                             f"{params!r}")
+    weighted = entry.get("mass_weighted", False)
+    values, grids = {}, []
+    for key, value in params.items():
+        grid = _axis(f"{where}.params.{key}", value)
+        values[key] = [float(value)] if grid is None else grid.tolist()
+        if grid is not None:
+            grids.append((i, key, grid))
+    first = {k: v[0] for k, v in values.items()}
+    try:
+        make_expression(kind, expression, first, weighted, dim)
+    except ValueError as exc:
+        key = "mass_weighted" if "mass_weighted" in str(exc) else \
+            next((f"params.{k}" for k in params if f"{k!r}" in str(exc)), "expression")
+        raise ConfigError(f"{where}.{key}", str(exc)) from None
+    return grids
+
+
 def _validate_system(s: dict, term_axes: list[Axis]) -> System:
     if s["masses"] is not None and len(s["masses"]) != s["bodies"]:
         raise ConfigError("[system].masses", f"needs {s['bodies']} values (one per body), "
                                             f"got {len(s['masses'])}")
-    return build_system(s, {a.name: float(a.values[0]) for a in term_axes})
+    try:
+        return build_system(s, {a.name: float(a.values[0]) for a in term_axes})
+    except ValueError as exc:       # a body count the terms do not support
+        raise ConfigError("[system].bodies", str(exc)) from None
 
 
 def _validate_initial(given: dict, body: dict, system: System):

@@ -20,7 +20,7 @@ class SurveyTable:
 class SystemTable:
     """[system]"""
 
-    bodies: int                         # number of bodies N
+    bodies: int                         # number of bodies N (3 or more with a triplet term, 2 wi...
     dim: int                            # dimension of space
     masses: list[float] | None          # masses, one per body (default all 1)
     potential: str                      # triplet potential <measure>_<profile> or axilrod_teller

@@ -39,7 +39,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
                                  "created; checkpoints go to <output>.checkpoints/"),
     },
     "system": {
-        "bodies": Key("int", defaults.BODIES, "number of bodies N", low=3),
+        "bodies": Key("int", defaults.BODIES, "number of bodies N (3 or more with a triplet "
+                                              "term, 2 with pair terms, 1 in an external "
+                                              "field alone)", low=1),
         "dim": Key("int", defaults.DIM, "dimension of space", choices=(2, 3)),
         "masses": Key("floats", None, "masses, one per body (default all 1)", "mass",
                       low=1e-100, high=1e100, hint="their products and squares (gravity's "
@@ -54,7 +56,13 @@ SCHEMA: dict[str, dict[str, Key]] = {
                                            "...]; every parameter is given, any may be a grid "
                                            "axis named <potential>_<parameter>; a pair term "
                                            "with mass_weighted = true is U(r_ij) m_i m_j "
-                                           "(the gravity term always is)"),
+                                           "(the gravity term always is). A term written as a "
+                                           "formula: {kind = \"pair\" (in r), \"triplet\" "
+                                           "(symmetric in the sides a, b, c; P and A too) or "
+                                           "\"external\" (in x, y, z, on every body), "
+                                           "expression = \"...\", params = {name = value}}, "
+                                           "its parameters' axes named "
+                                           "<kind>_formula_<parameter>"),
     },
     "initial": {
         "family": Key("str", None, "initial-condition family", choices=tuple(FAMILIES)),

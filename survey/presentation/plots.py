@@ -116,6 +116,12 @@ def figures(ds, variables=None, special=None, slice_at=None) -> dict[str, Figure
     return out
 
 
+def term_label(term: dict) -> str:
+    """An interactions entry as a figure or report names it: the built-in term's name,
+    or a formula's U = ..."""
+    return term.get("potential") or f"U = {term['expression']}"
+
+
 def survey_title(ds) -> str:
     """What every survey figure is of: the survey, its family and potential, T, and what
     varies over the grid (of a Dataset without a stored config: its title and grid)."""
@@ -129,7 +135,7 @@ def survey_title(ds) -> str:
         return f"{ds.attrs.get('title', 'survey')}{varies}"
     system = config["system"]
     if "interactions" in system:
-        potential = " + ".join(t["potential"] + (" (m_i m_j)" if t.get(
+        potential = " + ".join(term_label(t) + (" (m_i m_j)" if t.get(
             "mass_weighted") else "") for t in system["interactions"])
     else:
         potential = system["potential"]

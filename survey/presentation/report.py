@@ -69,7 +69,7 @@ def markdown(ds, figure_names=(), checks=None, special=None) -> str:
                      f"({np.unique(ds[a].values).size} values)" for a in axes) or "a single cell"
     if "interactions" in system:
         potential = "the sum of " + " + ".join(
-            f"{t.get('kind')} `{t.get('potential')}` "
+            f"{t.get('kind')} `{plots.term_label(t)}` "
             + str({k: "(grid axis)" if isinstance(v, (dict, list)) else v
                    for k, v in t.get("params", {}).items()})
             + (" times m_i m_j" if t.get("mass_weighted") else "")

@@ -110,3 +110,23 @@ def test_a_one_body_field_conserves_its_energy(formula, energy):
 def test_bad_formula_terms_are_refused(kind, text, params, weighted, message):
     with pytest.raises(ValueError, match=message):
         make_expression(kind, text, params, weighted)
+
+
+def test_a_formulas_parameter_is_a_grid_axis(tmp_path):
+    from survey.pipeline.config import parse_config
+    config = parse_config(f"""
+[survey]
+name = "f"
+output = "{tmp_path / 'f.nc'}"
+[system]
+interactions = [{{kind = "triplet", expression = "k * P**2 / 2", params = {{k = {{start = 1.0, stop = 2.0, num = 3}}}}}}]
+[initial]
+family = "equilateral"
+delta = 3.0
+""")
+    assert [a.name for a in config.axes] == ["triplet_formula_k"]
+    systems = [config.system(i) for i in range(3)]
+    assert [s.terms[0].params for s in systems] == [(1.0,), (1.5,), (2.0,)]
+    y = np.array([1.0, 0.1, -0.5, 0.9, -0.4, -1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    forces = [full_rhs(s, y)[6:] for s in systems]
+    np.testing.assert_allclose(forces[2], 2 * forces[0], rtol=1e-14)
