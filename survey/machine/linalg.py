@@ -564,7 +564,7 @@ def orthonormal(rows: np.ndarray) -> np.ndarray:
     """An orthonormal basis of the rows' span by modified Gram-Schmidt (sums in order, so
     the same bits on every CPU, unlike LAPACK's QR); a row whose remainder is below 1e-12
     of the largest row adds nothing."""
-    basis, floor = [], 1e-12 * float(np.max(vnorm(rows)))
+    basis, floor = [], 1e-12 * float(np.max(vnorm(rows), initial=0.0))
     for v in rows:
         v = v.copy()
         for q in basis:
@@ -572,4 +572,4 @@ def orthonormal(rows: np.ndarray) -> np.ndarray:
         size = float(vnorm(v))
         if size > floor:
             basis.append(v / size)
-    return np.array(basis)
+    return np.array(basis).reshape(-1, rows.shape[-1])

@@ -65,10 +65,11 @@ class ChaosIndicators(NamedTuple):
 
 def _constraints(system: System, y0, project_flow: bool) -> np.ndarray:
     """Orthonormal rows spanning what a deviation vector must not contain: centre-of-mass
-    shifts (sum m_i dq_i) and boosts (sum dp_i), and optionally the flow f(y0) and grad H."""
+    shifts (sum m_i dq_i) and boosts (sum dp_i) where the potential is translation
+    invariant, and optionally the flow f(y0) and grad H."""
     N, d, n = system.n_bodies, system.dim, system.n
     rows = []
-    for c in range(d):
+    for c in range(d if system.translation_invariant else 0):
         shift = np.zeros((2, N, d))
         shift[0, :, c] = system.masses
         boost = np.zeros((2, N, d))
@@ -78,7 +79,7 @@ def _constraints(system: System, y0, project_flow: bool) -> np.ndarray:
         f = np.zeros(n)
         rhs(0.0, np.ascontiguousarray(y0, dtype=float), f, system.model, 0)
         rows += [f, np.concatenate([-f[n // 2:], f[:n // 2]])]
-    return orthonormal(np.array(rows))
+    return orthonormal(np.array(rows).reshape(-1, n))
 
 
 def deviation_vectors(system: System, y0, count: int, seed: int,

@@ -289,7 +289,7 @@ def _positions(system: System, value, key: str) -> np.ndarray:
         raise ValueError(f"{key} must be {system.n_bodies} rows (one per body) of "
                          f"{system.dim} finite numbers, got shape {q.shape}")
     dist = np.linalg.norm(q[:, None] - q[None], axis=-1)[np.triu_indices(len(q), 1)]
-    if dist.min() <= 1e-12 * max(dist.max(), 1e-300):
+    if dist.size and dist.min() <= 1e-12 * max(dist.max(), 1e-300):
         raise ValueError(f"{key}: two bodies start at the same place")
     return q
 

@@ -122,6 +122,13 @@ class System:
         return " + ".join(t.describe() for t in self.terms)
 
     @property
+    def translation_invariant(self) -> bool:
+        """Whether moving every body alike leaves the potential alone (no external field):
+        then the centre of mass moves freely, and deviations along it or its momentum
+        never grow."""
+        return all(t.measure != POSITION for t in self.terms)
+
+    @property
     def n_bodies(self) -> int:
         return self.masses.size
 

@@ -130,3 +130,17 @@ delta = 3.0
     y = np.array([1.0, 0.1, -0.5, 0.9, -0.4, -1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
     forces = [full_rhs(s, y)[6:] for s in systems]
     np.testing.assert_allclose(forces[2], 2 * forces[0], rtol=1e-14)
+
+
+def test_deviations_in_an_external_field_keep_the_centre_of_mass():
+    """An external field breaks translation invariance: a deviation of the centre of mass
+    (for one body, any deviation) grows like any other, so none is projected out."""
+    from survey.numerics.indicators import deviation_vectors
+    one = System(np.ones(1), 2, make_expression("external", HENON_HEILES))
+    assert not one.translation_invariant
+    y = np.array([0.0, 0.1, 0.3, 0.2])
+    w = deviation_vectors(one, y, 2, seed=0)
+    assert w.shape == (2, 4) and np.allclose(np.linalg.norm(w, axis=1), 1.0)
+    two = System(np.ones(2), 2, make_expression("external", HENON_HEILES))
+    w = deviation_vectors(two, np.r_[0.0, 0.1, 0.2, 0.0, 0.3, 0.2, -0.1, 0.1], 3, seed=1)
+    assert np.abs(w[:, :2] + w[:, 2:4]).max() > 0.1      # centre-of-mass shifts kept
