@@ -81,8 +81,9 @@ def markdown(ds, figure_names=(), checks=None, special=None) -> str:
             f"{system['dim']}-D, masses {system.get('masses', 'all 1')}, "
             f"{potential}.",
             f"- Initial conditions: family `{initial.get('family')}`"
-            + "".join(f", {k} = {v}" for k, v in initial.items() if k not in (
-                "family", "starts_per_cell") and k not in axes)
+            + "".join(f", {k} = {v:g}" if isinstance(v, float) else f", {k} = {v}"
+                      for k, v in initial.items() if k != "family" and k not in axes
+                      and not (k == "starts_per_cell" and v == 1))
             + f"; grid: {grid}; {n} cell{'s' * (n != 1)}.",
             f"- Integration: DOP853 to t = {integ['t_final']:g}, rtol = "
             f"{integ['rtol']:g}, atol = {integ['atol']:g}; chaos indicators "
