@@ -12,7 +12,7 @@ from survey.pipeline import orbits
 from survey.pipeline.config import parse_config
 from survey.catalog.families import FAMILY_VARIABLES
 from survey.pipeline.families import is_family, special_table, verify_family
-from survey.pipeline.sweep import verify
+from survey.pipeline.sweep import REPORT_ATTRIBUTES, verify
 from survey.presentation.results_text import PLACEHOLDER, render
 
 ROOT = Path(__file__).parents[1]
@@ -82,14 +82,16 @@ def test_each_archive_stores_its_workflow_and_verifies(archive):
     and the last) agree with the archive bit for bit, on any machine
     (tests/pipeline/test_portable_archives.py); an archive of an isosceles plane's
     manifolds stores its [[plane]] table and verifies its orbits, two points and its first
-    homoclinic point. A survey archive stores its special cells and section slice
-    (pipeline.special.report_attributes), which its report reads whoever writes it."""
+    homoclinic point. A survey archive stores what its report reads beside the cells --
+    its resolved config, special cells and section slice (sweep.REPORT_ATTRIBUTES) -- so
+    `python -m survey report` (which fills in what an archive lacks) and
+    ds.survey.report() read the same, whoever writes it."""
     with xr.open_dataset(archive) as ds:
         assert ds.attrs["config"] == stored_text(archive)
         assert not ds.attrs["git_commit"].endswith("-dirty")
         if "family" not in ds.attrs:    # what its report needs from a solver, stored: the
             #                             command and ds.survey.report() write the same
-            assert {"special_cells", "section_slice"} <= set(ds.attrs), archive.name
+            assert set(REPORT_ATTRIBUTES) <= set(ds.attrs), archive.name
         else:                           # a family's variables are the catalog's
             declared = {v.name: v for v in FAMILY_VARIABLES[ds.attrs["family"]]}
             assert set(ds.data_vars) == set(declared) - set(ds.coords)
