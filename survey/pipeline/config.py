@@ -874,6 +874,11 @@ def _validate_cross(tables: dict, system: System):
     if tables["tori"]["analyse"] and not tables["tori"]["observables"]:
         raise ConfigError("[tori].observables", "needs at least one observable (or set "
                                                 "analyse = false)")
+    if tables["tori"]["analyse"] and not system.translation_invariant:
+        raise ConfigError("[tori].analyse", "the torus analysis reads the shape's signals "
+                          "(perimeter, inertia), which an external field's orbits do not "
+                          "carry their motion in; set analyse = false (the indicators' "
+                          "verdicts remain)")
     _validate_thresholds(tables["tori"], shape_dof(system.n_bodies, system.dim))
     if tables["section_enabled"]:
         coord = sec["coordinate"]

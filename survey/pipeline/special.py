@@ -53,9 +53,9 @@ def homographic_period(system: System, y, horizon: float) -> float | None:
     as a similarity (v_i = a q_i + b e_z x q_i, forces -lambda m_i q_i) keeps its shape
     while it breathes and turns: a relative periodic orbit -- from the time between the
     first two minima of its moment of inertia within `horizon`; None if the start is
-    not homographic (or not planar), is a rigid rotation (an equilibrium's business), or
+    not homographic (or not planar, or in an external field), is a rigid rotation (an equilibrium's business), or
     does not breathe within the horizon."""
-    if system.dim != 2:
+    if system.dim != 2 or not system.translation_invariant:
         return None
     q, p = system.split(np.asarray(y, dtype=float))
     m = system.masses[:, None]

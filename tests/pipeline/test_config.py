@@ -47,6 +47,7 @@ BAD = [
     ("[system]\nmasses = [1.0, 1.0]", "[system].masses: needs 3 values"),
     ("[system]\nbodies = 2", "[system].bodies: a system with a triplet term needs masses for N >= 3 bodies"),
     ("[system]\nbodies = 0", "[system].bodies: must be >= 1"),
+    ("[system]\ninteractions = [{kind = 'external', expression = 'x**2 + y**2'}]\n[tori]\nanalyse = true", "[tori].analyse: the torus analysis reads the shape's signals"),
     ("[system]\ninteractions = [{kind = 'triplet', expression = 'a**2 * b'}]", "[system].interactions[0].expression: is not symmetric in the sides: exchanging a and b"),
     ("[system]\ninteractions = [{kind = 'triplet', expression = \"P + __import__('os')\"}]", "[system].interactions[0].expression: unexpected \"'\" at character 16 (strings are not allowed)"),
     ("[system]\ninteractions = [{kind = 'triplet', expression = 'P.real'}]", "[system].interactions[0].expression: unexpected '.' at character 2 (attribute access is not allowed)"),
