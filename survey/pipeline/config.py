@@ -890,8 +890,8 @@ def _validate_cross(tables: dict, system: System):
             raise ConfigError("[section].coefficients", f"a 'linear' surface needs {system.n} "
                                                         "coefficients (one per state component)")
         trip = sec["triplet"]
-        if coord not in ("linear", *REDUCED_SURFACES) and (
-                len(trip) != 3 or len(set(trip)) != 3 or max(trip) >= system.n_bodies):
+        uses = coord not in ("linear", *REDUCED_SURFACES) or list(trip) != [0, 1, 2]
+        if uses and (len(trip) != 3 or len(set(trip)) != 3 or max(trip) >= system.n_bodies):
             raise ConfigError("[section].triplet", f"needs three different bodies of "
                                                    f"0..{system.n_bodies - 1}, got {trip}")
         if sec["value"] is None:
