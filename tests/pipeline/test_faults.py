@@ -597,7 +597,7 @@ def test_the_checkpoint_folder_deleted_mid_run(tmp_path):
     (["--potential-param", "exponent=x"], "--potential-param exponent=x: expected KEY=NUMBER"),
     (["--potential-param", "gama=1"], "--potential-param gama: not a parameter of"),
     (["--param", "delt=1"], "--param delt: not a parameter of family 'sides'"),
-    (["--masses", "1,2"], "--masses: must be >= 3, got 2"),
+    (["--masses", "1,2"], "--masses: a system with a triplet term needs masses for N >= 3 bodies"),
     (["--masses", "1,-2,3"], "--masses: "),
     (["--cell", "3"], "--cell: picks cells of a survey config"),
     (["--zoom-until", "-1"], "--zoom-until: must be >= 0"),
