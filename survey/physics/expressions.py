@@ -454,24 +454,6 @@ def _apply(op, x, y):
     return 0.0 if x == 0.0 else math.copysign(1.0, x)        # SIGN
 
 
-@helper
-def run(code, R):
-    """A program's instructions over one set of registers R (inputs and constants in
-    place): R[out] = op(R[a], R[b]) in order."""
-    for i in range(code.shape[0]):
-        R[code[i, 3]] = _apply(code[i, 0], R[code[i, 1]], R[code[i, 2]])
-
-
-@leaf
-def run_lanes(code, R, L):
-    """The same over L lanes at once, register r of lane k at R[r L + k]: each
-    instruction a loop over the lanes (one branch per instruction, not per lane)."""
-    for i in range(code.shape[0]):
-        op, a, b, o = code[i, 0], code[i, 1] * L, code[i, 2] * L, code[i, 3] * L
-        for k in range(L):
-            R[o + k] = _apply(op, R[a + k], R[b + k])
-
-
 class Programs(NamedTuple):
     """A system's programs packed for the kernels (a field of physics.system.Model): their
     instructions on one shared register file (`regs`, constants in place), each
@@ -510,10 +492,12 @@ def pack(programs) -> Programs:
                     np.array(regs, dtype=np.float64))
 
 
-@helper
+@leaf
 def run_program(X, t, x0, x1, x2):
     """Program t of a Programs X at inputs (x0, x1, x2) (those past its variables
-    ignored): its outputs are then in X.regs[X.outputs[t]]."""
+    ignored): its outputs are then in X.regs[X.outputs[t]]. Compiled once and called,
+    not inlined: each inlined copy of the instructions' functions cost a cold start
+    seconds of compilation."""
     regs, inputs = X.regs, X.inputs[t]
     regs[inputs[0]] = x0
     if inputs[1] >= 0:
@@ -533,17 +517,12 @@ def output(X, t, k):
 
 def values(prog: Program, point: dict) -> np.ndarray:
     """U, its gradient and Hessian's upper triangle (the program's outputs) at a point
-    (name -> value), computed by the compiled program: the tests' and checks' door."""
-    R = np.zeros(prog.registers)
-    R[:len(prog.inputs)] = [point[v] for v in prog.inputs]
-    R[len(prog.inputs):len(prog.inputs) + prog.consts.size] = prog.consts
-    run_scalar(prog.code, R)
-    return R[prog.outputs]
-
-
-@leaf
-def run_scalar(code, R):
-    run(code, R)
+    (name -> value), computed by the compiled program as the kernels run it: the tests'
+    and checks' door."""
+    X = pack([prog])
+    run_program(X, 0, *[float(point[v]) for v in prog.inputs],
+                *[0.0] * (3 - len(prog.inputs)))
+    return X.regs[X.outputs[0, :prog.outputs.size]]
 
 
 @functools.lru_cache(maxsize=256)

@@ -91,7 +91,7 @@ def test_a_triangles_names():
 
 # ----------------------------------------------------------------- exact derivatives
 
-from survey.physics.expressions import program, run_lanes, values  # noqa: E402
+from survey.physics.expressions import program, values  # noqa: E402
 import numpy as np  # noqa: E402
 
 HENON_HEILES = "(x**2 + y**2)/2 + x**2*y - y**3/3"
@@ -139,18 +139,3 @@ def test_derivatives_against_finite_differences(text, variables, params):
                 if a == i:
                     fd = (up[1 + b] - down[1 + b]) / (2 * h)
                     assert out[1 + n + k] == pytest.approx(fd, rel=1e-6, abs=1e-8)
-
-
-def test_lanes_give_the_bits_of_one_point():
-    prog = program(parse(TODA, ("x", "y")), ("x", "y"), {})
-    L = 8
-    points = np.random.default_rng(2).uniform(-0.5, 0.5, (L, 2))
-    R = np.zeros(prog.registers * L)
-    for i in range(2):
-        R[i * L:(i + 1) * L] = points[:, i]
-    for c, value in enumerate(prog.consts):
-        R[(2 + c) * L:(3 + c) * L] = value
-    run_lanes(prog.code, R, L)
-    for k in range(L):
-        one = values(prog, {"x": points[k, 0], "y": points[k, 1]})
-        assert np.array_equal(R[prog.outputs * L + k], one)
