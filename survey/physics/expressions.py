@@ -459,7 +459,7 @@ class Programs(NamedTuple):
     instructions on one shared register file (`regs`, constants in place), each
     program's instructions start[t]:start[t + 1], its inputs' registers (up to 3, -1 past
     its variables) and its outputs' (U, the gradient, the Hessian's upper triangle; -1
-    past them). Empty for a system without formulas: the same types for every system."""
+    past them)."""
 
     code: np.ndarray          # (I, 4) int64
     start: np.ndarray         # (T + 1,) int64

@@ -100,7 +100,7 @@ def _full_lanes(t, Y, dY, L, model, n_tan, W, rb):
         _planar_lanes(Y, dY, L, W, model, n_tan, rb)
     elif L == 1:
         rhs(t, Y, dY, model, n_tan)
-    elif L >= SIMD_MIN and model.expr.start.size == 1:      # (formulas: lane by lane)
+    elif L >= SIMD_MIN and model.expr is None:      # (formulas: lane by lane)
         general_lanes(Y, dY, L, W, model, n_tan)
     else:
         nf = Y.size // L

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
+from numba import types
 from numba.extending import overload
 
 from ..catalog import defaults
@@ -60,7 +61,8 @@ class Model(NamedTuple):
     measure: int
     prof: int
     par: np.ndarray
-    expr: Programs              # the programs of the terms written as formulas
+    expr: Programs | None       # the programs of the terms written as formulas (None:
+    #                             none, and a type of its own: their code is not compiled)
 
 
 @dataclass(frozen=True, eq=False)
@@ -94,9 +96,9 @@ class System:
         object.__setattr__(self, "masses", m)
         object.__setattr__(self, "terms", terms)
         object.__setattr__(self, "_par", _encode(terms, m.size, self.dim))
-        object.__setattr__(self, "_programs", pack([
-            term_program(t.kind, t.expression, t.variables, t.param_names, t.params)
-            for t in terms if t.profile == EXPRESSION]))
+        programs = [term_program(t.kind, t.expression, t.variables, t.param_names, t.params)
+                    for t in terms if t.profile == EXPRESSION]
+        object.__setattr__(self, "_programs", pack(programs) if programs else None)
 
     @classmethod
     def create(cls, masses=(1.0, 1.0, 1.0), dim=defaults.DIM, potential=defaults.POTENTIAL,
@@ -146,7 +148,8 @@ class System:
         codes = (lead.measure, lead.profile) if _leads(lead) else (NONE, 0)
         X = self._programs
         return Model(masses=self.masses.copy(), d=self.dim, measure=codes[0], prof=codes[1],
-                     par=self._par.copy(), expr=X._replace(regs=X.regs.copy()))
+                     par=self._par.copy(),
+                     expr=None if X is None else X._replace(regs=X.regs.copy()))
 
     def state(self, positions, momenta) -> np.ndarray:
         """Flat state from positions and momenta of shape (N, d)."""
@@ -394,7 +397,7 @@ def _rows_energy(q, masses, d, par, X):
         kind, code, weighted = int(par[row, 0]), int(par[row, 1]), par[row, 2]
         p = _term_params(par, row)
         if code == EXPRESSION:
-            total += _formula_energy(q, masses, d, kind, weighted, X, int(p[0]))
+            total += formula_energy(q, masses, d, kind, weighted, X, int(p[0]))
         elif kind == DISTANCE:
             for i in range(N - 1):
                 for j in range(i + 1, N):
@@ -409,6 +412,32 @@ def _rows_energy(q, masses, d, par, X):
         else:
             total += _triplet_energy(q, N, d, kind, code, p)
     return total
+
+
+def formula_energy(q, masses, d, kind, weighted, X, t):
+    """`_formula_energy`, or 0 where the system has no formulas (X None)."""
+
+
+def formula_forces(y, dy, masses, d, n, n_tan, kind, weighted, X, t):
+    """`_formula_forces`, or nothing where the system has no formulas (X None)."""
+
+
+# typed on X: a system without formulas (Model.expr None) compiles none of their code (the
+# programs' functions cost a general system's cold start some twenty seconds)
+@overload(formula_energy, jit_options=dict(error_model="numpy"), inline="always")
+def _formula_energy_overload(q, masses, d, kind, weighted, X, t):
+    if isinstance(X, types.NoneType):
+        return lambda q, masses, d, kind, weighted, X, t: 0.0
+    return lambda q, masses, d, kind, weighted, X, t: _formula_energy(
+        q, masses, d, kind, weighted, X, t)
+
+
+@overload(formula_forces, jit_options=dict(error_model="numpy"), inline="always")
+def _formula_forces_overload(y, dy, masses, d, n, n_tan, kind, weighted, X, t):
+    if isinstance(X, types.NoneType):
+        return lambda y, dy, masses, d, n, n_tan, kind, weighted, X, t: None
+    return lambda y, dy, masses, d, n, n_tan, kind, weighted, X, t: _formula_forces(
+        y, dy, masses, d, n, n_tan, kind, weighted, X, t)
 
 
 @leaf
@@ -599,7 +628,7 @@ def _rows_forces(y, dy, masses, d, n, n_tan, par, X):
         kind, code, weighted = int(par[row, 0]), int(par[row, 1]), par[row, 2]
         p = _term_params(par, row)
         if code == EXPRESSION:
-            _formula_forces(y, dy, masses, d, n, n_tan, kind, weighted, X, int(p[0]))
+            formula_forces(y, dy, masses, d, n, n_tan, kind, weighted, X, int(p[0]))
         elif kind == DISTANCE:
             for i in range(N - 1):
                 for j in range(i + 1, N):
