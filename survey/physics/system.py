@@ -461,7 +461,7 @@ def _formula_energy(q, masses, d, kind, weighted, X, t):
                 for k in range(j + 1, N):
                     if kind == SIDES:
                         u, v, w = vec(q, i * d, d), vec(q, j * d, d), vec(q, k * d, d)
-                        run_program(X, t, norm(sub(v, u)), norm(sub(w, v)), norm(sub(u, w)),)
+                        run_program(X, t, norm(sub(v, u)), norm(sub(w, v)), norm(sub(u, w)))
                     else:
                         run_program(X, t, triplet_measure(q, i, j, k, d, kind), 0.0, 0.0)
                     total += output(X, t, 0)

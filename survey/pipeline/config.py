@@ -615,12 +615,8 @@ def _validate_terms(s: dict, given: dict) -> list[Axis]:
                 raise ConfigError(f"{where}.{missing[0]}", f"is missing: a term in "
                                   f"interactions gives every parameter of {name} "
                                   f"({', '.join(allowed)})")
-        values = {}
-        for key, value in params.items():
-            grid = _axis(f"{where}.{key}", value)
-            values[key] = [float(value)] if grid is None else grid.tolist()
-            if grid is not None:
-                grids.append((i, key, grid))
+        values, axes = _parameter_values(params, where, i)
+        grids += axes
         # every value of every axis must make a valid term (the checks are per parameter)
         first = {k: v[0] for k, v in values.items()}
         for key, options in [(None, [None])] + list(values.items()):
@@ -634,6 +630,18 @@ def _validate_terms(s: dict, given: dict) -> list[Axis]:
                                       str(exc) + at) from None
     names = term_axis_names(s)
     return [Axis(names[i][key], grid, term=i, param=key) for i, key, grid in grids]
+
+
+def _parameter_values(params: dict, where: str, i: int) -> tuple[dict, list]:
+    """Each parameter of term i as the list of values it takes (one, or a grid axis's),
+    and its grid axes as (term, parameter, values)."""
+    values, grids = {}, []
+    for key, value in params.items():
+        grid = _axis(f"{where}.{key}", value)
+        values[key] = [float(value)] if grid is None else grid.tolist()
+        if grid is not None:
+            grids.append((i, key, grid))
+    return values, grids
 
 
 def _validate_formula(entry: dict, where: str, i: int, dim: int) -> list:
@@ -655,12 +663,7 @@ def _validate_formula(entry: dict, where: str, i: int, dim: int) -> list:
         raise ConfigError(f"{where}.params", f"expected a table of named numbers, got "
                                              f"{params!r}")
     weighted = entry.get("mass_weighted", False)
-    values, grids = {}, []
-    for key, value in params.items():
-        grid = _axis(f"{where}.params.{key}", value)
-        values[key] = [float(value)] if grid is None else grid.tolist()
-        if grid is not None:
-            grids.append((i, key, grid))
+    values, grids = _parameter_values(params, f"{where}.params", i)
     first = {k: v[0] for k, v in values.items()}
     try:
         make_expression(kind, expression, first, weighted, dim)
