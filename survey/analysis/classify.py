@@ -6,6 +6,7 @@ too, from the histories, which is how a verdict in doubt is found (and extended 
 survey). It reads an xarray Dataset, or `Table`: the workers' plain arrays."""
 from __future__ import annotations
 
+import dataclasses
 from typing import NamedTuple
 
 import numpy as np
@@ -289,7 +290,10 @@ def wilson(k, n, level: float = 0.95):
         p, q = k / n, z * z / n
         centre = (p + q / 2) / (1 + q)
         half = z / (1 + q) * np.sqrt(p * (1 - p) / n + q / (4 * n))
-    return np.maximum(0.0, centre - half), np.minimum(1.0, centre + half)
+    # exactly 0 and 1 at k = 0 and k = n (the formula's rounding falls a few ulps short)
+    low = np.where((k == 0) & (n > 0), 0.0, np.maximum(0.0, centre - half))
+    high = np.where((k == n) & (n > 0), 1.0, np.minimum(1.0, centre + half))
+    return (low, high) if low.ndim else (float(low), float(high))
 
 
 def regular_share(ds, regime=None):
@@ -306,3 +310,54 @@ def regular_share(ds, regime=None):
         share = regular / decided.where(decided > 0)
     return xr.Dataset({"decided": decided, "regular": regular, "share": share,
                        "share_low": (decided.dims, low), "share_high": (decided.dims, high)})
+
+
+def threshold_variants(ds, th: Thresholds):
+    """Each vote threshold of the evidence an archive holds moved a quarter of the way
+    towards its partner and as far away from it (in log10 for SALI, which spans decades):
+    (threshold name, its moved value, Thresholds) -- a regular share that moves much
+    under these rests on where a threshold sits, not on the orbits."""
+    base = dataclasses.asdict(th)
+    present = {vote.thresholds: vote.log for _, vote, _ in _evidence(ds, False)}
+    for prefix, log in present.items():
+        ends = {side: base[f"{prefix}_{side}"] for side in ("regular", "chaotic")}
+        scale = (lambda v: np.log10(v)) if log else (lambda v: v)
+        step = (scale(ends["chaotic"]) - scale(ends["regular"])) / 4
+        for side, sign in (("regular", 1), ("regular", -1), ("chaotic", -1), ("chaotic", 1)):
+            moved = scale(ends[side]) + sign * step
+            value = float(10.0 ** moved if log else moved)
+            yield f"{prefix}_{side}", value, Thresholds(**{**base, f"{prefix}_{side}": value})
+
+
+def share_sensitivity(ds, th: Thresholds):
+    """The regular share of a seeded sample (`regular_share`) as archived, then decided
+    again from the evidence each cell's run stored (no orbit integrated again) with each
+    of `threshold_variants`, and at half each cell's horizon: [(label, share Dataset)]."""
+    def share(regime):
+        return regular_share(ds, ds[V.status].copy(data=regime))
+    rows = [("as archived", regular_share(ds))]
+    rows += [(f"{name} = {value:.3g}", share(classify(ds, moved)[0]))
+             for name, value, moved in threshold_variants(ds, th)]
+    rows.append(("at half each cell's horizon", share(classify(ds, th, half=True)[0])))
+    return rows
+
+
+def separation_share(ds, crossings: int, growth: float):
+    """The regular share a short-horizon separation criterion gives on an archive's
+    orbits (as Henon & Heiles decided theirs): a start counts as regular if its deviation
+    vector grew by less than `growth` by the time of its `crossings`-th section crossing
+    -- the growth exp(t FTLE(t)) interpolated in t FTLE(t) between history times (from 0
+    at t = 0) -- irregular if by more, undecided with fewer crossings. A `regular_share`
+    Dataset."""
+    times = np.concatenate([[0.0], ds["history_time"].values])
+    log_growth = ds[V.ftle_history].values * ds["history_time"].values
+    when = ds[V.crossing_time].values[..., crossings - 1]
+    flat_log, flat_when = log_growth.reshape(-1, times.size - 1), when.ravel()
+    grown = np.full(flat_when.shape, np.nan)
+    for i, (row, t) in enumerate(zip(flat_log, flat_when)):
+        known = np.concatenate([[True], np.isfinite(row)])
+        if np.isfinite(t) and t <= times[known][-1]:
+            grown[i] = np.interp(t, times[known], np.concatenate([[0.0], row])[known])
+    verdict = np.where(np.isnan(grown), Regime.UNDETERMINED,
+                       np.where(grown < np.log(growth), Regime.TORUS, Regime.CHAOTIC))
+    return regular_share(ds, ds[V.status].copy(data=verdict.reshape(when.shape)))

@@ -28,13 +28,15 @@ class Vote:
     (-1: more chaotic), and the catalog.regimes.Thresholds fields `<thresholds>_regular` and
     `<thresholds>_chaotic`; `per_torus_rate`: measured in units of ln(T)/T, a torus's FTLE;
     `half`: the variable holding its value at half the cell's horizon (a history, read at
-    that time, or a scalar), "" if there is none -- the verdict at T/2."""
+    that time, or a scalar), "" if there is none -- the verdict at T/2; `log`: its
+    thresholds span decades."""
 
     variable: str
     sign: int
     thresholds: str
     per_torus_rate: bool = False
     half: str = ""
+    log: bool = False          # its thresholds span decades: moved in log10 (SALI)
 
 
 @dataclass(frozen=True)
@@ -73,7 +75,7 @@ REGISTRY = (
               "Froeschle, Lega & Gonczi, Celest. Mech. Dyn. Astron. 67 (1997) 41",
               map=MapStyle("cividis")),
     Indicator("sali", TANGENT, ("sali", "sali_history"), "Skokos, J. Phys. A 34 (2001) 10029",
-              deviations=2, vote=Vote("sali", +1, "sali", half="sali_history")),
+              deviations=2, vote=Vote("sali", +1, "sali", half="sali_history", log=True)),
     Indicator("gali2", TANGENT, ("gali2",),
               "Skokos, Bountis & Antonopoulos, Physica D 231 (2007) 30", deviations=2),
     Indicator("wba", TORUS, ("birkhoff_digits", "birkhoff_digits_half",

@@ -52,6 +52,8 @@ class CellResult(NamedTuple):
     crossing_time: np.ndarray | None = None    # kept crossings
     crossing_state: np.ndarray | None = None
     reduced: Any = None                    # physics.jacobi.Reduced of the kept crossings
+    centre: Any = None                     # (centre of mass, total momentum) of the kept
+    #                                        crossings, (k, d) each, in an external field
     horizon: float = np.nan                # the run's t_final: T, or k^r T once extended
     verdicts: Any = None                   # regimes at T/2, T, k T, ... (-1 past the last)
 
@@ -130,6 +132,19 @@ def _reduced_crossing(q):
     return Var(f"crossing_{q}", f"reduced coordinate {q} at each kept section crossing",
                lambda r: getattr(r.reduced, q), extra=("crossing",),
                when=lambda c: _section(c) and _planar3(c))
+
+
+def _field_crossing(q: str, momentum: bool):
+    """The centre of mass's coordinate q (or the total momentum's) at each kept crossing of
+    a system in an external field: for one body, its section coordinates (y, p_y on
+    Henon-Heiles' x = 0)."""
+    axis = "xyz".index(q)
+    return Var(f"crossing_{'p_' if momentum else ''}{q}",
+               f"{'total momentum p_' if momentum else 'centre of mass '}{q} at each kept "
+               "section crossing", lambda r: r.centre[int(momentum)][:, axis],
+               extra=("crossing",), symbol=f"p_{q}" if momentum else q,
+               when=lambda c: (_section(c) and in_field(c.settings.system)
+                               and axis < c.settings.system.dim))
 
 
 VARIABLES = [
@@ -236,6 +251,7 @@ VARIABLES = [
     Var("crossing_time", "time of each kept section crossing", lambda r: r.crossing_time,
         extra=("crossing",), when=_section),
     *[_reduced_crossing(q) for q in ("sigma", "p_sigma", "eta", "p_eta", "phi", "p_phi")],
+    *[_field_crossing(q, momentum) for q in "xyz" for momentum in (False, True)],
     Var("crossing_state", "phase-space state at each kept section crossing",
         lambda r: r.crossing_state, extra=("crossing", "component"),
         when=lambda c: _section(c) and c.settings.section.store_state),
@@ -305,17 +321,35 @@ def history_grid(t_final: float, points: int, extend: int, rounds: int) -> np.nd
 OBSERVABLES = {
     "perimeter": "sum of all pair distances (the perimeter for three bodies)",
     "inertia": "moment of inertia about the centre of mass",
+    "x": "the centre of mass's x (one body's, in an external field)",
+    "y": "the centre of mass's y",
+    "z": "the centre of mass's z (3-D)",
 }
 
 
-def shape_dof(n_bodies: int, dim: int) -> int:
+def default_observables(n_bodies: int, dim: int, field: bool) -> list[str]:
+    """The Birkhoff observables a survey takes unless told: the shape's (perimeter,
+    inertia) of a free system; in an external field the centre of mass's coordinates, and
+    the shape's too where there is one."""
+    shape = ["perimeter", "inertia"] if n_bodies > 1 else []
+    return shape + ["x", "y", "z"][:dim] if field else shape
+
+
+def in_field(system_table) -> bool:
+    """Whether a [system] table (records.SystemTable) has an external term."""
+    return any(t.get("kind") == "external" for t in system_table.interactions or [])
+
+
+def shape_dof(n_bodies: int, dim: int, field: bool = False) -> int:
     """Degrees of freedom of the shape: N d minus translations and rotations (3 for three
-    bodies in the plane or in space)."""
-    return n_bodies * dim - dim - dim * (dim - 1) // 2
+    bodies in the plane or in space); in an external field, which fixes neither, all N d
+    (2 for Henon-Heiles)."""
+    return n_bodies * dim if field else n_bodies * dim - dim - dim * (dim - 1) // 2
 
 
-def fundamental_names(n_bodies: int, dim: int) -> list[str]:
-    """The frequencies stored per cell: a basis of shape frequencies, and for three bodies
-    in the plane the rotation frequency of theta."""
-    return [f"shape_{k + 1}" for k in range(shape_dof(n_bodies, dim))] + \
-        (["rotation"] if (n_bodies, dim) == (3, 2) else [])
+def fundamental_names(n_bodies: int, dim: int, field: bool = False) -> list[str]:
+    """The frequencies stored per cell: a basis of shape frequencies (in a field, of the
+    motion's N d degrees of freedom), and for three free bodies in the plane the rotation
+    frequency of theta."""
+    return [f"shape_{k + 1}" for k in range(shape_dof(n_bodies, dim, field))] + \
+        (["rotation"] if (n_bodies, dim) == (3, 2) and not field else [])

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from ..machine import portable
 from ..physics.jacobi import jacobi_weights, phase_form, position_form
 from ..physics.system import System
@@ -17,7 +19,17 @@ SIDE_WEIGHTS = {"a": (1, 0, 0), "b": (0, 1, 0), "c": (0, 0, 1), "perimeter": (1,
 REDUCED_SURFACES = ("phi", "sigma", "eta", "p_sigma", "p_eta")
 
 
-SURFACES = REDUCED_SURFACES + tuple(SIDE_WEIGHTS) + ("area", "linear")
+CARTESIAN = ("x", "y", "z")       # the centre of mass's coordinates: surfaces in a field
+
+
+SURFACES = REDUCED_SURFACES + tuple(SIDE_WEIGHTS) + ("area", "linear") + CARTESIAN
+
+
+def cartesian_form(system: System, axis: int) -> np.ndarray:
+    """The state coefficients of the centre of mass's coordinate `axis` (sum m_i q_i / M)."""
+    c = np.zeros(system.n)
+    c[axis:system.n // 2:system.dim] = system.masses / system.masses.sum()
+    return c
 
 
 def section_event(system: System, coordinate="phi", value=math.pi / 2, direction=1,
@@ -29,7 +41,9 @@ def section_event(system: System, coordinate="phi", value=math.pi / 2, direction
     sin(phi0) s . h (for pi/2: -s . h) where sigma eta cos(phi - phi0) > 0 -- smooth, with no
     angle wrapping. sigma, eta: |s|^2 - value^2, |h|^2 - value^2; p_sigma, p_eta (value 0
     only): s . p_s, h . p_h. a, b, c, perimeter, i_a, i_b, i_c: side combinations of
-    `triplet`; area: the signed area (2-D) or |A| (3-D); linear: coefficients . y = value.
+    `triplet`; area: the signed area (2-D) or |A| (3-D); linear: coefficients . y = value;
+    x, y, z: the centre of mass's coordinate (one body's, in an external field: the
+    section x = 0, p_x > 0 of Henon & Heiles).
     """
     if direction not in (-1, 0, 1):
         raise ValueError(f"section direction must be -1, 0 or +1, got {direction!r}")
@@ -61,5 +75,10 @@ def section_event(system: System, coordinate="phi", value=math.pi / 2, direction
             raise ValueError("section coordinate 'linear' needs coefficients (one per state "
                              "component)")
         return Event(Linear(coefficients, -value), direction, name="linear")
+    if coordinate in CARTESIAN:
+        axis = CARTESIAN.index(coordinate)
+        if axis >= system.dim:
+            raise ValueError(f"section coordinate {coordinate!r} needs dim = 3")
+        return Event(Linear(cartesian_form(system, axis), -value), direction, name=coordinate)
     raise ValueError(f"unknown section coordinate {coordinate!r}; choose one of "
                      f"{', '.join(SURFACES)}")

@@ -113,6 +113,8 @@ def observable(name: str, system, states: np.ndarray) -> np.ndarray:
         return out
     if name == "inertia":
         return system.moment_of_inertia(states)
+    if name in ("x", "y", "z"):
+        return system.centre_of_mass(states)[..., "xyz".index(name)]
     raise ValueError(f"unknown observable {name!r}; choose from {', '.join(OBSERVABLES)}")
 
 
@@ -192,7 +194,14 @@ def unwrap(p):
 
 
 def signals(system, states: np.ndarray):
-    """Complex shape signals (those that move) and the rotation signal (or None)."""
+    """Complex shape signals (those that move) and the rotation signal (or None); in an
+    external field, every Cartesian coordinate with its momentum."""
+    if not system.translation_invariant:     # a field: every coordinate and its momentum
+        q, p = system.split(states)
+        q, p = q.reshape(len(states), -1), p.reshape(len(states), -1)
+        shape = [_centred(np.ascontiguousarray(q[:, k]), np.ascontiguousarray(p[:, k]))
+                 for k in range(q.shape[1])]
+        return [z for z in shape if z is not None], None
     if system.n_bodies == 3 and system.dim == 2:
         r = reduced(system, states)
         phi = unwrap(r.phi)
@@ -203,7 +212,7 @@ def signals(system, states: np.ndarray):
         # spurious one near 0 whose change between halves looks like diffusion)
         turns = np.ptp(theta) > 1e-9
         return [z for z in shape if z is not None], _unit(r.theta) if turns else None
-    values = (observable(name, system, states) for name in OBSERVABLES)
+    values = (observable(name, system, states) for name in ("perimeter", "inertia"))
     shape = [_centred(h, np.gradient(h)) for h in values]
     return [z for z in shape if z is not None], None
 
@@ -499,7 +508,8 @@ def frequency_analysis(system, states: np.ndarray, dt: float, lines: int = defau
     turns, and flips within a family); the rotation, a reconstruction phase of the reduced
     flow rather than one of its frequencies, takes part in the diffusion but in no
     resonance."""
-    names = fundamental_names(system.n_bodies, system.dim)
+    field = not system.translation_invariant
+    names = fundamental_names(system.n_bodies, system.dim, field)
     k = len(names)
     nan = Frequencies(np.full(k, np.nan), np.full(k, np.nan), np.nan, np.zeros(k, np.int64),
                       -1, np.nan, -1)
@@ -516,7 +526,7 @@ def frequency_analysis(system, states: np.ndarray, dt: float, lines: int = defau
             found += list(zip(f, a))
         pooled.append(found)
         rotation.append(spectral_lines(rot, dt, 1)[0][0] if rot is not None else np.nan)
-    basis = frequency_basis(pooled[0], shape_dof(system.n_bodies, system.dim), order, tol,
+    basis = frequency_basis(pooled[0], shape_dof(system.n_bodies, system.dim, field), order, tol,
                             1.0 / (half * dt))
     second = np.array([abs(f) for f, _ in pooled[1]]) if pooled[1] else np.zeros(0)
     nu1, nu2 = [], []

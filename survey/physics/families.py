@@ -281,6 +281,96 @@ def _section_sample(system, energy, angular_momentum, seed, sigma_max, eta_max, 
     raise Inaccessible("no start drawn on the section in 100000 tries")
 
 
+def _one_body_in_plane(system: System, family: str):
+    if system.n_bodies != 1 or system.dim != 2 or system.translation_invariant:
+        raise ValueError(f"family {family!r} starts one body in the plane in an external "
+                         "field ([system] bodies = 1, dim = 2, an external term)")
+
+
+def _field_room(system: System, energy, x, y):
+    """2 m (E - U(x, y)): the p_x^2 + p_y^2 a body of mass m has left at (x, y)."""
+    y = np.asarray(y, dtype=float)
+    q = np.stack([np.full(y.shape, float(x)), y], axis=-1)
+    states = np.concatenate([q, np.zeros_like(q)], axis=-1)
+    return 2.0 * system.masses[0] * (energy - system.potential_energy(states))
+
+
+def _field_section(system, energy, x, y, p_y, direction):
+    """One body in the plane on the surface x = x0 (default 0) at energy E, the
+    two-degree-of-freedom section of Henon & Heiles (1964): (y, p_y) given, p_x from
+    H = E, its sign the crossing direction (+1: x increasing). Where no real p_x exists the
+    point is inaccessible."""
+    _one_body_in_plane(system, "field_section")
+    if direction not in (-1, 1):
+        raise ValueError(f"field_section direction must be +1 or -1, got {direction}")
+    room = float(_field_room(system, energy, x, y)) - p_y * p_y
+    if not room >= 0:
+        raise Inaccessible(f"no real p_x: 2m(E - U) - p_y^2 = {room:.6g} < 0")
+    p_x = direction * math.sqrt(room)
+    return np.array([[x, y]], dtype=float), np.array([[p_x, p_y]]) / system.masses[0]
+
+
+def _field_interval(system, energy, x):
+    """The interval of y on the line x = x0 that the energy reaches around the line's
+    lowest point: a grid over [-L, L], L doubled from 1 until the reachable run of points
+    about the minimum stops short of both ends, its ends then bisected to 1e-12. An open
+    shell (reachable out to 2^40) is an error naming the bounds to give."""
+    size = 1.0
+    for _ in range(40):
+        axis = np.linspace(-size, size, 4097)
+        room = _field_room(system, energy, x, axis)
+        ok = room > 0
+        if ok.any():
+            lo = hi = int(np.argmax(room))
+            while lo > 0 and ok[lo - 1]:
+                lo -= 1
+            while hi < axis.size - 1 and ok[hi + 1]:
+                hi += 1
+            if lo > 0 and hi < axis.size - 1:
+                ends = []
+                for inside, outside in ((axis[lo], axis[lo - 1]), (axis[hi], axis[hi + 1])):
+                    for _ in range(60):
+                        mid = 0.5 * (inside + outside)
+                        if _field_room(system, energy, x, mid) > 0:
+                            inside = mid
+                        else:
+                            outside = mid
+                    ends.append(float(inside))
+                return ends[0], ends[1], float(room[lo:hi + 1].max())
+        size *= 2.0
+    raise ValueError(f"the line x = {x:g} is reachable without bound at E = {energy:g} (an "
+                     "open shell): give y_min and y_max to sample a bounded part")
+
+
+def _field_section_sample(system, energy, seed, x, y_min, y_max, direction):
+    """A seeded start drawn uniformly in (y, p_y) -- the section's invariant (Liouville)
+    measure -- from the region the energy reaches on the surface x = x0: a grid of seeds is
+    a random sample of the section, whose regular share estimates the share of its area
+    on tori (Henon & Heiles' relative area). y is drawn from the reachable interval about
+    the line's lowest point (found where y_min = y_max = 0, the default; or given), p_y uniform under the
+    largest |p_y| there, rejected where p_y^2 > 2m(E - U); p_x as in `field_section`."""
+    _one_body_in_plane(system, "field_section_sample")
+    if (y_min, y_max) != (0.0, 0.0) and not y_min < y_max:
+        raise ValueError("y_min and y_max bound the y drawn: y_min < y_max, or both 0 "
+                         "(found from the shell)")
+    if (y_min, y_max) == (0.0, 0.0):
+        y_min, y_max, most = _field_interval(system, energy, x)
+    else:
+        most = float(np.max(_field_room(system, energy, x, np.linspace(y_min, y_max, 4097))))
+    if not most > 0:
+        raise Inaccessible(f"no point of x = {x:g}, {y_min:g} <= y <= {y_max:g} reaches "
+                           f"E = {energy:g}")
+    top = math.sqrt(1.25 * most)      # 1.25: the grid's maximum is not the maximum
+    rng = np.random.default_rng(int(seed))
+    for _ in range(100000):
+        u, v = rng.random(2)
+        y = y_min + (y_max - y_min) * u
+        p_y = top * (2.0 * v - 1.0)
+        if p_y * p_y < float(_field_room(system, energy, x, y)):
+            return _field_section(system, energy, x, y, p_y, direction)
+    raise Inaccessible("no start drawn on the section in 100000 tries")
+
+
 def _positions(system: System, value, key: str) -> np.ndarray:
     if value is None:
         raise ValueError(f"{key} is required: {system.n_bodies} rows of {system.dim} numbers")
@@ -305,13 +395,18 @@ def _explicit(system, positions, velocities):
 
 
 def _random_motion(system: System, q: np.ndarray, rng, angular_momentum: float):
-    """Seeded Gaussian velocities with zero total momentum and zero angular momentum about
-    the centre of mass, and the rigid rotation that carries `angular_momentum` (about z):
+    """Seeded Gaussian velocities (in an external field: as drawn) with zero total momentum
+    and zero angular momentum about the centre of mass, and the rigid rotation that carries `angular_momentum` (about z):
     (internal, rotation) velocities. Sums body by body and the inertia tensor inverted
     through linalg.symmetric_eigen: the same bits on every machine."""
     m = system.masses[:, None]
     r = q - centre_of_mass(system.masses, q)
     v = rng.normal(size=q.shape)
+    if not system.translation_invariant:     # an external field: momentum is not conserved
+        if angular_momentum:
+            raise ValueError("in an external field the angular momentum is not conserved: "
+                             "give angular_momentum = 0")
+        return v, np.zeros_like(v)
     v -= centre_of_mass(system.masses, v)
     # remove the rigid rotations: L = I omega, with the inertia tensor of the body
     r3 = np.pad(r, ((0, 0), (0, 3 - system.dim)))
@@ -414,6 +509,10 @@ FAMILIES = {f.name: f for f in [
     Family("section_sample", _section_sample,
            dict(energy=84.45577136594005, angular_momentum=24.401923788646684, seed=0,
                 sigma_max=0.0, eta_max=0.0, phi=math.pi / 2, theta=0.0, direction=1)),
+    Family("field_section", _field_section, dict(energy=None, x=0.0, y=0.0, p_y=0.0,
+                                                 direction=1), any_n=True),
+    Family("field_section_sample", _field_section_sample,
+           dict(energy=None, seed=0, x=0.0, y_min=0.0, y_max=0.0, direction=1), any_n=True),
     Family("explicit", _explicit, dict(positions=None, velocities=None), any_n=True),
     Family("equilibrium", _equilibrium, dict(positions=None, displacement=0.0, speed=1.0,
                                              seed=0), any_n=True),
@@ -460,10 +559,12 @@ def initial_state(system: System, family: str, energy=None, **params) -> np.ndar
 
 
 def with_energy(system: System, y, energy: float) -> np.ndarray:
-    """Rescale the velocities relative to the centre of mass so that H = energy."""
+    """Rescale the velocities relative to the centre of mass so that H = energy (in an
+    external field, where the centre of mass is not free, every velocity)."""
     q, p = system.split(y)
     m = system.masses[:, None]
-    v_cm = p.sum(axis=0) / system.masses.sum()
+    v_cm = p.sum(axis=0) / system.masses.sum() if system.translation_invariant \
+        else np.zeros(system.dim)
     rel = p / m - v_cm
     k_rel = 0.5 * np.sum(m * rel ** 2)
     k_cm = 0.5 * system.masses.sum() * np.sum(v_cm * v_cm)

@@ -33,6 +33,7 @@ from ..catalog.variables import (
     V,
     Var,
     fundamental_names,
+    in_field,
     history_grid,
     horizon_factors,
 )
@@ -65,7 +66,7 @@ def cell_shape(config, v: Var) -> tuple[int, ...]:
              "component": 2 * s.bodies * s.dim, "spatial": 3,
              "observable": len(tori.observables),
              "ensemble_statistic": len(ENSEMBLE_STATISTICS),
-             "fundamental": len(fundamental_names(s.bodies, s.dim))}
+             "fundamental": len(fundamental_names(s.bodies, s.dim, in_field(s)))}
     return tuple(sizes[d] for d in v.extra)
 
 
@@ -106,7 +107,7 @@ def fill_row(results: dict, k: int, cell: CellResult):
 
 def versions() -> dict[str, str]:
     names = ["survey", "numpy", "numba", "llvmlite", "dask", "distributed", "xarray",
-             "netCDF4"]
+             "netCDF4", "sympy"]
     out = {"python": sys.version.split()[0]}
     for n in names:
         try:
@@ -229,7 +230,8 @@ def coordinates(config, cells=None) -> dict:
         s = config.settings.system
         coords["observable_name"] = ("observable", config.settings.tori.observables,
                                      {"long_name": "observable of the Birkhoff averages"})
-        coords["fundamental_name"] = ("fundamental", fundamental_names(s.bodies, s.dim),
+        coords["fundamental_name"] = ("fundamental", fundamental_names(s.bodies, s.dim,
+                                                                         in_field(s)),
                                       {"long_name": "fundamental frequency: a basis of shape "
                                                     "frequencies, then the rotation"})
     return coords

@@ -245,7 +245,7 @@ def classify_rows(task: CellTask, system, arrays: dict, half: bool = False):
     table = Table(arrays, history_time=history_grid(
         task.integration.t_final, ind.history_points, tor.extend,
         tor.extend_rounds), fundamental_name=np.array(fundamental_names(
-            system.n_bodies, system.dim)))
+            system.n_bodies, system.dim, not system.translation_invariant)))
     return classify(table, Thresholds.from_table(vars(tor)), half=half)
 
 
@@ -302,6 +302,8 @@ def _run(task: CellTask, system, events, starts, factor: int) -> list[CellResult
             n_crossings=out.n_crossings,
             crossing_time=out.crossings.t, crossing_state=out.crossings.y,
             reduced=reduced(system, out.crossings.y) if planar3 else None,
+            centre=None if system.translation_invariant else (
+                system.centre_of_mass(out.crossings.y), system.momentum(out.crossings.y)),
             horizon=t_final))
     return results
 

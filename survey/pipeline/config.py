@@ -24,8 +24,8 @@ from ..catalog import defaults
 from ..catalog.errors import ConfigError
 from ..catalog.indicators import BY_NAME as INDICATOR
 from ..catalog.indicators import REGISTRY, TANGENT
-from ..catalog.variables import shape_dof
-from ..numerics.sections import REDUCED_SURFACES
+from ..catalog.variables import V, default_observables, shape_dof
+from ..numerics.sections import CARTESIAN, REDUCED_SURFACES
 from ..numerics.torus import resonance_count
 from ..physics.families import FAMILIES, family_parameters
 from ..physics.system import System
@@ -511,6 +511,7 @@ def validate(raw: dict, text: str, where: str = "<config>", check_output: bool =
     tables["section_enabled"] = "section" in raw
     tables["check_enabled"] = "check" in raw
     tables["refine_enabled"] = "refine" in raw
+    tables["reference_enabled"] = "reference" in raw
     _validate_names(tables)
     check_memory(settings_of(tables), math.prod(_axis_size(v) for v in initial_raw.values())
                  * tables["initial"]["starts_per_cell"])
@@ -526,6 +527,8 @@ def validate(raw: dict, text: str, where: str = "<config>", check_output: bool =
     _validate_cross(tables, system)
     if tables["refine_enabled"]:
         _validate_refine(tables, axes)
+    if tables["reference_enabled"]:
+        _validate_reference(tables, axes)
     config = Config(tables=tables, axes=tuple(axes), fixed=fixed, text=text, source=where)
     if check_output:
         ensure_writable(config.output, inputs=[where] if Path(where).is_file() else [])
@@ -740,6 +743,52 @@ def _validate_initial(given: dict, body: dict, system: System):
     return axes, fixed
 
 
+def _validate_reference(tables: dict, axes: list[Axis]):
+    """Published regular shares are compared with a sample's: the survey draws seeded
+    starts at each value of one axis, and every published value sits on that axis."""
+    ref = tables["reference"]
+    if ref["crossings"]:
+        if not tables["section_enabled"]:
+            raise ConfigError("[reference].crossings", "counts crossings of the surface of "
+                                                       "section: give a [section] table")
+        if tables["section"]["max_crossings"] < ref["crossings"]:
+            raise ConfigError("[reference].crossings", f"{ref['crossings']} crossings are "
+                              f"more than [section] max_crossings = "
+                              f"{tables['section']['max_crossings']} keeps")
+        if V.ftle not in tables["indicators"]["which"]:      # the indicator that fills it
+            raise ConfigError("[reference].crossings", "reads the deviation's growth from "
+                                                       "the ftle history: add 'ftle' to "
+                                                       "[indicators] which")
+        if not ref["growth"] > 1:
+            raise ConfigError("[reference].growth", "give the largest growth of the "
+                                                    "separation counted regular (> 1)")
+    others = [a for a in axes if a.name != "seed"]
+    if len(others) == len(axes) or len(others) != 1:
+        raise ConfigError("[reference]", "compares published regular shares with a sample "
+                          "of seeded starts along one axis: give [initial] starts_per_cell "
+                          "> 1 and one other grid axis" + (f" (the grid has {len(others)})"
+                                                           if others else ""))
+    if others[0].name != ref["axis"]:
+        raise ConfigError("[reference].axis", f"{ref['axis']!r} is not the survey's axis "
+                                              f"({others[0].name})")
+    if not ref["source"].strip():
+        raise ConfigError("[reference].source", "say who published the values and how they "
+                                                "measured them")
+    at, share = ref["at"] or [], ref["regular_share"] or []
+    if not at or len(at) != len(share):
+        raise ConfigError("[reference].regular_share", f"needs one value per entry of at "
+                                                       f"({len(at)}), got {len(share)}")
+    for v in share:
+        if not 0.0 <= v <= 1.0:
+            raise ConfigError("[reference].regular_share", f"{v:g} is not a share in [0, 1]")
+    grid = others[0].values
+    for v in at:
+        if not np.any(np.abs(grid - v) <= 1e-9 * max(1.0, abs(v))):
+            raise ConfigError("[reference].at", f"{v:g} is not a value of the axis "
+                              f"{ref['axis']} ({', '.join(f'{g:g}' for g in grid[:8])}"
+                              + (", ..." if grid.size > 8 else "") + ")")
+
+
 # the variables a refinement may follow: each indicator's headline
 REFINE_INDICATORS = tuple(i.headline for i in REGISTRY)
 
@@ -874,26 +923,39 @@ def _validate_cross(tables: dict, system: System):
             raise ConfigError("[check].nudge", "equals [indicators].nudge, so the rounding "
                                                "variant would repeat the survey bit for bit; "
                                                "give it another value (1e-13 is usual)")
-    if tables["tori"]["analyse"] and not tables["tori"]["observables"]:
+    field = not system.translation_invariant
+    tor = tables["tori"]
+    if tor["observables"] is None:
+        tor["observables"] = default_observables(system.n_bodies, system.dim, field)
+    if tor["analyse"] and not tor["observables"]:
         raise ConfigError("[tori].observables", "needs at least one observable (or set "
                                                 "analyse = false)")
-    if tables["tori"]["analyse"] and not system.translation_invariant:
-        raise ConfigError("[tori].analyse", "the torus analysis reads the shape's signals "
-                          "(perimeter, inertia), which an external field's orbits do not "
-                          "carry their motion in; set analyse = false (the indicators' "
-                          "verdicts remain)")
-    _validate_thresholds(tables["tori"], shape_dof(system.n_bodies, system.dim))
+    for name in tor["observables"]:
+        if name in CARTESIAN and not field:
+            raise ConfigError("[tori].observables", f"{name!r} is the centre of mass's "
+                              "coordinate, which moves uniformly without an external field: "
+                              "use perimeter or inertia")
+        if name in CARTESIAN and CARTESIAN.index(name) >= system.dim:
+            raise ConfigError("[tori].observables", f"{name!r} needs dim = 3")
+        if name not in CARTESIAN and system.n_bodies == 1:
+            raise ConfigError("[tori].observables", f"{name!r} is a shape's, and one body "
+                              "has none: use x, y" + (", z" if system.dim == 3 else ""))
+    _validate_thresholds(tor, shape_dof(system.n_bodies, system.dim, field))
     if tables["section_enabled"]:
         coord = sec["coordinate"]
         if coord in REDUCED_SURFACES and (system.n_bodies != 3 or system.dim != 2):
             raise ConfigError("[section].coordinate", f"{coord!r} is a reduced coordinate of "
                                                       "three bodies in the plane")
+        if coord in CARTESIAN and not field:
+            raise ConfigError("[section].coordinate", f"{coord!r} is the centre of mass's "
+                              "coordinate, which without an external field moves uniformly "
+                              "and crosses a plane once at most")
         if coord == "linear" and (sec["coefficients"] is None
                                   or len(sec["coefficients"]) != system.n):
             raise ConfigError("[section].coefficients", f"a 'linear' surface needs {system.n} "
                                                         "coefficients (one per state component)")
         trip = sec["triplet"]
-        uses = coord not in ("linear", *REDUCED_SURFACES) or list(trip) != [0, 1, 2]
+        uses = coord not in ("linear", *REDUCED_SURFACES, *CARTESIAN) or list(trip) != [0, 1, 2]
         if uses and (len(trip) != 3 or len(set(trip)) != 3 or max(trip) >= system.n_bodies):
             raise ConfigError("[section].triplet", f"needs three different bodies of "
                                                    f"0..{system.n_bodies - 1}, got {trip}")

@@ -83,7 +83,7 @@ class ToriTable:
 
     analyse: bool                       # weighted Birkhoff digits and frequency analysis of ever...
     sample_interval: float              # time between the orbit samples they are computed from (...
-    observables: list[str]              # observables of the Birkhoff averages
+    observables: list[str]              # observables of the Birkhoff averages (default: perimete...
     lines: int                          # NAFF lines per shape signal and half orbit
     extend: int                         # a cell whose verdict changed from t_final / 2 to t_fina...
     extend_rounds: int                  # how many times a verdict still in doubt is extended aga...
@@ -127,6 +127,19 @@ class RefineTable:
 
 
 @dataclass(frozen=True)
+class ReferenceTable:
+    """[reference]"""
+
+    source: str                         # who published the regular shares below, and how they me...
+    axis: str                           # the grid axis the published values are at (the survey's...
+    at: list[float] | None              # the axis values they are at, each one of the grid's
+    regular_share: list[float] | None   # the published regular share at each (0 to 1): the repor...
+    spread: float                       # their stated spread, or how closely they can be read of...
+    crossings: int                      # the published shares were decided by how far two nearby...
+    growth: float                       # the largest growth of that separation the publication c...
+
+
+@dataclass(frozen=True)
 class DaskTable:
     """[dask]"""
 
@@ -151,7 +164,9 @@ class Settings:
     tori: ToriTable
     check: CheckTable
     refine: RefineTable
+    reference: ReferenceTable
     dask: DaskTable
     section_enabled: bool
     check_enabled: bool
     refine_enabled: bool
+    reference_enabled: bool

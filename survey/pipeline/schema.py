@@ -137,8 +137,10 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "sample_interval": Key("float", defaults.SAMPLE_INTERVAL, "time between the orbit "
                                "samples they are computed from (NAFF sees frequencies up to "
                                "1/(2 interval))", "time", above=0),
-        "observables": Key("strs", list(OBSERVABLES), "observables of the Birkhoff "
-                                                      "averages", choices=tuple(OBSERVABLES)),
+        "observables": Key("strs", None, "observables of the Birkhoff averages (default: "
+                                         "perimeter, inertia; in an external field the "
+                                         "centre of mass's x, y (z) besides)",
+                           choices=tuple(OBSERVABLES)),
         "lines": Key("int", defaults.NAFF_LINES, "NAFF lines per shape signal and half orbit",
                      low=1, high=50),
         "extend": Key("int", defaults.EXTEND, "a cell whose verdict changed from t_final / 2 "
@@ -195,6 +197,26 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "tolerance": Key("float", 0.0, "one axis: a boundary is bisected until its interval "
                                        "is no wider than this (0: down to max_level)", low=0),
     },
+    "reference": {
+        "source": Key("str", "", "who published the regular shares below, and how they "
+                                 "measured them (quoted beside them in the report)"),
+        "axis": Key("str", "energy", "the grid axis the published values are at (the "
+                                     "survey's one axis besides the seeds)"),
+        "at": Key("floats", None, "the axis values they are at, each one of the grid's"),
+        "regular_share": Key("floats", None, "the published regular share at each (0 to 1): "
+                                             "the report sets each beside the survey's with "
+                                             "its interval and says whether they agree"),
+        "spread": Key("float", 0.0, "their stated spread, or how closely they can be read "
+                                    "off a figure (absolute, 0 to 1)", low=0, high=1),
+        "crossings": Key("int", 0, "the published shares were decided by how far two "
+                                   "nearby orbits separated over this many crossings of "
+                                   "the section: the report applies that criterion to "
+                                   "survey's own orbits too (their deviation's growth by "
+                                   "each cell's crossing of that number; needs [section] "
+                                   "and the ftle indicator; 0: none)", low=0),
+        "growth": Key("float", 0.0, "the largest growth of that separation the publication "
+                                    "counted as regular", low=0),
+    },
     "dask": {
         "workers": Key("int", 2, "local worker processes (1 thread each)", low=1, high=512,
                        hint="more workers than cores only queue; for more machines give "
@@ -217,7 +239,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
 }
 
 
-FLAGS = ("section_enabled", "check_enabled", "refine_enabled")   # whether a table was given
+FLAGS = ("section_enabled", "check_enabled", "refine_enabled", "reference_enabled")   # whether a table was given
 TYPES = {"str": "str", "int": "int", "float": "float", "bool": "bool",
          "floats": "list[float] | None", "ints": "list[int] | None", "strs": "list[str]",
          "table": "dict", "terms": "list[dict] | None", "axis": "Any"}

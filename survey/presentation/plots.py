@@ -21,7 +21,8 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
-from ..analysis.classify import horizon, regular_share, stored_config, stored_table
+from ..analysis.classify import (horizon, regular_share, separation_share, stored_config,
+                                 stored_table)
 from ..analysis.refine import as_grid, painted, refined_axes
 from ..catalog.indicators import OWNER, REGISTRY
 from ..catalog.regimes import IRREGULAR, REGULAR, Regime, Thresholds
@@ -32,6 +33,7 @@ from .sections import (
     crossing_surface,
     place_legends,
     section,
+    section_axes,
     section_slice,
     shells,
     slice_slab,
@@ -94,7 +96,7 @@ def figures(ds, variables=None, special=None, slice_at=None) -> dict[str, Figure
     elif len(axes) == 1 and axes[0] != "seed":      # seeds are in no order: no scan
         out["scan"] = scan(ds, [n for n, _ in names] if variables is None else variables,
                            special)
-    if V.crossing_sigma in ds and int(np.nansum(ds[V.n_crossings].values)) > 0 \
+    if section_axes(ds) and int(np.nansum(ds[V.n_crossings].values)) > 0 \
             and len(shells(ds)) <= MAX_SHELLS:
         out["section"] = section(ds)
         if len(shells(ds)) == 1 and crossing_surface(ds)[0] == "phi":   # the 4-D section, sliced
@@ -370,7 +372,8 @@ def _edges(c) -> np.ndarray:
 def regular_share_figure(ds) -> Figure:
     """Several seeded starts per grid point: the share of each point's decided starts that
     are regular -- a map over two axes (points with none decided masked, each labelled
-    k/n), or along one axis with its 95% Wilson interval as a bar."""
+    k/n), or along one axis with its 95% Wilson interval as a bar (and a [reference]
+    table's published shares beside it)."""
     share = regular_share(ds)
     points = [a for a in grid_axes(ds) if a != "seed"]
     starts = ds.sizes["seed"]
@@ -397,10 +400,28 @@ def regular_share_figure(ds) -> Figure:
         (a,) = points
         x = ds[a].values
         y = share.share.values
-        ax.errorbar(x, y, yerr=[y - share.share_low.values, share.share_high.values - y],
+        ax.errorbar(x, y, yerr=np.maximum(0.0, [y - share.share_low.values,
+                                                share.share_high.values - y]),
                     fmt="o", ms=4, color="#1f77b4", ecolor="0.4", capsize=2,
                     label=f"regular share of the decided starts ({starts} per point), "
                           "95% Wilson interval")
+        reference = stored_table(ds, "reference")
+        if reference:
+            spread = reference["spread"]
+            ax.errorbar(reference["at"], reference["regular_share"],
+                        yerr=spread if spread else None, fmt="s", ms=5, mfc="none",
+                        color="#d62728", capsize=3,
+                        label="published: " + reference["source"].split(":")[0].strip())
+            if reference.get("crossings"):
+                own = separation_share(ds, reference["crossings"], reference["growth"])
+                shift = 0.01 * float(np.ptp(x) or 1.0)
+                v = own.share.values
+                ax.errorbar(x + shift, v, yerr=np.maximum(0.0, [v - own.share_low.values,
+                                                               own.share_high.values - v]),
+                            fmt="D", ms=4, color="#2ca02c", ecolor="#2ca02c", capsize=2,
+                            label=f"their criterion on survey's orbits (growth < "
+                                  f"{reference['growth']:g} by crossing "
+                                  f"{reference['crossings']}), 95% interval")
         ax.set_ylim(-0.03, 1.03)
         ax.set_xlabel(label(a))
         ax.set_ylabel("regular share")
@@ -455,12 +476,15 @@ def indicator_map(ds, name, cmap="viridis", clip=None, log=False, overlay=False,
         keep, slab = slice_slab(ds, slice_at or {})
         ax.scatter(ds[f"crossing_{a}"].values.ravel()[keep],
                    ds[f"crossing_{b}"].values.ravel()[keep],
-                   s=2.0, lw=0, color="black", alpha=0.6, rasterized=True)
-        handles.append(Patch(color="black", alpha=0.6, label="section crossings in the "
-                                                             "slice's slab"))
+                   s=2.0 if keep.sum() < 20000 else 0.3, lw=0, color="black", alpha=0.6,
+                   rasterized=True)
+        whole = not slice_at        # two degrees of freedom: the grid is the section itself
+        handles.append(Patch(color="black", alpha=0.6, label="section crossings" + (
+            "" if whole else " in the slice's slab")))
         ax.set_xlabel(ax.get_xlabel() + "\n" + textwrap.fill(
-            f"the grid is a 2-D slice of the 4-D section; drawn: the crossings in its slab "
-            f"{slab}", 75), fontsize="small")
+            f"the grid is the 2-D section itself; drawn: every crossing ({int(keep.sum())})"
+            if whole else f"the grid is a 2-D slice of the 4-D section; drawn: the crossings "
+                          f"in its slab {slab}", 75), fontsize="small")
         ax.set_xlim(x.min(), x.max())
         ax.set_ylim(y.min(), y.max())
     where = f"clipped to [{lo:g}, {hi:g}]" if clip else f"range [{lo:.3g}, {hi:.3g}]"

@@ -7,7 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analysis.classify import (evidence_votes, regular_share, stored_config, stored_table,
+from ..analysis.classify import (evidence_votes, regular_share, separation_share,
+                                 share_sensitivity, stored_config, stored_table,
                                  threshold_margins)
 from ..analysis.findings import decorrelated, how_many, islands, regions, twists
 from ..analysis.onset import budget, onset, onset_over_horizons, runs
@@ -113,7 +114,8 @@ def markdown(ds, figure_names=(), checks=None, special=None) -> str:
 
     out += _ensembles(ds, regime)
     out += _refinement(ds, config, regime, check)
-    out += _shares(ds, axes, regime)
+    out += _shares(ds, axes, regime, config.get("reference"))
+    out += _sensitivity(ds, axes, th)
     out += _onsets(ds, axes, regime, checks, th)
     out += _islands(axes, regime)
     out += _second_run(ds, check, regime)
@@ -124,7 +126,7 @@ def markdown(ds, figure_names=(), checks=None, special=None) -> str:
     out += _quality(ds)
     if figure_names:
         out += ["## Figures", ""] + [f"![{name}]({name})" for name in figure_names] + [""]
-        many = len(plots.shells(ds)) if V.crossing_sigma in ds else 0
+        many = len(plots.shells(ds)) if plots.section_axes(ds) else 0
         if many > plots.MAX_SHELLS:
             out += [f"No section figure: the cells start on {many} different energy shells "
                     "(E, J, and the system's parameters); a section is drawn one shell a "
@@ -241,9 +243,41 @@ def _sample_share(ds, axes, regime) -> str:
 SHARE_ROWS = 40     # grid points listed one by one in the regular-share table
 
 
-def _shares(ds, axes, regime) -> list[str]:
+def _published(reference: dict | None, p, criterion=None) -> str:
+    """The [reference] table's published share at grid point p, and whether the survey's
+    interval meets the published value's spread (and with the publication's own criterion
+    applied to survey's orbits, `criterion`: its share, interval and agreement at p, and
+    its shares at a tenth and ten times the growth): table cells, or none."""
+    if not reference:
+        return ""
+    at = np.asarray(reference["at"], dtype=float)
+    x = float(p[reference["axis"]])
+    hit = np.flatnonzero(np.abs(at - x) <= 1e-9 * max(1.0, abs(x)))
+    value, spread = (reference["regular_share"][hit[0]], reference["spread"]) if hit.size \
+        else (None, 0.0)
+
+    def agrees(share) -> str:
+        if value is None or not int(share.decided):
+            return "—"
+        meets = float(share.share_low) <= value + spread \
+            and float(share.share_high) >= value - spread
+        return "yes" if meets else "**no**"
+    cells = [agrees(p)]
+    if criterion is not None:
+        own, tenth, tenfold = (c.sel({reference["axis"]: x}) for c in criterion)
+        cells += [f"{100 * float(own.share):.0f}% ({100 * float(own.share_low):.0f}-"
+                  f"{100 * float(own.share_high):.0f}%; {100 * float(tenth.share):.0f}-"
+                  f"{100 * float(tenfold.share):.0f}%)" if int(own.decided) else "—",
+                  agrees(own)]
+    published = "—" if value is None else \
+        f"{100 * value:.0f}%" + (f" ± {100 * spread:.0f}" if spread else "")
+    return f" {published} | " + " | ".join(cells) + " |"
+
+
+def _shares(ds, axes, regime, reference=None) -> list[str]:
     """Several seeded starts per grid point: each point's regular share with its 95%
-    Wilson interval (the points with every start alike summarised beyond SHARE_ROWS)."""
+    Wilson interval (the points with every start alike summarised beyond SHARE_ROWS); with
+    a [reference] table, the published share beside it and whether the two agree."""
     if "seed" not in axes or len(axes) == 1:
         return []
     share = regular_share(ds, ds[V.status].copy(data=regime))
@@ -252,9 +286,25 @@ def _shares(ds, axes, regime) -> list[str]:
     out = [f"## Regular share per grid point ({ds.sizes['seed']} seeded starts each)", "",
            "Regular share: of a point's starts decided regular or irregular, the regular "
            "ones; 95% Wilson interval (the starts are a random sample of what the family "
-           "draws from; undecided starts are left out).", "",
-           "| " + " | ".join(points) + " | decided | regular | share | 95% interval |",
-           "|" + " --- |" * (len(points) + 4)]
+           "draws from; undecided starts are left out).", ""]
+    criterion = None
+    if reference:
+        out += [f"Published: {reference['source'].strip()} Agrees: the survey's interval "
+                "meets the published value" + (" within its spread" if reference["spread"]
+                                               else "") + ".", ""]
+        if reference.get("crossings"):
+            k, g = reference["crossings"], reference["growth"]
+            criterion = [separation_share(ds, k, g * f) for f in (1.0, 0.1, 10.0)]
+            out += [f"Their criterion on survey's orbits: a start counts as regular if its "
+                    f"deviation grew by less than {g:g} by its {k}th crossing of the "
+                    f"section (analysis.classify.separation_share); its share with the 95% "
+                    f"interval, then its shares at a tenth and ten times that growth.", ""]
+    extra = [" published | agrees |"] if reference else []
+    if criterion is not None:
+        extra.append(" their criterion on survey's orbits | agrees |")
+    out += ["| " + " | ".join(points) + " | decided | regular | share | 95% interval |"
+            + "".join(extra),
+            "|" + " --- |" * (len(points) + 4 + 2 * len(extra))]
     mixed = np.flatnonzero((flat.share.values > 0) & (flat.share.values < 1))
     rows = np.arange(flat.sizes["point"]) if flat.sizes["point"] <= SHARE_ROWS else \
         mixed[:SHARE_ROWS]
@@ -264,7 +314,7 @@ def _shares(ds, axes, regime) -> list[str]:
         n, k = int(p.decided), int(p.regular)
         value = f"{100 * k / n:.0f}% | {100 * float(p.share_low):.0f}-" \
                 f"{100 * float(p.share_high):.0f}%" if n else "— | —"
-        out.append(f"| {where} | {n} | {k} | {value} |")
+        out.append(f"| {where} | {n} | {k} | {value} |" + _published(reference, p, criterion))
     if flat.sizes["point"] > SHARE_ROWS:
         s = flat.share.values
         first = f", the first {SHARE_ROWS}" if mixed.size > SHARE_ROWS else ""
@@ -272,6 +322,39 @@ def _shares(ds, axes, regime) -> list[str]:
                     f"between 0 and 1 ({mixed.size}{first}); all regular at "
                     f"{int(np.sum(s == 1))}, none regular at {int(np.sum(s == 0))}, none "
                     f"decided at {int(np.sum(np.isnan(s)))}."]
+    return out + [""]
+
+
+def _sensitivity(ds, axes, th) -> list[str]:
+    """How a seeded sample's regular shares move with each vote threshold and with the
+    horizon (analysis.classify.share_sensitivity), one column per grid point: a share that
+    holds under these is the orbits', not the thresholds'."""
+    if "seed" not in axes or len(axes) != 2:
+        return []
+    rows = share_sensitivity(ds, th)
+    point = next(a for a in axes if a != "seed")
+    values = rows[0][1][point].values
+    out = ["## Sensitivity of the regular share", "",
+           "Each point's regular share decided again from the evidence the cells' runs "
+           "stored (no orbit integrated again): with each threshold moved a quarter of the "
+           "way towards its partner and as far away (in log10 for SALI), and at half each "
+           "cell's horizon. In brackets, the change from the archived share in points (none: "
+           "less than half a point).", "",
+           "| decided with | " + " | ".join(f"{point} = {v:g}" for v in values) + " |",
+           "| --- |" + " --- |" * values.size]
+    base = rows[0][1].share.values
+    for label, share in rows:
+        cells = []
+        for b, v in zip(base, share.share.values):
+            moved = round(100 * (v - b)) if np.isfinite(v - b) else 0
+            shift = f" ({moved:+d})" if moved else ""
+            cells.append("—" if not np.isfinite(v) else f"{100 * v:.0f}%{shift}")
+        out.append(f"| {label} | " + " | ".join(cells) + " |")
+    moved = np.array([[abs(s.share.values[i] - base[i]) for i in range(base.size)]
+                      for _, s in rows[1:]])
+    if moved.size and np.isfinite(moved).any():
+        largest = round(100 * float(np.nanmax(moved)))
+        out += ["", f"Largest change: {largest} point{'s' * (largest != 1)}."]
     return out + [""]
 
 

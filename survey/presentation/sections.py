@@ -18,9 +18,15 @@ from .style import REGIME_COLOURS, grid_axes, map_axes, per_cell
 MAX_SHELLS = 9      # a section figure draws up to this many shells, one panel each
 
 
+def in_field(ds) -> bool:
+    """Whether an archive's system has an external term (its stored [system] table)."""
+    return any(t.get("kind") == "external"
+               for t in (stored_table(ds, "system") or {}).get("interactions") or [])
+
+
 def shells(ds) -> list[np.ndarray]:
     """The cells of an archive grouped by the Hamiltonian and energy shell they start on:
-    equal E and J (to 1e-9) and equal values of every grid axis that is a parameter of the
+    equal E and J (to 1e-9; E alone in an external field) and equal values of every grid axis that is a parameter of the
     system (its terms' axes). Each group is a flat array of cell indices; cells without a
     start are left out. A Poincare section is of one shell."""
     axes = [a for a in map_axes(ds)        # a term's parameter: another Hamiltonian
@@ -28,6 +34,8 @@ def shells(ds) -> list[np.ndarray]:
     flat = {a: per_cell(ds, a) for a in axes}
     groups: dict[tuple, list[int]] = {}
     energy, spin = per_cell(ds, V.energy), per_cell(ds, V.angular_momentum)
+    if in_field(ds):        # a field conserves no angular momentum
+        spin = np.zeros_like(energy)
     for i, (e, j) in enumerate(zip(energy, spin)):
         if np.isfinite(e):
             key = (float(f"{e:.9e}"), float(f"{j:.9e}")) + tuple(float(flat[a][i])
@@ -36,11 +44,25 @@ def shells(ds) -> list[np.ndarray]:
     return [np.array(cells) for cells in groups.values()]
 
 
-def section(ds, x="sigma", y="p_sigma", colour_by=V.regime) -> Figure:
-    """Section crossings in the (x, y) reduced coordinates, one panel per energy shell (and
+def section_axes(ds) -> tuple[str, str] | None:
+    """The two coordinates a section figure draws its crossings in: (sigma, p_sigma) of the
+    reduced flow of three bodies in the plane; in an external field, the centre of mass's
+    coordinate after the surface's and its momentum ((y, p_y) on x = 0: Henon-Heiles'
+    plane); None if the archive stores neither."""
+    if V.crossing_sigma in ds:
+        return "sigma", "p_sigma"
+    coordinate = crossing_surface(ds)[0]
+    other = {"x": "y", "y": "x", "z": "x"}.get(coordinate, "x")
+    return (other, f"p_{other}") if f"crossing_{other}" in ds else None
+
+
+def section(ds, colour_by=V.regime) -> Figure:
+    """Section crossings in the archive's `section_axes`, one panel per energy shell (and
     Hamiltonian: see `shells`) -- a section never overlays different shells -- coloured by
-    the cell's regime (or an indicator), rasterised; each panel says it is a projection of
-    the 4-D section of the reduced 3-degree-of-freedom flow."""
+    the cell's regime (or an indicator), rasterised; a panel of the reduced flow says it is
+    a projection of the 4-D section of a 3-degree-of-freedom flow (a two-degree-of-freedom
+    system's section is the plane itself)."""
+    x, y = section_axes(ds)
     groups = shells(ds)[:MAX_SHELLS]
     cols = min(3, len(groups))
     rows = -(-len(groups) // cols)
@@ -66,17 +88,21 @@ def section(ds, x="sigma", y="p_sigma", colour_by=V.regime) -> Figure:
             pts = ax.scatter(xs[cells].ravel(), ys[cells].ravel(), c=value, s=size, lw=0,
                              cmap="viridis", rasterized=True)
             fig.colorbar(pts, ax=ax, label=label(colour_by))
-        ax.set_title(f"E = {energy[cells[0]]:.6g}, J = {spin[cells[0]]:.6g} "
+        ax.set_title(f"E = {energy[cells[0]]:.6g}"
+                     + (f", J = {spin[cells[0]]:.6g}" if x == "sigma" else "") + " "
                      f"({cells.size} cell{'s' if cells.size > 1 else ''})", fontsize="small")
         ax.set_xlabel(label(x))
         ax.set_ylabel(label(y))
         _one_point(ax, xs[cells], ys[cells])
     for ax in axes[len(groups):]:
         ax.set_visible(False)
+    surface = "surface of section {} = {:.6g}, one panel per energy shell: ".format(
+        *crossing_surface(ds))
     fig.supxlabel(textwrap.fill(
-        "surface of section {} = {:.6g}, one panel per energy shell: every ".format(*crossing_surface(ds))
-        + f"crossing projected onto ({x}, {y}); the section of the reduced 3-degree-of-freedom "
-        f"flow is 4-D, so a torus need not draw a curve", int(13 * fig.get_figwidth())),
+        surface + (f"every crossing projected onto ({x}, {y}); the section of the reduced "
+                   "3-degree-of-freedom flow is 4-D, so a torus need not draw a curve"
+                   if x == "sigma" else f"every crossing in ({x}, {y}): a torus draws a "
+                   "curve, a chaotic orbit fills an area"), int(13 * fig.get_figwidth())),
         fontsize="small")
     return place_legends(fig)
 
