@@ -16,7 +16,7 @@ from ..numerics.integrate import Frame, integrate, integrate_batch
 from ..physics.families import initial_state
 from ..physics.lanes import SIMD_LANES
 from ..physics.system import System
-from ..physics.terms import make_potential
+from ..physics.terms import make_expression, make_potential
 from .common import CASES, timed_command, user_env
 
 
@@ -125,6 +125,14 @@ def interaction_terms(t_final=2000.0, repeats=5, out=print):
         alone, many = lanes[name]
         out(f"  {label:55s} {alone:6.0f} {many:6.0f}  ({alone / many:.1f}x)")
     out(f"  the paper's 'sides' orbit in {SIMD_LANES} lanes: {lanes['paper']:.0f} ns")
+    out(f"The same terms written as formulas (their programs run over the lanes), on the same "
+        f"starts, ns per attempted orbit-step in {SIMD_LANES} lanes (target: formula <= 1.3x "
+        f"built-in):")
+    for name, label in (("four", "P^2/2 of four bodies as 'P**2/2'"),
+                        ("mixed", "P^2/2 + Lennard-Jones pairs as '4*((1/r)**12 - (1/r)**6)'")):
+        builtin, formula = lanes[name][1], lanes[f"{name} formula"][1]
+        out(f"  {label:60s} built-in {builtin:6.0f}  formula {formula:6.0f}  "
+            f"({formula / builtin:.2f}x)")
     return rows
 
 
@@ -132,8 +140,9 @@ def _others_in_lanes(repeats, orbits=64, t_final=100.0) -> dict:
     """ns per attempted orbit-step, alone and in SIMD_LANES lanes, of systems other than the
     paper's -- the LJAT trimer and the paper's P^2/2 beside Lennard-Jones pairs (orbits
     near the equilateral triangle), P^2/2 of three bodies in 3-D (the triangle tilted out
-    of the plane) and of four in the plane (near a square), seeded momenta -- and of the
-    paper's 'sides' orbit in as many lanes, best of `repeats`."""
+    of the plane) and of four in the plane (near a square), seeded momenta -- of the first
+    and the last written as formulas, on the same starts -- and of the paper's 'sides'
+    orbit in as many lanes, best of `repeats`."""
     rng = np.random.default_rng(3)
     triangle = np.array([[0.0, 0.0, 0.0], [1.12, 0.0, 0.0], [0.56, 0.97, 0.0]])
     square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
@@ -157,6 +166,10 @@ def _others_in_lanes(repeats, orbits=64, t_final=100.0) -> dict:
             done = integrate_batch(system, y0s, t, tangents=w, megno=True, lanes=lanes)
             best = min(best, time.perf_counter() - start)
         return 1e9 * best / sum(o.n_steps + o.n_rejected for o in done)
+    # the same terms written as formulas, on the same starts as their built-in systems
+    formulas = {"four": System(np.ones(4), 2, (make_expression("triplet", "P**2/2"),)),
+                "mixed": System(np.ones(3), 2, (P2, make_expression(
+                    "pair", "4*((1/r)**12 - (1/r)**6)")))}
     out = dict(orbits=orbits, t=t_final, paper=per_step(paper, sides, SIMD_LANES, t_final))
     for name, (system, at) in systems.items():
         q = at + 0.02 * rng.normal(size=(orbits,) + at.shape)
@@ -165,6 +178,9 @@ def _others_in_lanes(repeats, orbits=64, t_final=100.0) -> dict:
         y0s = np.array([system.state(*qp) for qp in zip(q, p)])
         out[name] = (per_step(system, y0s[:4], 1, t_final),
                      per_step(system, y0s, SIMD_LANES, t_final))
+        if name in formulas:
+            out[f"{name} formula"] = (per_step(formulas[name], y0s[:4], 1, t_final),
+                                      per_step(formulas[name], y0s, SIMD_LANES, t_final))
     return out
 
 

@@ -757,16 +757,17 @@ def dop853(y0s, rows, model: Model, control: Control, recording: Recording, L: i
     # The SIMD loops cost all L lanes whether they run a job or not: once every job has
     # started and at most half the lanes run one (their lengths differ 2x and more), those
     # go on in half as many lanes, down to SIMD_MIN, where the last one goes on alone.
-    ln, next_job = lane_state(L, n, nf, n_tan, m, n_sub), 0
+    registers = 0 if model.expr is None else model.expr.regs.size
+    ln, next_job = lane_state(L, n, nf, n_tan, m, n_sub, registers), 0
     while drive(ln, next_job) == HANDOFF:
         next_job, running = M, np.flatnonzero(ln.job >= 0)
         if ln.job.size // 2 >= SIMD_MIN:
-            fewer = lane_state(ln.job.size // 2, n, nf, n_tan, m, n_sub)
+            fewer = lane_state(ln.job.size // 2, n, nf, n_tan, m, n_sub, registers)
             for slot, k in enumerate(running):
                 _adopt(fewer, slot, ln, k)
             ln = fewer
             continue
-        one, handed = lane_state(1, n, nf, n_tan, m, n_sub), time.perf_counter()
+        one, handed = lane_state(1, n, nf, n_tan, m, n_sub, registers), time.perf_counter()
         for k in running:
             _adopt(one, 0, ln, k)
             if time_limit > 0.0:    # a job's budget does not run while it waits its turn

@@ -117,13 +117,14 @@ def aligned_zeros(shape, dtype=np.float64) -> np.ndarray:
     return raw[start:start + size].view(dtype).reshape(shape)
 
 
-def lane_state(L, n, nf, n_tan, m, n_sub) -> Lanes:
+def lane_state(L, n, nf, n_tan, m, n_sub, registers=0) -> Lanes:
     """A driver's state for L lanes of orbits of n components with n_tan tangent vectors
-    each (nf in all), m watched events scanned in n_sub parts of a step."""
+    each (nf in all), m watched events scanned in n_sub parts of a step, and the
+    `registers` of the system's formula programs in every lane."""
     m1 = max(m, 1)
     return Lanes(
         Y=aligned_zeros(nf * L), K=aligned_zeros((16, nf * L)), YT=aligned_zeros(nf * L), YN=aligned_zeros(nf * L),
-        F=aligned_zeros((7, nf * L)), HH=aligned_zeros(nf * L), W=aligned_zeros(workspace_size(L, nf)),
+        F=aligned_zeros((7, nf * L)), HH=aligned_zeros(nf * L), W=aligned_zeros(workspace_size(L, nf, registers)),
         S=aligned_zeros(2 * (nf + 1) * L),
         err=aligned_zeros(L), grow=aligned_zeros(L), err_next=aligned_zeros(L), cut=aligned_zeros(L),
         NW=aligned_zeros((2 * n_tan + 1) * L), taken=aligned_zeros(L, dtype=np.int64),
@@ -135,13 +136,13 @@ def lane_state(L, n, nf, n_tan, m, n_sub) -> Lanes:
         s_new=aligned_zeros((L, m1)), todo=aligned_zeros((L, m1), dtype=np.int64),
         found_x=aligned_zeros(max(1, m * n_sub)), found_e=aligned_zeros(max(1, m * n_sub), dtype=np.int64),
         yd=aligned_zeros(nf), y1=aligned_zeros(nf), k1=aligned_zeros((2, nf)),
-        wait=deferred_state(2 * max(L, SIMD_LANES), n))
+        wait=deferred_state(2 * max(L, SIMD_LANES), n, registers))
 
 
-def deferred_state(P, n) -> Deferred:
+def deferred_state(P, n, registers=0) -> Deferred:
     return Deferred(
         Y=aligned_zeros(n * P), YN=aligned_zeros(n * P), K=aligned_zeros((16, n * P)), F=aligned_zeros((7, n * P)),
-        HH=aligned_zeros(n * P), YT=aligned_zeros(n * P), W=aligned_zeros(workspace_size(P, n)),
+        HH=aligned_zeros(n * P), YT=aligned_zeros(n * P), W=aligned_zeros(workspace_size(P, n, registers)),
         x=aligned_zeros(P), XX=aligned_zeros(n * P), S=aligned_zeros(n * P), t=aligned_zeros(P), h=aligned_zeros(P),
         t_new=aligned_zeros(P), row=aligned_zeros(P, dtype=np.int64), first=aligned_zeros(P, dtype=np.int64),
         end=aligned_zeros(P, dtype=np.int64), count=aligned_zeros(1, dtype=np.int64))

@@ -510,6 +510,77 @@ def run_program(X, t, x0, x1, x2):
 
 
 @helper
+def _apply_lanes(op, x, y, out, tmp, L):
+    """`_apply` on L lanes: the operation chosen once, each arithmetic one a loop the
+    compiler turns into SIMD instructions (the same operations, so the same bits; tmp: a
+    row of scratch). Inlined into `run_program_lanes`: called once an instruction, a
+    compiled function of its own cost a formula's orbit-step a third more (LJ pairs)."""
+    if op == ADD:
+        for k in range(L):
+            out[k] = x[k] + y[k]
+    elif op == SUB:
+        for k in range(L):
+            out[k] = x[k] - y[k]
+    elif op == MUL:
+        for k in range(L):
+            out[k] = x[k] * y[k]
+    elif op == DIV:
+        for k in range(L):
+            out[k] = x[k] / y[k]
+    elif op == NEG:
+        for k in range(L):
+            out[k] = -x[k]
+    elif op == SQRT:
+        for k in range(L):
+            out[k] = math.sqrt(x[k])
+    elif op == IPOW:        # portable.ipow's products, lane by lane in step: the exponent
+        n = int(y[0])       # is a constant, the same in every lane; tmp holds the powers
+        for k in range(L):
+            out[k] = 1.0
+            tmp[k] = x[k]
+        e = abs(n)
+        while e > 0:
+            if e & 1:
+                for k in range(L):
+                    out[k] *= tmp[k]
+            e >>= 1
+            if e > 0:
+                for k in range(L):
+                    tmp[k] *= tmp[k]
+        if n < 0:
+            for k in range(L):
+                out[k] = 1.0 / out[k]
+    else:
+        for k in range(L):
+            out[k] = _apply(op, x[k], y[k])
+
+
+@leaf
+def run_program_lanes(X, t, R, L):
+    """`run_program` on L lanes at once: register r of lane k at R[r * L + k] (and a row of
+    scratch after them), the constants put there by `constants_lanes`, the inputs' rows by
+    the caller; each instruction one `_apply_lanes` over its three rows (distinct: a
+    result's register is never an operand's)."""
+    code = X.code
+    tmp = R[X.regs.size * L:(X.regs.size + 1) * L]
+    for i in range(X.start[t], X.start[t + 1]):
+        a, b, o = code[i, 1], code[i, 2], code[i, 3]
+        _apply_lanes(code[i, 0], R[a * L:(a + 1) * L], R[b * L:(b + 1) * L],
+                     R[o * L:(o + 1) * L], tmp, L)
+
+
+@leaf
+def constants_lanes(X, R, L):
+    """Every register of X's file (its constants in place) in each of L lanes of R."""
+    regs = X.regs
+    for r in range(regs.size):
+        v = regs[r]
+        row = R[r * L:(r + 1) * L]
+        for k in range(L):
+            row[k] = v
+
+
+@helper
 def output(X, t, k):
     """Output k of program t after `run_program`."""
     return X.regs[X.outputs[t, k]]

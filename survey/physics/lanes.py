@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 
+from numba import types
 from numba.extending import overload
 
 from ..machine.jit import VECTOR_DOUBLES, helper, lanes, leaf
@@ -33,7 +34,8 @@ from .system import (
     par_type,
     rhs,
 )
-from .terms import AREA, BARRIER, DISTANCE, PERIMETER, POWER
+from .expressions import constants_lanes, run_program_lanes
+from .terms import AREA, BARRIER, DISTANCE, EXPRESSION, PERIMETER, POSITION, POWER, SIDES
 
 
 # A batch's lanes: four vectors' worth, 16 in 256-bit vectors (32 cost ~10% more per
@@ -65,9 +67,11 @@ def state_size(masses, d, rb):
 
 
 @helper
-def workspace_size(L, nf):
-    """Floats of the workspace `rhs_lanes` needs for L lanes of nf components."""
-    return max(GENERAL_ROWS * L, 2 * nf)
+def workspace_size(L, nf, registers=0):
+    """Floats of the workspace `rhs_lanes` needs for L lanes of nf components (and a
+    system's formula programs' `registers`: their register file in every lane, and a row
+    of scratch)."""
+    return max((GENERAL_ROWS + registers + (registers > 0)) * L, 2 * nf)
 
 
 @leaf
@@ -100,7 +104,7 @@ def _full_lanes(t, Y, dY, L, model, n_tan, W, rb):
         _planar_lanes(Y, dY, L, W, model, n_tan, rb)
     elif L == 1:
         rhs(t, Y, dY, model, n_tan)
-    elif L >= SIMD_MIN and model.expr is None:      # (formulas: lane by lane)
+    elif L >= SIMD_MIN and not _sides_formula(model.par):
         general_lanes(Y, dY, L, W, model, n_tan)
     else:
         nf = Y.size // L
@@ -126,6 +130,24 @@ def _full_lanes(t, Y, dY, L, model, n_tan, W, rb):
 GENERAL_ROWS = 57
 
 
+def _sides_formula(par):
+    """Whether a system has a triplet formula in the sides a, b, c (`rhs` runs those lane
+    by lane: the other formulas run in the lanes' loops)."""
+
+
+@overload(_sides_formula, jit_options=dict(error_model="numpy"), inline="always")
+def _sides_formula_overload(par):
+    if par.ndim == 1:           # the paper's systems: no formulas
+        return lambda par: False
+
+    def sides(par):
+        for row in range(1, par.shape[0]):
+            if int(par[row, 0]) == SIDES and int(par[row, 1]) == EXPRESSION:
+                return True
+        return False
+    return sides
+
+
 def general_lanes(Y, dY, L, W, model, n_tan):
     """`_general_lanes` of a 2-D par (any system but the paper's: see _encode)."""
 
@@ -141,19 +163,25 @@ def _general_lanes_overload(Y, dY, L, W, model, n_tan):
         planar = (measure == PERIMETER or measure == AREA) and masses.size == 3 and d == 2
         if planar:      # the velocities and the leading term's forces, as _leading_forces
             _planar_lanes(Y, dY, L, W, model, n_tan, None)
+        X = model.expr
+        R = W[GENERAL_ROWS * L:]
+        formula_constants(X, R, L)
         _general_lanes(Y, dY, L, W[:18 * L], W[18 * L:22 * L], W[22 * L:24 * L],
                        W[24 * L:44 * L], W[44 * L:GENERAL_ROWS * L], masses, d, measure, prof,
-                       par, n_tan, planar)
+                       par, n_tan, planar, X, R)
     return run
 
 
 @lanes
-def _general_lanes(Y, dY, L, G, P, U, O, T, masses, d, measure, prof, par, n_tan, lead):
+def _general_lanes(Y, dY, L, G, P, U, O, T, masses, d, measure, prof, par, n_tan, lead, X,
+                   R):
     """`rhs` of L full states: the velocities and the leading perimetric or areal term's
     forces (unless `lead`: that term's lanes wrote them), then each further term's forces
     (par's rows 1, ...), as `_leading_forces` and `_rows_forces` give them, term by term
     and pair or triplet by pair or triplet in their order, each in loops over the lanes
-    (forces.py's lane kernels), so every lane gets the bits `rhs` gives."""
+    (forces.py's lane kernels), so every lane gets the bits `rhs` gives. A formula's
+    values come from its program run over the lanes (X, R: the programs and their
+    registers in every lane; None and unused for a system without formulas)."""
     N = masses.size
     nq = N * d
     n = 2 * nq
@@ -177,18 +205,20 @@ def _general_lanes(Y, dY, L, G, P, U, O, T, masses, d, measure, prof, par, n_tan
                 force[k] = 0.0
         if measure == PERIMETER or measure == AREA:
             _triplet_term_lanes(Y, dY, L, G, T, U, O, N, d, measure, prof,
-                                (par[0, 0], par[0, 1]), n_tan)
+                                (par[0, 0], par[0, 1]), n_tan, X, R)
     for row in range(1, par.shape[0]):
         kind, code, p = int(par[row, 0]), int(par[row, 1]), _term_params(par, row)
-        if kind == DISTANCE:
+        if kind == POSITION:
+            external_lanes(Y, dY, L, R, masses, d, par[row, 2] != 0.0, X, int(p[0]), n_tan)
+        elif kind == DISTANCE:
             _pair_term_lanes(Y, dY, L, G, P, U, O, masses, d, code, p, par[row, 2] != 0.0,
-                             n_tan)
+                             n_tan, X, R)
         else:
-            _triplet_term_lanes(Y, dY, L, G, T, U, O, N, d, kind, code, p, n_tan)
+            _triplet_term_lanes(Y, dY, L, G, T, U, O, N, d, kind, code, p, n_tan, X, R)
 
 
 @lanes
-def _pair_term_lanes(Y, dY, L, G, P, U, O, masses, d, code, p, weighted, n_tan):
+def _pair_term_lanes(Y, dY, L, G, P, U, O, masses, d, code, p, weighted, n_tan, X, R):
     """One pair term's forces, pair i < j by pair, as `_rows_forces` adds them
     (forces.pair_forces)."""
     N = masses.size
@@ -199,7 +229,7 @@ def _pair_term_lanes(Y, dY, L, G, P, U, O, masses, d, code, p, weighted, n_tan):
             w = masses[i] * masses[j] if weighted else 1.0
             _gather(G, 0, Y, (i * d, j * d), d, L)
             pair_geometry_lanes(G, P, L)
-            profile_lanes(code, p, P[3 * L:], U, L)
+            _measure_profile_lanes(code, p, X, R, P[3 * L:], U, L)
             for k in range(L):
                 O[k] = w * U[k]
             _pair_sums(dY[(nq + i * d) * L:], dY[(nq + j * d) * L:], O, P, L, d)
@@ -212,7 +242,7 @@ def _pair_term_lanes(Y, dY, L, G, P, U, O, masses, d, code, p, weighted, n_tan):
 
 
 @lanes
-def _triplet_term_lanes(Y, dY, L, G, E, U, O, N, d, measure, prof, par, n_tan):
+def _triplet_term_lanes(Y, dY, L, G, E, U, O, N, d, measure, prof, par, n_tan, X, R):
     """One perimetric, areal or ATM term's forces, triplet i < j < k by triplet, as
     `_leading_forces` and `_rows_forces` add them (forces.perimetric_forces, areal_forces,
     atm_forces)."""
@@ -225,11 +255,11 @@ def _triplet_term_lanes(Y, dY, L, G, E, U, O, N, d, measure, prof, par, n_tan):
                 _gather(G, 0, Y, (i * d, j * d, k3 * d), d, L)
                 if measure == PERIMETER:
                     perimetric_lanes(G, E, O, L)
-                    profile_lanes(prof, par, E[12 * L:], U, L)
+                    _measure_profile_lanes(prof, par, X, R, E[12 * L:], U, L)
                     _add_cyclic_lanes(dY, nq, bodies, d, U, O, L)
                 elif measure == AREA:
                     areal_lanes(G, E, L)
-                    profile_lanes(prof, par, E[3 * L:], U, L)
+                    _measure_profile_lanes(prof, par, X, R, E[3 * L:], U, L)
                     areal_force_lanes(G, E, U, O, L)
                     _add_cyclic_lanes(dY, nq, bodies, d, O, O[L:], L)
                 else:
@@ -251,6 +281,123 @@ def _triplet_term_lanes(Y, dY, L, G, E, U, O, N, d, measure, prof, par, n_tan):
                         atm_tangent_lanes(G, O[10 * L:], L, par[0])
                     _add_cyclic_lanes(dY, base + nq, bodies, d, O[10 * L:], O[L:], L)
                     _add_cyclic_lanes(dY, base + nq, bodies, d, O, O[11 * L:], L)
+
+
+@helper
+def _measure_profile_lanes(code, par, X, R, x, U, L):
+    """U' and U'' (U rows 0, 1) of a pair's or triangle's measure x in every lane: from the
+    term's profile, or from its formula's program (code EXPRESSION, par[0] its index)."""
+    if code == EXPRESSION:
+        program_profile_lanes(X, int(par[0]), R, x, U, L)
+    else:
+        profile_lanes(code, par, x, U, L)
+
+
+def formula_constants(X, R, L):
+    """`constants_lanes`, or nothing where the system has no formulas (X None)."""
+
+
+def program_profile_lanes(X, t, R, x, U, L):
+    """`_program_profile_lanes`, or nothing where the system has no formulas (X None)."""
+
+
+def external_lanes(Y, dY, L, R, masses, d, weighted, X, t, n_tan):
+    """`_external_lanes`, or nothing where the system has no formulas (X None)."""
+
+
+# typed on X, as system.formula_forces: a system without formulas compiles none of this
+@overload(formula_constants, jit_options=dict(error_model="numpy"), inline="always")
+def _formula_constants_overload(X, R, L):
+    if isinstance(X, types.NoneType):
+        return lambda X, R, L: None
+    return lambda X, R, L: constants_lanes(X, R, L)
+
+
+@overload(program_profile_lanes, jit_options=dict(error_model="numpy"), inline="always")
+def _program_profile_overload(X, t, R, x, U, L):
+    if isinstance(X, types.NoneType):
+        return lambda X, t, R, x, U, L: None
+    return lambda X, t, R, x, U, L: _program_profile_lanes(X, t, R, x, U, L)
+
+
+@overload(external_lanes, jit_options=dict(error_model="numpy"), inline="always")
+def _external_overload(Y, dY, L, R, masses, d, weighted, X, t, n_tan):
+    if isinstance(X, types.NoneType):
+        return lambda Y, dY, L, R, masses, d, weighted, X, t, n_tan: None
+    return lambda Y, dY, L, R, masses, d, weighted, X, t, n_tan: _external_lanes(
+        Y, dY, L, R, masses, d, weighted, X, t, n_tan)
+
+
+@leaf
+def _program_profile_lanes(X, t, R, x, U, L):
+    """forces.expression_profile in every lane: program t at the measures x, its U' and
+    U'' into U's rows 0 and 1."""
+    into = R[X.inputs[t, 0] * L:]
+    for k in range(L):
+        into[k] = x[k]
+    run_program_lanes(X, t, R, L)
+    d1, d2 = R[X.outputs[t, 1] * L:], R[X.outputs[t, 2] * L:]
+    for k in range(L):
+        U[k] = d1[k]
+        U[L + k] = d2[k]
+
+
+@leaf
+def _external_lanes(Y, dY, L, R, masses, d, weighted, X, t, n_tan):
+    """forces.external_forces of every body in every lane: program t at each body's
+    position, the force -w grad U added to its momentum rates and -w Hess U dq to each
+    tangent vector's (the same products and sums, the z terms zero in the plane)."""
+    N = masses.size
+    nq = N * d
+    n = 2 * nq
+    out = X.outputs[t]
+    for i in range(N):
+        w = masses[i] if weighted else 1.0
+        o = i * d
+        for c in range(d):
+            into, q = R[X.inputs[t, c] * L:], Y[(o + c) * L:]
+            for k in range(L):
+                into[k] = q[k]
+        run_program_lanes(X, t, R, L)
+        for c in range(d):
+            _external_force_lanes(dY[(nq + o + c) * L:], R[out[1 + c] * L:], -w, L)
+        for tt in range(n_tan):
+            r, q = dY[(n * (1 + tt) + nq + o) * L:], Y[(n * (1 + tt) + o) * L:]
+            if d == 2:      # H's (xx, xy, yy)
+                _external_tangent_plane(r, r[L:], q, q[L:], R[out[3] * L:], R[out[4] * L:],
+                                        R[out[5] * L:], -w, L)
+            else:           # (xx, xy, xz, yy, yz, zz)
+                _external_tangent_space(r, r[L:], r[2 * L:], q, q[L:], q[2 * L:],
+                                        R[out[4] * L:], R[out[5] * L:], R[out[6] * L:],
+                                        R[out[7] * L:], R[out[8] * L:], R[out[9] * L:], -w, L)
+
+
+@lanes
+def _external_force_lanes(rate, g, s, L):
+    """add_to's rate += s g, every lane."""
+    for k in range(L):
+        rate[k] += s * g[k]
+
+
+@lanes
+def _external_tangent_plane(r0, r1, q0, q1, Hxx, Hxy, Hyy, s, L):
+    """external_forces' tangent force in the plane, every lane: rates += s (H dq), with
+    the zero z terms of the scalar kernel's padded vectors (their products summed all the
+    same, so the same bits)."""
+    for k in range(L):
+        a, b = q0[k], q1[k]
+        r0[k] += s * (Hxx[k] * a + Hxy[k] * b + 0.0 * 0.0)
+        r1[k] += s * (Hxy[k] * a + Hyy[k] * b + 0.0 * 0.0)
+
+
+@lanes
+def _external_tangent_space(r0, r1, r2, q0, q1, q2, Hxx, Hxy, Hxz, Hyy, Hyz, Hzz, s, L):
+    """external_forces' tangent force in space, every lane: rates += s (H dq)."""
+    for k in range(L):
+        a, b, c = q0[k], q1[k], q2[k]
+        r0[k] += s * (Hxx[k] * a + Hxy[k] * b + Hxz[k] * c)
+        r1[k] += s * (Hxy[k] * a + Hyy[k] * b + Hyz[k] * c)
+        r2[k] += s * (Hxz[k] * a + Hyz[k] * b + Hzz[k] * c)
 
 
 @helper

@@ -11,7 +11,7 @@ import pytest
 
 from survey.physics.lanes import rhs_lanes, workspace_size
 from survey.physics.system import System, _leading_forces, rhs
-from survey.physics.terms import TERMS, make_potential
+from survey.physics.terms import TERMS, make_expression, make_potential
 
 PLANAR = [t for t in TERMS if t.kind == "triplet" and t.name.startswith(("perimetric",
                                                                            "areal"))]
@@ -26,7 +26,21 @@ OTHERS = {"four bodies": (4, 2, (make_potential("perimetric_power"),)),
                                        make_potential("axilrod_teller"))),
           "triplet terms and pairs in 3-D": (4, 3, (
               make_potential("perimetric_power"), make_potential("areal_barrier"),
-              make_potential("gravity", {"G": 0.5}, "pair")))}
+              make_potential("gravity", {"G": 0.5}, "pair"))),
+          # terms written as formulas: their programs run over the lanes (a formula of
+          # the sides, lane by lane through rhs)
+          "Henon-Heiles": (1, 2, (make_expression(
+              "external", "(x**2 + y**2)/2 + x**2*y - y**3/3"),)),
+          "a mass-weighted field in 3-D": (3, 3, (make_potential("perimetric_power"),
+                                                  make_expression(
+              "external", "x**2 + y**2/2 + z**4 + x*y*z + exp(-x**2)", {}, True, dim=3))),
+          "a pair formula": (3, 2, (make_potential("perimetric_power"), make_expression(
+              "pair", "4*e*((1/r)**12 - (1/r)**6)", {"e": 0.7}, True))),
+          "a perimetric formula of four bodies": (4, 2, (make_expression(
+              "triplet", "P**2/2 + tanh(P)"),)),
+          "an areal formula in 3-D": (3, 3, (make_expression("triplet", "w/A + A**2",
+                                                             {"w": 2.0}),)),
+          "a formula of the sides": (3, 2, (make_expression("triplet", "a*b*c + a + b + c"),))}
 
 
 def states(rng, nq, n_tan, count):
@@ -46,8 +60,9 @@ def check(system, rng, trials=60):
         nf = y.shape[1]
         Y = np.ascontiguousarray(y.T).ravel()
         dY = np.full(Y.size, np.nan)
+        registers = 0 if model.expr is None else model.expr.regs.size
         rhs_lanes(0.0, Y, dY, L, model, n_tan,
-                  np.zeros(workspace_size(L, nf)), None)
+                  np.zeros(workspace_size(L, nf, registers)), None)
         for k in range(L):
             one = np.full(nf, np.nan)
             rhs(0.0, y[k], one, model, n_tan)
