@@ -11,6 +11,7 @@ import xarray as xr
 from survey.pipeline import orbits
 from survey.pipeline.config import parse_config
 from survey.catalog.families import FAMILY_VARIABLES
+from survey.catalog.variables import V
 from survey.pipeline.families import is_family, special_table, verify_family
 from survey.pipeline.sweep import REPORT_ATTRIBUTES, verify
 from survey.presentation.results_text import PLACEHOLDER, render
@@ -233,3 +234,44 @@ def test_a_family_dataset_holds_what_the_catalog_declares():
         family_dataset("equilibria", {**values, "period": []})
     with pytest.raises(ValueError, match="stable"):
         family_dataset("equilibria", {k: v for k, v in values.items() if k != "stable"})
+
+
+def share_rows(report: str) -> dict:
+    """A share report's table rows by their first cell: the cells after it."""
+    rows = {}
+    for line in (RESULTS / report).read_text().splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) >= 9 and cells[3].endswith("%") and re.match(r"[0-9.]+$", cells[0]):
+            rows[cells[0]] = cells[1:]
+    return rows
+
+
+def test_the_calibration_prose_holds_for_its_archives():
+    """What results/README.md says of the calibration in words: Henon-Heiles at E = 1/12
+    agrees with the published share and with their criterion on survey's orbits; at 1/8
+    with neither, the criterion's share above the published one and survey's below; at 1/6
+    survey's share does not agree and the criterion's does. Toda: no start chaotic or
+    sticky; its undetermined starts have no Lyapunov-type vote for chaos and a Birkhoff or
+    diffusion vote for it; at T = 20000 every start a torus."""
+    import json
+
+    from survey.analysis.classify import evidence_votes
+    from survey.catalog.regimes import Regime, Thresholds
+    rows = share_rows("henon_heiles_share_report.md")
+    agree = {e: (r[5], r[7]) for e, r in rows.items()}
+    assert agree == {"0.0833333": ("yes", "yes"), "0.125": ("**no**", "**no**"),
+                     "0.166667": ("**no**", "yes")}, agree
+    share = {e: float(r[2].rstrip("%")) for e, r in rows.items()}
+    criterion = {e: float(r[6].split("%")[0]) for e, r in rows.items()}
+    assert share["0.125"] < 70 < criterion["0.125"]
+    with xr.open_dataset(RESULTS / "toda_share.nc") as ds:
+        regime = ds[V.regime].values
+        assert not np.isin(regime, [Regime.CHAOTIC, Regime.STICKY]).any()
+        votes = evidence_votes(ds, Thresholds(**json.loads(ds[V.regime].attrs["thresholds"])))
+        undecided = regime == Regime.UNDETERMINED
+        assert undecided.any()
+        for line in ("ftle", "megno", "sali"):
+            assert not (votes[line][undecided] == -1).any(), line
+        assert np.all((votes["wba"][undecided] == -1) | (votes["diffusion"][undecided] == -1))
+    with xr.open_dataset(RESULTS / "toda_share_t20000.nc") as ds:
+        assert np.all(ds[V.regime].values == Regime.TORUS)
