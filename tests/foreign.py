@@ -48,6 +48,19 @@ out = dict(
     sides=initial_state(System(np.array([1.0, 0.3, 0.07]), 2, (ATM,)), "sides"),
     reduced=np.array(reduced(System(np.array([1.0, 0.3, 0.07])),
                              np.random.default_rng(5).normal(size=(200, 12)))))
+# a formula (its program's exp through the portable functions): a start on the Toda
+# section and a stretch of its orbit with a tangent vector, in SIMD lanes
+from survey.numerics.integrate import integrate_batch
+from survey.physics.terms import make_expression
+toda = System(np.ones(1), 2, (make_expression("external", "(exp(2*y + 2*sqrt(3)*x) + "
+                                              "exp(2*y - 2*sqrt(3)*x) + exp(-4*y))/24 - 1/8"),))
+starts = np.array([initial_state(toda, "field_section_sample", energy=1.0, seed=s)
+                   for s in range(16)])
+ends = integrate_batch(toda, starts, 20.0, tangents=np.tile(np.eye(4)[:1], (16, 1, 1)),
+                       megno=True, lanes=16)
+out["toda"] = np.concatenate([starts.ravel()] + [np.concatenate([e.y, e.megno_sums,
+                                                                 e.log_growth])
+                                                 for e in ends])
 # families: a Lyapunov family from a relative equilibrium's normal mode (rotating, in the
 # energy), the figure-eight in a mass with its bifurcations bisected, and a family of
 # relative equilibria with its Routh bifurcation
