@@ -466,21 +466,44 @@ class Programs(NamedTuple):
     inputs: np.ndarray        # (T, 3) int64
     outputs: np.ndarray       # (T, 10) int64
     regs: np.ndarray          # (R,) float64
+    forces_end: np.ndarray    # (T,) int64: start[t]:forces_end[t] give all but U
+
+
+def forces_first(prog: Program) -> tuple[np.ndarray, int]:
+    """The program's instructions reordered so that those its derivatives need come
+    first (in their order), then those only U needs: (code, how many come first). Each
+    instruction is the same operation on the same operands, so every output keeps its
+    bits; the forces in the lanes run the first part alone (`P**2/2`'s derivatives need
+    none of its two instructions)."""
+    made = {int(c[3]): i for i, c in enumerate(prog.code)}
+    needed = set()
+    todo = [int(o) for o in prog.outputs[1:]]
+    while todo:
+        r = todo.pop()
+        i = made.get(r)
+        if i is not None and i not in needed:
+            needed.add(i)
+            todo += [int(prog.code[i, 1]), int(prog.code[i, 2])]
+    order = sorted(needed) + [i for i in range(len(prog.code)) if i not in needed]
+    return prog.code[order].reshape(-1, 4), len(needed)
 
 
 def pack(programs) -> Programs:
     """Programs of a system's formula terms, in order, on one register file: each
-    program's registers moved past those of the ones before."""
-    code, start, inputs, outputs, regs = [], [0], [], [], []
+    program's registers moved past those of the ones before, its instructions those its
+    derivatives need first (`forces_first`)."""
+    code, start, inputs, outputs, regs, forces = [], [0], [], [], [], []
     for prog in programs:
         base = len(regs)
         n_in = len(prog.inputs)
         block = np.zeros(prog.registers)
         block[n_in:n_in + prog.consts.size] = prog.consts
         regs.extend(block)
-        shifted = prog.code.copy()
+        ordered, first = forces_first(prog)
+        shifted = ordered.copy()
         shifted[:, 1:] += base
         code.extend(shifted.tolist())
+        forces.append(start[-1] + first)
         start.append(start[-1] + len(prog.code))
         inputs.append([base + i for i in range(n_in)] + [-1] * (3 - n_in))
         outputs.append([base + int(o) for o in prog.outputs]
@@ -489,7 +512,7 @@ def pack(programs) -> Programs:
                     np.array(start, dtype=np.int64),
                     np.array(inputs, dtype=np.int64).reshape(-1, 3),
                     np.array(outputs, dtype=np.int64).reshape(-1, 10),
-                    np.array(regs, dtype=np.float64))
+                    np.array(regs, dtype=np.float64), np.array(forces, dtype=np.int64))
 
 
 @leaf
@@ -557,13 +580,14 @@ def _apply_lanes(op, x, y, out, tmp, L):
 
 @leaf
 def run_program_lanes(X, t, R, L):
-    """`run_program` on L lanes at once: register r of lane k at R[r * L + k] (and a row of
-    scratch after them), the constants put there by `constants_lanes`, the inputs' rows by
-    the caller; each instruction one `_apply_lanes` over its three rows (distinct: a
+    """`run_program`'s derivatives on L lanes at once (the instructions U alone needs are
+    left out: the lanes compute forces): register r of lane k at R[r * L + k] (and a row
+    of scratch after them), the constants put there by `constants_lanes`, the inputs' rows
+    by the caller; each instruction one `_apply_lanes` over its three rows (distinct: a
     result's register is never an operand's)."""
     code = X.code
     tmp = R[X.regs.size * L:(X.regs.size + 1) * L]
-    for i in range(X.start[t], X.start[t + 1]):
+    for i in range(X.start[t], X.forces_end[t]):
         a, b, o = code[i, 1], code[i, 2], code[i, 3]
         _apply_lanes(code[i, 0], R[a * L:(a + 1) * L], R[b * L:(b + 1) * L],
                      R[o * L:(o + 1) * L], tmp, L)
