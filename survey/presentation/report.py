@@ -18,6 +18,7 @@ from ..catalog.regimes import IRREGULAR, REGULAR, Regime, Thresholds
 from ..catalog.status import Status
 from ..catalog.variables import ENSEMBLE_MIN, START_COORDINATES, V
 from . import plots
+from .sections import in_field
 
 
 PROVENANCE_LINE = "- Code: survey "
@@ -915,9 +916,11 @@ def _quality(ds) -> list[str]:
     finished = np.isin(status, [Status.OK, Status.EVENT])
     if finished.any():
         dE = ds[V.energy_error].values[finished]
+        spin = "" if in_field(ds) else (      # a field conserves no angular momentum
+            f"; angular momentum error largest "
+            f"{np.nanmax(ds[V.angular_momentum_error].values[finished]):.1e}")
         out.append(f"Relative energy error over the finished cells: median {np.median(dE):.1e}, "
-                   f"largest {np.max(dE):.1e}; angular momentum error largest "
-                   f"{np.nanmax(ds[V.angular_momentum_error].values[finished]):.1e}.")
+                   f"largest {np.max(dE):.1e}{spin}.")
     failed = [(s, int(np.sum(status == s))) for s in Status if s not in (Status.OK, Status.EVENT)]
     failed = [(s, k) for s, k in failed if k]
     if failed:
