@@ -171,9 +171,11 @@ def classify(ds, thresholds: Thresholds | None = None, half: bool = False):
 
     regime[status == Status.INACCESSIBLE] = Regime.INACCESSIBLE
     regime[status == Status.COLLISION] = Regime.COLLISION
-    failed = ~np.isin(status, [Status.OK, Status.EVENT, Status.INACCESSIBLE, Status.COLLISION])
+    regime[status == Status.ESCAPED] = Regime.ESCAPED
+    known = [Status.INACCESSIBLE, Status.COLLISION, Status.ESCAPED]
+    failed = ~np.isin(status, [Status.OK, Status.EVENT, *known])
     regime[failed] = Regime.UNDETERMINED
-    confidence[(status == Status.INACCESSIBLE) | (status == Status.COLLISION)] = 1.0
+    confidence[np.isin(status, known)] = 1.0
     confidence[failed | (regime == Regime.UNDETERMINED)] = 0.0
     return regime, confidence
 

@@ -19,6 +19,7 @@ class Regime(enum.IntEnum):
     INACCESSIBLE = 6
     UNDETERMINED = 7
     EQUILIBRIUM = 8
+    ESCAPED = 9
 
     @property
     def meaning(self) -> str:
@@ -38,6 +39,8 @@ REGIME_MEANINGS = {
     Regime.UNDETERMINED: "the lines of evidence disagree, or the run failed",
     Regime.EQUILIBRIUM: "regular, the shape does not move: at rest at a critical point, or a "
                         "relative equilibrium (the rotating triangle)",
+    Regime.ESCAPED: "a body escaped (status escaped): the orbit is neither regular nor "
+                    "chaotic by its indicators, which stop at the escape",
 }
 
 

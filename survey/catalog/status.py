@@ -18,6 +18,7 @@ class Status(enum.IntEnum):
     NONFINITE = 4     # the state or its derivative became inf/nan
     INACCESSIBLE = 5  # no initial condition exists at this grid point (set by families)
     TIME_LIMIT = 6    # wall-clock budget spent
+    ESCAPED = 7       # a body left the escape radius, unbound (set by the cells: `[escape]`)
 
     @property
     def meaning(self) -> str:
@@ -37,4 +38,6 @@ MEANINGS = {
     Status.NONFINITE: "the state or its derivative became inf or nan",
     Status.INACCESSIBLE: "no start at this grid point (e.g. U(q0) > target energy)",
     Status.TIME_LIMIT: "the cell's wall-clock budget (cell_time_limit) ran out",
+    Status.ESCAPED: "a body crossed the [outcomes] escape radius moving outward, unbound: the run "
+                    "stopped there (its time escape_time, the body escaped_body)",
 }

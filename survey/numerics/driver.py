@@ -74,6 +74,16 @@ DENSE_LATER, DENSE_ORBIT, DENSE_ALL = 1, 2, 3
 # what a job records besides its end state: crossings of the watched events, samples at
 # t_eval, orbit samples at t_fine
 EVENTS, EVAL, FINE = 1, 2, 4
+# the closest approaches a job that records crossings keeps (`_near`): each pair's, and
+# the triangles' perimeter, area and thin time too
+NEAR_PAIRS, NEAR_TRIANGLES = 1, 2
+
+
+def near_width(bodies: int) -> int:
+    """A job's closest-approach record: (distance, time) of each pair i < j in order, then
+    (perimeter, time), (|area|, time) of the triangle with the least of each, and the time
+    the thinnest triangle was thin."""
+    return bodies * (bodies - 1) + 5
 
 
 @helper
@@ -126,9 +136,11 @@ def _finish(k, ln, out, status, rows):
 
 @helper
 def _start(k, j, ln, out, y0s, rows, t0, t1, model, n_tan, n_err,
-           rtol, atol, h0, h_max, events, t_eval, n_eval, t_fine, renorm_dt, now, rb):
+           rtol, atol, h0, h_max, events, t_eval, n_eval, t_fine, renorm_dt, now, rb,
+           near, thin):
     """Job j into lane k: its start, first evaluation, samples at t0, events' first values
-    and first step. Returns False if the job ended at once (nonfinite start, zero span)."""
+    and closest approaches, and first step. Returns False if the job ended at once
+    (nonfinite start, zero span)."""
     L = ln.job.size
     nf = y0s.shape[1]
     masses, d = model.masses, model.d
@@ -173,6 +185,12 @@ def _start(k, j, ln, out, y0s, rows, t0, t1, model, n_tan, n_err,
             put_sample(out.fine[r, ln.i_fine[k]], y, n, rb)
             ln.i_fine[k] += 1
     if rows[0, j] >= 0:
+        if near > 0:
+            rec = out.near[j]
+            for i in range(rec.size - 1):
+                rec[i] = np.inf if i % 2 == 0 else np.nan
+            rec[rec.size - 1] = 0.0
+            _near(rec, y, t0, 0.0, masses.size, d, rb, near, thin)
         for e in range(eoff.size - 1):
             if watch[e]:
                 # the lane's strided copies, as at every step: one compiled layout
@@ -201,6 +219,69 @@ def _lane(ln, k):
     when made up front)."""
     L = ln.job.size
     return ln.Y[k::L], ln.YN[k::L], ln.F[:, k::L]
+
+
+@helper
+def _position(y, b, c, d, rb):
+    """Coordinate c of body b of orbit state y: full, or reduced (rb: the mass ratios; the
+    third body rebuilt as `put_sample` rebuilds it, in the centre-of-mass frame)."""
+    if rb is None:
+        return y[b * d + c]
+    if b < 2:
+        return y[2 * b + c]
+    return -(rb[0] * y[c] + rb[1] * y[2 + c])
+
+
+@helper
+def _side(y, i, j, d, rb):
+    s = 0.0
+    for c in range(d):
+        x = _position(y, i, c, d, rb) - _position(y, j, c, d, rb)
+        s += x * x
+    return math.sqrt(s)
+
+
+@helper
+def _near(rec, y, t, dt, N, d, rb, near, thin):
+    """Orbit state y at time t, the end of a step of length dt, into a closest-approach
+    record (`near_width`): each pair's distance, and with NEAR_TRIANGLES the least
+    perimeter and |area| of its triangles, where below the record's (with t), and dt
+    added to the thin time where the thinnest triangle has |A|/P^2 < thin. At step ends:
+    a close approach is where the steps are shortest."""
+    p = 0
+    for i in range(N):
+        for j in range(i + 1, N):
+            r = _side(y, i, j, d, rb)
+            if r < rec[2 * p]:
+                rec[2 * p], rec[2 * p + 1] = r, t
+            p += 1
+    if near != NEAR_TRIANGLES:
+        return
+    o = 2 * p
+    least = np.inf
+    for i in range(N):
+        for j in range(i + 1, N):
+            for k in range(j + 1, N):
+                P = _side(y, i, j, d, rb) + _side(y, j, k, d, rb) + _side(y, i, k, d, rb)
+                ux = _position(y, j, 0, d, rb) - _position(y, i, 0, d, rb)
+                uy = _position(y, j, 1, d, rb) - _position(y, i, 1, d, rb)
+                vx = _position(y, k, 0, d, rb) - _position(y, i, 0, d, rb)
+                vy = _position(y, k, 1, d, rb) - _position(y, i, 1, d, rb)
+                if d == 2:
+                    A = 0.5 * abs(ux * vy - uy * vx)
+                else:
+                    uz = _position(y, j, 2, d, rb) - _position(y, i, 2, d, rb)
+                    vz = _position(y, k, 2, d, rb) - _position(y, i, 2, d, rb)
+                    A = 0.5 * math.sqrt((uy * vz - uz * vy) ** 2 + (uz * vx - ux * vz) ** 2
+                                        + (ux * vy - uy * vx) ** 2)
+                if P < rec[o]:
+                    rec[o], rec[o + 1] = P, t
+                if A < rec[o + 2]:
+                    rec[o + 2], rec[o + 3] = A, t
+                if P > 0.0:
+                    least = min(least, A / (P * P))
+    if least < thin:
+        rec[o + 4] += dt
 
 
 @helper
@@ -436,7 +517,9 @@ class Control(NamedTuple):
 class Recording(NamedTuple):
     """What the orbits record besides their ends: crossings of the encoded events
     (events.encode_events; at most max_events each, n_sub sub-intervals of a step
-    scanned), the first n_eval components at the times t_eval, the orbit at t_fine."""
+    scanned), the first n_eval components at the times t_eval, the orbit at t_fine; and
+    with the crossings their closest approaches (`near`: 0 none, NEAR_PAIRS, NEAR_TRIANGLES;
+    a triangle thin where |A|/P^2 < thin: `_near`)."""
 
     events: tuple
     max_events: int
@@ -444,6 +527,8 @@ class Recording(NamedTuple):
     t_eval: np.ndarray
     n_eval: int
     t_fine: np.ndarray
+    near: int = 0
+    thin: float = 0.0
 
 
 @leaf
@@ -457,7 +542,7 @@ def _run(ln, out, y0s, rows, model, control, recording, next_job, iterations, no
     masses, d = model.masses, model.d
     (t0, t1, n_tan, megno, rtol, atol, n_err, max_steps, h0, h_max, h_min, renorm_dt,
      time_limit) = control
-    events, max_events, n_sub, t_eval, n_eval, t_fine = recording
+    events, max_events, n_sub, t_eval, n_eval, t_fine, near, thin = recording
     L = ln.job.size
     nf = y0s.shape[1]
     M = y0s.shape[0]
@@ -470,7 +555,7 @@ def _run(ln, out, y0s, rows, model, control, recording, next_job, iterations, no
                 next_job += 1
                 _start(k, next_job - 1, ln, out, y0s, rows, t0, t1, model, n_tan, n_err,
                        rtol, atol, h0, h_max, events, t_eval, n_eval, t_fine, renorm_dt,
-                       now, rb)
+                       now, rb, near, thin)
             j = ln.job[k]
             if j < 0:
                 ln.h[k] = 0.0
@@ -541,10 +626,15 @@ def _run(ln, out, y0s, rows, model, control, recording, next_job, iterations, no
             _flush(ln, out, model, t_fine, rb)   # room for the steps
         for k in range(L):
             if ln.flags[k, 3]:
+                t_before = ln.t[k]
                 ended = _record(k, ln, out, rows, t0, t1, masses, d, n, n_tan, rb, megno,
                                 events, max_events, n_sub, t_eval, n_eval, t_fine,
                                 dense == DENSE_LATER)
                 if ended == EVENT_:
+                    if near > 0:        # the state at the event, as _record left it
+                        # (only a job that records crossings watches events)
+                        _near(out.near[ln.job[k]], ln.Y[k::L], ln.t[k],
+                              abs(ln.t[k] - t_before), masses.size, d, rb, near, thin)
                     _finish(k, ln, out, EVENT_, rows)
                     ln.flags[k, 3] = 0
             ln.taken[k] = -ln.flags[k, 3]
@@ -556,6 +646,10 @@ def _run(ln, out, y0s, rows, model, control, recording, next_job, iterations, no
         for k in range(L):
             if not ln.flags[k, 3]:
                 continue
+            if near > 0 and rows[0, ln.job[k]] >= 0:
+                _near(out.near[ln.job[k]], ln.Y[k::L],
+                      t1 if ln.flags[k, 2] else ln.t[k] + ln.h[k], abs(ln.h[k]),
+                      masses.size, d, rb, near, thin)
             if _advance(k, ln, out, t0, t1, n, n_tan, megno, renorm_dt,
                         ln.NW) == OK_:
                 _finish(k, ln, out, OK_, rows)
@@ -729,7 +823,7 @@ def dop853(y0s, rows, model: Model, control: Control, recording: Recording, L: i
     M, nf = y0s.shape
     masses, d = model.masses, model.d
     t0, n_tan, time_limit = control.t0, control.n_tan, control.time_limit
-    events, max_events, n_sub, t_eval, n_eval, t_fine = recording
+    events, max_events, n_sub, t_eval, n_eval, t_fine, near, thin = recording
     n = state_size(masses, d, rb)
     nfull = 2 * masses.size * d     # samples, fine ones too, are written in full (`put_sample`)
     m = events[0].size - 1
@@ -742,6 +836,7 @@ def dop853(y0s, rows, model: Model, control: Control, recording: Recording, L: i
         ev_index=np.empty((Me, max_events), dtype=np.int64),
         ev_t=np.empty((Me, max_events)), ev_y=np.empty((Me, max_events, n)),
         samples=np.full((Ms, T, n_eval // n * nfull), np.nan),
+        near=np.full((M if recording.near else 0, near_width(masses.size)), np.nan),
         ends=np.zeros((M, width(n_tan))), sampled=np.full((Ms, T, width(n_tan, True)), np.nan),
         fine=reused_samples((Mf, Tf, nfull)) if reuse_samples else np.full((Mf, Tf, nfull), np.nan))
 

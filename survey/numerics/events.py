@@ -13,6 +13,7 @@ import numpy as np
 from ..physics.forces import cross, dot, norm, sub, vec
 from ..machine.jit import leaf
 from ..physics.system import System
+from ..physics.terms import DISTANCE, TRIANGLE
 from .dop853 import EPS, dense_eval
 
 # ---------------------------------------------------------------- event functions
@@ -375,3 +376,74 @@ class Crossings(NamedTuple):
     index: np.ndarray
     t: np.ndarray
     y: np.ndarray
+
+
+def escape_events(system: System, radius: float, binding: float = 0.0) -> list[Event]:
+    """Terminal events, one per body, at which it escapes: in a system of bodies, body i's
+    distance from the centre of mass of the others rises through `radius` while the
+    kinetic energy of their relative motion, mu |v_i - V_rest|^2 / 2 (mu the reduced
+    mass), exceeds `binding` (a bound on what the others can still pull back from there);
+    in an external field, the body's distance from the origin rises through `radius`. Each
+    a quadratic form of the state (of relative coordinates where the system is translation
+    invariant: `relative_events` writes them for a reduced state)."""
+    N, d, m = system.n_bodies, system.dim, system.masses
+    n = system.n
+    events = []
+    for i in range(N):
+        A = np.zeros((d, n))           # the relative position (first half) and velocity
+        B = np.zeros((d, n))
+        rest = m.sum() - m[i]
+        for c in range(d):
+            A[c, i * d + c] = 1.0
+            B[c, N * d + i * d + c] = 1.0 / m[i]
+            if system.translation_invariant:
+                for j in range(N):
+                    if j != i:
+                        A[c, j * d + c] = -m[j] / rest
+                        B[c, N * d + j * d + c] = -1.0 / rest
+        guard = None
+        if system.translation_invariant:
+            mu = m[i] * rest / (m[i] + rest)
+            guard = Quadratic(0.5 * mu * B.T @ B, offset=-float(binding))
+        events.append(Event(Quadratic(A.T @ A, offset=-float(radius) ** 2), direction=1,
+                            terminal=True, guard=guard, name=f"escape of body {i}"))
+    return events
+
+
+# escape defaults: |u| beyond the derived radius's half below this share of the well's depth
+ESCAPE_TAIL = 1e-3
+
+
+def escape_defaults(system: System, radius: float = 0.0) -> tuple[float, float] | None:
+    """(radius, binding) of `escape_events` derived from the potential, for bodies whose
+    interaction vanishes far apart (pair terms and the triple dipole only): from u(r), the
+    energy of two bodies at distance r with the others far away, the radius (unless given)
+    is twice the distance beyond which |u| stays below ESCAPE_TAIL of the depth of u's
+    well, and binding is (N - 1) max |u| beyond half the radius -- what the others pull
+    back at most while they keep within half the radius of their centre of mass. None for
+    other systems, and with no radius given where u has no well."""
+    N, d = system.n_bodies, system.dim
+    if N < 2 or any(t.measure not in (DISTANCE, TRIANGLE) for t in system.terms):
+        return None
+    r = np.geomspace(1e-2, 1e4, 1201)
+    q = np.zeros((N, d))
+    q[2:, 1] = 1e9 * np.arange(1, N - 1)          # the others far apart and far away
+
+    def u(x):
+        q[1, 0] = x
+        return system.potential_energy(system.state(q, np.zeros((N, d))))
+    far = u(1e9)
+    with np.errstate(all="ignore"):
+        us = np.array([u(x) for x in r]) - far
+    if radius <= 0.0:
+        well = int(np.argmin(us))
+        depth = -us[well]
+        if not (np.all(np.isfinite(us[well:])) and depth > 0.0 and 0 < well < r.size - 1):
+            return None
+        beyond = np.flatnonzero(np.abs(us) >= ESCAPE_TAIL * depth)[-1] + 1
+        if beyond >= r.size - 1:
+            return None
+        radius = 2.0 * float(r[beyond])
+    tail = us[r >= radius / 2]
+    binding = float((N - 1) * np.abs(tail).max()) if tail.size else 0.0
+    return float(radius), binding

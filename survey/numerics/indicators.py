@@ -255,11 +255,11 @@ def combine(system: System, y0, t_final: float, options: IndicatorOptions, jobs:
 def batch_options(t_final: float, options: IndicatorOptions, *, events=(), rtol=defaults.RTOL,
                   atol=defaults.ATOL, max_steps=defaults.MAX_STEPS, max_events=100_000,
                   time_limit=0.0, control_tangents=False, t_fine=None,
-                  reuse_samples=False) -> dict:
+                  reuse_samples=False, approach=False, thin=0.0) -> dict:
     """integrate_batch's options for the jobs of cells' ensembles."""
     return dict(megno=True, t_eval=history_times(t_final, options.history_points),
                 sample_tangents=True, events=events, max_events=max_events, t_fine=t_fine,
-                reuse_samples=reuse_samples,
+                reuse_samples=reuse_samples, approach=approach, thin=thin,
                 rtol=rtol, atol=atol, max_steps=max_steps,
                 renorm_interval=options.renorm_interval, control_tangents=control_tangents,
                 time_limit=time_limit)

@@ -18,7 +18,8 @@ from ..physics.lanes import SIMD_LANES, SIMD_MIN
 from ..physics.system import System
 from ..physics.terms import AREA, PERIMETER
 from .dop853 import RTOL_MIN
-from .driver import EVAL, EVENTS, FINE, Control, Model, Recording, dop853, put_sample
+from .driver import (EVAL, EVENTS, FINE, NEAR_PAIRS, NEAR_TRIANGLES, Control, Model,
+                     Recording, dop853, put_sample)
 from .tangents import outcome_fields
 from .events import Crossings, Event, encode_events, relative_events
 class Outcome(NamedTuple):
@@ -45,6 +46,7 @@ class Outcome(NamedTuple):
     sample_megno: np.ndarray  # (s Y/2, s <Y>) at t_eval (NaN unless megno and tangents sampled)
     fine: np.ndarray          # orbit states at t_fine (NaN beyond the end reached)
     ftle_wba: float           # weighted Birkhoff average of d ln|w|/dt, first tangent vector
+    near: np.ndarray          # closest approaches (driver.near_width; empty unless asked)
 
     @property
     def ok(self) -> bool:
@@ -77,7 +79,8 @@ def integrate_batch(system: System, starts, t_span, *, tangents=None, record=Non
                     max_step=0.0, min_step=0.0, events: Sequence[Event] = (),
                     max_events=100_000, event_substeps=8, t_eval=None, sample_tangents=False,
                     renorm_interval=1.0, time_limit=0.0, t_fine=None,
-                    lanes=None, reuse_samples=False) -> list[Outcome]:
+                    lanes=None, reuse_samples=False, approach=False,
+                    thin=0.0) -> list[Outcome]:
     """Integrate many orbits of `system` (starts (M, n)), each with its tangent vectors
     (tangents (M, n_tan, n)), over t_span, as SIMD lanes; one Outcome per orbit, each the
     bits `integrate` gives that orbit alone.
@@ -139,7 +142,10 @@ def integrate_batch(system: System, starts, t_span, *, tangents=None, record=Non
     # (rows[:, order] alone would be Fortran-ordered: a second compilation of the kernel)
     recording = Recording(events=encode_events(frame.events if frame else events, system),
                           max_events=int(max_events), n_sub=int(event_substeps),
-                          t_eval=t_eval, n_eval=n_eval, t_fine=t_fine)
+                          t_eval=t_eval, n_eval=n_eval, t_fine=t_fine,
+                          near=0 if not approach or system.n_bodies < 2 else
+                          NEAR_TRIANGLES if system.n_bodies >= 3 else NEAR_PAIRS,
+                          thin=float(thin))
     res = dop853(y0s[order], np.ascontiguousarray(rows[:, order]), model, control,
                  recording, L, rb, reuse_samples=bool(reuse_samples))
     at = np.empty(M, dtype=np.int64)
@@ -307,6 +313,7 @@ def _outcome(res, j, rows, n, n_tan, tan, megno, max_events, t_eval, n_eval, t_f
         h_min=float(res.h_range[j, 0]), h_max=float(res.h_range[j, 1]), crossings=crossings,
         n_crossings=int(counts[3]), t_eval=t_eval, samples=samples,
         fine=res.fine[rf] if rf >= 0 else np.zeros((0, n)),
+        near=res.near[j].copy() if res.near.size and re >= 0 else np.zeros(0),
         **outcome_fields(res.ends[j], res.sampled[rs] if rs >= 0 else None, n_tan,
                          portable.vnorm(tans), sample_norms, megno))
 

@@ -28,6 +28,8 @@ class RawOutcome(NamedTuple):
     ev_y: np.ndarray
     samples: np.ndarray       # (Ms, T, n_eval) states at t_eval
     fine: np.ndarray          # (Mf, Tf, n) orbit states at t_fine
+    near: np.ndarray          # (M or 0, driver.near_width) the closest approaches of the
+    #                           jobs that record crossings
     ends: np.ndarray          # (M, W) the step-end indicators at t (tangents.STEP_END; the
     #                           logs of vectors as rescaled: their norms are added outside)
     sampled: np.ndarray       # (Ms, T, Ws) those sampled at t_eval

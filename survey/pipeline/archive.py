@@ -64,6 +64,7 @@ def cell_shape(config, v: Var) -> tuple[int, ...]:
                                           tori.extend, tori.extend_rounds).size,
              "horizon": len(horizon_factors(tori.extend, tori.extend_rounds)),
              "component": 2 * s.bodies * s.dim, "spatial": 3,
+             "pair": s.bodies * (s.bodies - 1) // 2,
              "observable": len(tori.observables),
              "ensemble_statistic": len(ENSEMBLE_STATISTICS),
              "fundamental": len(fundamental_names(s.bodies, s.dim, in_field(s)))}
@@ -215,6 +216,11 @@ def coordinates(config, cells=None) -> dict:
     coords["component_name"] = ("component", _component_labels(config),
                                 {"long_name": "phase-space component (positions, then "
                                               "momenta)"})
+    s = config.settings.system
+    if s.bodies >= 2:
+        coords["pair_name"] = ("pair", [f"{i}-{j}" for i in range(s.bodies)
+                                        for j in range(i + 1, s.bodies)],
+                               {"long_name": "pair of bodies i-j"})
     if config.settings.section_enabled:
         n = config.settings.section.max_crossings
         coords["crossing"] = ("crossing", np.arange(n), {"long_name": "index of the kept "
@@ -300,7 +306,7 @@ def write(config, load: Callable[[list[str]], dict], command: str, cells=None,
         for group in _groups(config, [v for v in variables(config) if not v.derived], count):
             data = load([v.name for v in group])
             _append(tmp, [(v, data.pop(v.name).reshape(shape + cell_shape(config, v)),
-                           dims + v.extra, {}) for v in group])
+                           dims + v.extra, _settings_of(config, v)) for v in group])
         with xr.open_dataset(tmp, engine="netcdf4") as ds:    # reads only what it needs
             derived = derive(ds)
         _append(tmp, [(v, derived[v.name], dims + v.extra, derived.get(v.name + ":attrs", {}))
@@ -318,6 +324,16 @@ def write(config, load: Callable[[list[str]], dict], command: str, cells=None,
         if tmp.exists():
             tmp.unlink()
     return out
+
+
+def _settings_of(config, v: Var) -> dict:
+    """What a variable's values were measured with beyond the config's text: the escape
+    radius and binding energy derived from the potential (build.escape_for; those of the
+    first cell's System where a term parameter is a grid axis)."""
+    if v.name == V.escape_time:
+        radius, binding = config.escape
+        return {"escape_radius": radius, "escape_binding": binding}
+    return {}
 
 
 def _groups(config, vs: list[Var], count: int):

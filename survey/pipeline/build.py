@@ -8,6 +8,7 @@ from dataclasses import fields
 import numpy as np
 
 from ..catalog.indicators import IndicatorOptions
+from ..numerics.events import escape_defaults
 from ..numerics.sections import section_event
 from ..physics.system import System
 from ..physics.terms import make_expression, make_potential, parameter_defaults
@@ -72,3 +73,19 @@ def section_event_for(sec, system: System):
     """The surface of section of a validated [section] table (records.SectionTable)."""
     return section_event(system, sec.coordinate, sec.value, sec.direction,
                          tuple(sec.triplet), sec.coefficients)
+
+
+def escape_for(out, system: System) -> tuple[float, float] | None:
+    """(radius, binding) of the escapes of a validated [outcomes] table
+    (records.OutcomesTable) in `system`, or None where none are watched."""
+    radius, binding = out.escape_radius, out.escape_binding
+    if not out.escape:
+        return None
+    if not system.translation_invariant:
+        return (radius, 0.0) if radius > 0 else None
+    if radius > 0 and binding is not None:
+        return radius, binding
+    derived = escape_defaults(system, radius)
+    if derived is None:
+        return None
+    return derived[0], derived[1] if binding is None else binding

@@ -28,14 +28,19 @@ from ..catalog.variables import (
 from ..numerics import torus
 from ..numerics.indicators import batch_options, combine, conservation_errors, ensemble
 from ..numerics.driver import compile_handoff
+from ..numerics.events import escape_events
 from ..numerics.integrate import integrate_batch
 from ..machine import linalg, portable
 from ..physics.families import initial_state
 from ..physics.jacobi import reduced
 from . import archive
-from .build import build_system, indicator_options, section_event_for
+from .build import build_system, escape_for, indicator_options, section_event_for
 from .config import Config
-from .records import IndicatorsTable, IntegrationTable, SectionTable, ToriTable
+from .records import (IndicatorsTable, IntegrationTable, OutcomesTable, SectionTable,
+                      ToriTable)
+
+
+THIN_EQUILATERAL = 3 ** 0.5 / 36     # |A| / P^2 of the equilateral triangle
 
 
 def build_starts(config: Config, ids=None) -> np.ndarray:
@@ -72,6 +77,7 @@ class CellTask:
     indicators: IndicatorsTable
     section: SectionTable | None
     tori: ToriTable
+    outcomes: OutcomesTable
     slots: tuple
     term_axes: tuple = ()   # (name, values, stride in flat cell index) of the terms' axes
 
@@ -82,7 +88,7 @@ class CellTask:
         terms = tuple((a.name, tuple(a.values.tolist()), int(stride))
                       for a, stride in zip(config.axes, strides) if a.term >= 0)
         return cls(config.system_table, t.integration, t.indicators,
-                   t.section if t.section_enabled else None, t.tori,
+                   t.section if t.section_enabled else None, t.tori, t.outcomes,
                    archive.layout(config), terms)
 
     def term_values(self, cell: int) -> tuple:
@@ -156,7 +162,8 @@ def merge_rows(res: dict, at: np.ndarray, rows: dict):
 
 
 def _systems(task: CellTask, cell_ids, starts):
-    """(System, its events, the rows of the cells with a start on it) of a chunk's cells."""
+    """(System, its events -- the surface of section's, then the escapes' -- the rows of
+    the cells with a start on it) of a chunk's cells."""
     groups: dict = {}
     for k, cell in enumerate(cell_ids):
         groups.setdefault(task.term_values(int(cell)), []).append(k)
@@ -164,6 +171,9 @@ def _systems(task: CellTask, cell_ids, starts):
         system = build_system(task.system, dict(at))
         events = [section_event_for(task.section, system)] if task.section \
             else []
+        escape = escape_for(task.outcomes, system)
+        if escape is not None:
+            events += escape_events(system, *escape)
         rows = [k for k in rows if not np.isnan(starts[k][0])]
         if rows:
             yield system, events, rows
@@ -256,7 +266,8 @@ def _run(task: CellTask, system, events, starts, factor: int) -> list[CellResult
     t_final = factor * integ.t_final
     points = factor * ind.history_points
     run = dict(rtol=integ.rtol, atol=integ.atol, max_steps=integ.max_steps,
-               time_limit=integ.cell_time_limit, events=events)
+               time_limit=integ.cell_time_limit, events=events, approach=True,
+               thin=task.outcomes.thin * THIN_EQUILATERAL)
     dt = tor.sample_interval
     if tor.analyse:    # midpoints of equal intervals: the Birkhoff sums' quadrature;
         # each batch's samples are analysed before this thread's next batch reuses them
@@ -287,8 +298,17 @@ def _run(task: CellTask, system, events, starts, factor: int) -> list[CellResult
             ends.append((out, out.status, conservation_errors(
                 system, y0, np.concatenate([out.samples[done], [out.y]]))))
     planar3 = system.n_bodies == 3 and system.dim == 2
+    watched = len(events) > (1 if task.section else 0)     # escape events after the section's
     results = []
     for y0, ind_k, (out, status, errors) in zip(starts, indicators, ends):
+        escape, crossings, n_crossings = None, out.crossings, out.n_crossings
+        if watched and status == Status.EVENT:
+            status, n_crossings = Status.ESCAPED, n_crossings - 1
+            escape = escaped(system, out.y, out.t, task.outcomes.exits)
+        if watched and task.section:
+            on = crossings.index == 0
+            crossings = crossings._replace(index=crossings.index[on], t=crossings.t[on],
+                                           y=crossings.y[on])
         evidence = None
         if tor.analyse and status.finished:
             evidence = torus_evidence(task, system, out.fine, errors[0])
@@ -299,13 +319,34 @@ def _run(task: CellTask, system, events, starts, factor: int) -> list[CellResult
             scale_free_energy=system.scale_free_energy(y0),
             start_potential=float(system.potential_energy(y0)), energy_error=errors[0],
             angular_momentum_error=errors[1], indicators=ind_k, tori=evidence,
-            n_crossings=out.n_crossings,
-            crossing_time=out.crossings.t, crossing_state=out.crossings.y,
-            reduced=reduced(system, out.crossings.y) if planar3 else None,
+            n_crossings=n_crossings,
+            crossing_time=crossings.t, crossing_state=crossings.y,
+            reduced=reduced(system, crossings.y) if planar3 else None,
             centre=None if system.translation_invariant else (
-                system.centre_of_mass(out.crossings.y), system.momentum(out.crossings.y)),
-            horizon=t_final))
+                system.centre_of_mass(crossings.y), system.momentum(crossings.y)),
+            horizon=t_final, near=out.near, escape=escape))
     return results
+
+
+def escaped(system, y, t: float, exits) -> tuple[float, int, int]:
+    """(time, body, exit) of an escape that ended an orbit at state y, time t: the body
+    farthest from the others' centre of mass (the one whose escape event fired; one body
+    in a field), and in a field the index of the exit direction (degrees) nearest the
+    body's (-1 if no exits are given)."""
+    q = system.split(y)[0]
+    m = system.masses
+    if system.translation_invariant:
+        rest = (m.sum() - m)[:, None]
+        away = q - ((m[:, None] * q).sum(0) - m[:, None] * q) / rest
+        body = int(np.argmax(np.einsum("ij,ij->i", away, away)))
+    else:
+        body = 0
+    exit_ = -1
+    if exits:
+        angle = np.degrees(np.arctan2(q[body, 1], q[body, 0]))
+        gap = np.abs((angle - np.asarray(exits, dtype=float) + 180.0) % 360.0 - 180.0)
+        exit_ = int(np.argmin(gap))
+    return float(t), body, exit_
 
 
 def torus_evidence(task: CellTask, system, fine, energy_error) -> torus.TorusEvidence:

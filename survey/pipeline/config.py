@@ -38,7 +38,8 @@ from ..physics.terms import (
     make_potential,
     parameter_defaults,
 )
-from .build import build_system, section_event_for, term_axis_names
+from ..numerics.events import escape_defaults
+from .build import build_system, escape_for, section_event_for, term_axis_names
 from .resources import check_address, check_memory, ensure_writable
 from . import records
 from .records import Settings
@@ -156,6 +157,12 @@ class Config:
         """The System of flat cell `index` (the same for every cell unless a parameter of
         an interaction term is a grid axis)."""
         return build_system(self.tables["system"], self.axis_values(index, terms=True))
+
+    @functools.cached_property
+    def escape(self) -> tuple[float, float] | None:
+        """(radius, binding) of the escapes the first cell's System watches for, or None
+        (build.escape_for; whether there are escapes is the same for every cell)."""
+        return escape_for(self.settings.outcomes, self.system())
 
     def cell_parameters(self, index: int) -> dict:
         """Family parameters (and target energy) of flat cell `index` (C order)."""
@@ -877,6 +884,29 @@ def _validate_thresholds(tori: dict, dof: int):
                           f"use at most {most}")
 
 
+def _validate_outcomes(out: dict, system: System):
+    field = not system.translation_invariant
+    if out["exits"] is not None:
+        if not field:
+            raise ConfigError("[outcomes].exits", "are the exits of an external field's "
+                              "potential; free bodies escape in every direction (drop exits)")
+        if not out["exits"]:
+            raise ConfigError("[outcomes].exits", "give at least one direction, or drop exits")
+        if out["escape_radius"] <= 0:
+            raise ConfigError("[outcomes].exits", "need escape_radius: the distance from the "
+                              "origin at which the body has left through an exit")
+    if field and out["escape_binding"] is not None:
+        raise ConfigError("[outcomes].escape_binding", "bounds what other bodies pull an "
+                          "escaping one back with; in an external field the radius alone "
+                          "decides (drop escape_binding)")
+    if out["escape"] and out["escape_radius"] > 0 and out["escape_binding"] is None \
+            and not field and escape_defaults(system, out["escape_radius"]) is None:
+        raise ConfigError("[outcomes].escape_binding", "cannot be derived for this system "
+                          "(only for pair terms and the triple dipole): give the kinetic "
+                          "energy of relative motion above which a body at escape_radius "
+                          "escapes")
+
+
 def _validate_cross(tables: dict, system: System):
     ind, sec, integ = tables["indicators"], tables["section"], tables["integration"]
     needy = [name for name in ind["which"] if INDICATOR[name].deviations > ind["deviations"]]
@@ -941,6 +971,7 @@ def _validate_cross(tables: dict, system: System):
             raise ConfigError("[tori].observables", f"{name!r} is a shape's, and one body "
                               "has none: use x, y" + (", z" if system.dim == 3 else ""))
     _validate_thresholds(tor, shape_dof(system.n_bodies, system.dim, field))
+    _validate_outcomes(tables["outcomes"], system)
     if tables["section_enabled"]:
         coord = sec["coordinate"]
         if coord in REDUCED_SURFACES and (system.n_bodies != 3 or system.dim != 2):

@@ -78,6 +78,17 @@ class SectionTable:
 
 
 @dataclass(frozen=True)
+class OutcomesTable:
+    """[outcomes]"""
+
+    escape: bool                        # stop a cell where a body escapes (at escape_radius); fa...
+    escape_radius: float                # a body escapes when its distance from the others' centr...
+    escape_binding: float               # kinetic energy of the relative motion above which a bod...
+    exits: list[float] | None           # in an external field, directions (degrees in the x-y pl...
+    thin: float                         # a triangle is thin where |A|/P^2 is below this share of...
+
+
+@dataclass(frozen=True)
 class ToriTable:
     """[tori]"""
 
@@ -161,6 +172,7 @@ class Settings:
     integration: IntegrationTable
     indicators: IndicatorsTable
     section: SectionTable
+    outcomes: OutcomesTable
     tori: ToriTable
     check: CheckTable
     refine: RefineTable

@@ -131,6 +131,32 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "coefficients": Key("floats", None, "state coefficients of a 'linear' surface"),
         "store_state": Key("bool", False, "also store the Cartesian state at each crossing"),
     },
+    "outcomes": {
+        "escape": Key("bool", True, "stop a cell where a body escapes (at escape_radius); "
+                                    "false: every orbit runs on to t_final"),
+        "escape_radius": Key("float", 0.0, "a body escapes when its distance from the others' "
+                                          "centre of mass (in an external field: from the "
+                                          "origin) rises through this radius with the kinetic "
+                                          "energy of their relative motion above "
+                                          "escape_binding: the cell stops there, status and "
+                                          "regime escaped; 0: derived for bodies with pair "
+                                          "terms (and the triple dipole) that have a well "
+                                          "(twice the distance where the pair energy falls "
+                                          "below 1e-3 of the well's depth), else none",
+                              "length", low=0),
+        "escape_binding": Key("float", None, "kinetic energy of the relative motion above "
+                                             "which a body at escape_radius escapes "
+                                             "(default: (N - 1) times the largest pair energy "
+                                             "beyond half the radius; 0 in a field)", "energy",
+                              low=0),
+        "exits": Key("floats", None, "in an external field, directions (degrees in the x-y "
+                                     "plane, from the x axis) of the exits of an open "
+                                     "potential: escape_exit is the one nearest the direction "
+                                     "the body escapes in (Henon-Heiles: 90, 210, 330)"),
+        "thin": Key("float", 0.1, "a triangle is thin where |A|/P^2 is below this share of "
+                                  "the equilateral's sqrt(3)/36: thin_share is the share of "
+                                  "the run during which one was", above=0, high=1),
+    },
     "tori": {
         "analyse": Key("bool", True, "weighted Birkhoff digits and frequency analysis of "
                                      "every orbit (needs 128 samples or more)"),

@@ -87,6 +87,8 @@ def figures(ds, variables=None, special=None, slice_at=None) -> dict[str, Figure
                                                    style.log)
         if _height_axis(ds) is not None:
             out["map_regime_height"] = regime_height_map(ds)
+        if V.escape_time in ds and np.any(ds[V.status].values == Status.ESCAPED):
+            out["map_escape"] = escape_map(ds)
         if all(f"crossing_{a}" in ds for a in map_axes(ds)) and V.megno in ds \
                 and np.isfinite(ds[V.megno].values).any():
             style = OWNER[V.megno].map
@@ -103,6 +105,8 @@ def figures(ds, variables=None, special=None, slice_at=None) -> dict[str, Figure
             out["section_slice"] = section_slice(ds)
     if V.megno_history in ds and np.isfinite(ds[V.megno_history].values).any():
         out["convergence"] = convergence(ds)
+    if V.closest_approach in ds and V.ftle in ds and np.any(ds[V.ftle].values > 0):
+        out["approach"] = approach_figure(ds)
     if V.frequency in ds and V.regime in ds and sum(
             str(n).startswith("shape") for n in ds["fundamental_name"].values) >= 3:
         # frequencies mean something on regular cells; the map needs three of them
@@ -164,13 +168,13 @@ def _unfinished(ds) -> np.ndarray:
     return ~np.isin(ds[V.status].values, [Status.OK, Status.EVENT])
 
 
-def _mask_layer(ax, ds, x, y, grid=np.asarray):
-    """Cells whose run did not finish, in their status colours; legend handles with
-    counts."""
+def _mask_layer(ax, ds, x, y, grid=np.asarray, skip=()):
+    """Cells whose run did not finish, in their status colours (but the statuses `skip`);
+    legend handles with counts."""
     status = ds[V.status].values
     handles = []
     for s, colour in STATUS_COLOURS.items():
-        where = status == s
+        where = (status == s) & (s not in skip)
         if where.any():
             on = grid(where)
             rgba = np.zeros(on.shape + (4,))
@@ -841,4 +845,86 @@ def family_diagram(ds, title: str = "") -> Figure:
     bottom.set_ylabel("stability index b")
     bottom.set_xlabel(name if name != "energy" else "energy E")
     bottom.legend(fontsize=8, loc="best")
+    return fig
+
+
+EXIT_COLOURS = ("#1b9e77", "#d95f02", "#7570b3", "#e7298a", "#66a61e", "#e6ab02")
+
+
+def escape_map(ds) -> Figure:
+    """The escape basins of an open system over two axes: each cell coloured by the exit its
+    body escaped through (or escaped at all, without exits), the cells that stayed to their
+    horizon by their regime's class; and beside it the escape time, log scale."""
+    fig = Figure(figsize=(11.0, 4.8), layout="constrained")
+    basin, timed = fig.subplots(1, 2, sharey=True)
+    x, y, grid = _on_grid(ds)
+    status, regime = ds[V.status].values, ds[V.regime].values
+    escaped = status == Status.ESCAPED
+    exits = (stored_table(ds, "outcomes") or {}).get("exits") or []
+    where = ds[V.escape_exit].values if V.escape_exit in ds else np.where(escaped, 0, -1)
+    layers = [(f"exit {k} ({exits[k]:g}°)" if exits else "escaped", escaped & (where == k),
+               EXIT_COLOURS[k % len(EXIT_COLOURS)]) for k in range(max(len(exits), 1))]
+    layers += [("stayed: regular", np.isin(regime, REGULAR), "#c6dbef"),
+               ("stayed: chaotic or sticky", np.isin(regime, IRREGULAR), "#fcbba1"),
+               ("stayed: undetermined", (regime == Regime.UNDETERMINED)
+                & np.isin(status, [Status.OK, Status.EVENT]), "#dadaeb")]
+    rgba = np.zeros(status.shape + (4,))
+    handles = []
+    for name, on, colour in layers:
+        if on.any():
+            rgba[on] = _rgba(colour)
+            handles.append(Patch(color=colour, label=f"{name} ({int(on.sum())})"))
+    basin.pcolormesh(x, y, np.moveaxis(grid(rgba), 0, 1), shading="nearest")
+    handles += _mask_layer(basin, ds, x, y, grid, skip=(Status.ESCAPED,))
+    basin.legend(handles=handles, loc="lower left", bbox_to_anchor=(0.0, 1.0), ncol=2,
+                 fontsize="small", frameon=False)
+    t = np.where(escaped, ds[V.escape_time].values, np.nan)
+    from matplotlib.colors import LogNorm
+    finite = t[np.isfinite(t) & (t > 0)]
+    norm = LogNorm(finite.min(), max(finite.max(), 1.01 * finite.min())) if finite.size \
+        else LogNorm(1.0, 10.0)
+    mesh = timed.pcolormesh(x, y, grid(t).T, cmap="magma", norm=norm, shading="nearest")
+    fig.colorbar(mesh, ax=timed, label=f"{label(V.escape_time)}, log scale (blank: stayed "
+                                       f"to its horizon, or no start)")
+    for ax in (basin, timed):
+        ax.set_xlabel(label(map_axes(ds)[0]))
+    basin.set_ylabel(label(map_axes(ds)[1]))
+    timed.set_title("escape time", fontsize="medium")
+    return fig
+
+
+def approach_figure(ds) -> Figure:
+    """Each decided cell's FTLE against its closest approach (the least distance of any
+    pair), and for three bodies or more against the share of the run a triangle was thin
+    (|A|/P^2 small: the areal potential's channels), coloured by regime: whether large
+    FTLEs come from close encounters or from channel excursions."""
+    thin = V.thin_share in ds
+    fig = Figure(figsize=(10.0 if thin else 6.0, 4.5), layout="constrained")
+    axs = np.atleast_1d(fig.subplots(1, 2 if thin else 1, sharey=True))
+    regime = ds[V.regime].values.ravel()
+    ftle = ds[V.ftle].values.ravel()
+    closest = ds[V.closest_approach].min("pair").broadcast_like(ds[V.status]).values.ravel()
+    near = closest[np.isfinite(closest) & (closest > 0)]
+    wide = near.size > 0 and near.max() > 10.0 * near.min()     # else a log axis has no ticks
+    xs = [(closest, r"closest approach $\min_{ij} r_{ij}$" + (", log scale" if wide else ""),
+           wide)]
+    if thin:
+        xs.append((ds[V.thin_share].broadcast_like(ds[V.status]).values.ravel(),
+                   label(V.thin_share) + " (share of the run in a thin triangle)", False))
+    shown = np.isfinite(ftle) & (ftle > 0)
+    for ax, (value, name, log) in zip(axs, xs):
+        for r in Regime:
+            on = shown & (regime == r) & np.isfinite(value) & ((value > 0) | (not log))
+            if on.any():
+                ax.scatter(value[on], ftle[on], s=8, lw=0, color=REGIME_COLOURS[r],
+                           label=f"{r.name.lower()} ({int(on.sum())})", rasterized=True)
+        ax.set_xscale("log" if log else "linear")
+        ax.set_yscale("log")
+        ax.set_xlabel(name)
+    axs[0].set_ylabel(label(V.ftle))
+    axs[-1].legend(fontsize="small", loc="best", title="regime (cells)")
+    hidden = int(regime.size - shown.sum())
+    axs[0].set_title(textwrap.fill("FTLE against how close the bodies came" + (
+        f" ({hidden} cell{'s' * (hidden != 1)} without a positive FTLE not drawn: escaped, "
+        "inaccessible or failed)" if hidden else ""), 70), fontsize="small")
     return fig

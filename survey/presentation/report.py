@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analysis.classify import (evidence_votes, regular_share, separation_share,
+from ..analysis.classify import (evidence_votes, regular_share, separation_share, wilson,
                                  share_sensitivity, stored_config, stored_table,
                                  threshold_margins)
 from ..analysis.findings import decorrelated, how_many, islands, regions, twists
@@ -122,6 +122,8 @@ def markdown(ds, figure_names=(), checks=None, special=None) -> str:
     out += _second_run(ds, check, regime)
     out += _tori_table(ds, axes, regime)
     out += _special(ds, special, regime)
+    out += _escapes(ds)
+    out += _approaches(ds, regime)
     out += _agreement(ds, th)
     out += _thresholds(th)
     out += _quality(ds)
@@ -910,6 +912,85 @@ def _thresholds(th) -> list[str]:
     return out
 
 
+def _escapes(ds) -> list[str]:
+    """How many started cells escaped, when, and through which exit (a share of the
+    started cells with its 95% Wilson interval where the cells are a seeded sample)."""
+    if V.escape_time not in ds:
+        return []
+    status = ds[V.status].values
+    started = status != Status.INACCESSIBLE
+    escaped = status == Status.ESCAPED
+    n, k = int(started.sum()), int(escaped.sum())
+    attrs = ds[V.escape_time].attrs
+    out = ["## Escapes", "",
+           f"A body escapes when its distance from the others' centre of mass (in a field: "
+           f"from the origin) rises through {attrs.get('escape_radius', float('nan')):.4g}"
+           + (f" with the kinetic energy of their relative motion above "
+              f"{attrs['escape_binding']:.3g}" if attrs.get("escape_binding") else "")
+           + "; the cell stops there and gets no regular or chaotic verdict.", ""]
+    if not k:
+        return out + [f"None of the {n} started cells escaped by its horizon.", ""]
+    t = ds[V.escape_time].values[escaped]
+    q = np.quantile(t, [0.0, 0.25, 0.5, 0.75, 1.0])
+    out.append(f"{k} of {n} started cells escaped ({100 * k / n:.1f}%); escape time median "
+               f"{q[2]:.3g} (quartiles {q[1]:.3g}-{q[3]:.3g}, range {q[0]:.3g}-{q[4]:.3g}); "
+               f"the other {n - k} stayed to their horizon.")
+    exits = (stored_table(ds, "outcomes") or {}).get("exits") or []
+    if exits and V.escape_exit in ds:
+        where = ds[V.escape_exit].values[escaped]
+        low, high = wilson([int(np.sum(where == e)) for e in range(len(exits))],
+                           [n] * len(exits))
+        out += ["", "| exit | direction | cells | share of the started cells | 95% interval "
+                    "| median escape time |", "| --- | --- | --- | --- | --- | --- |"]
+        for e, angle in enumerate(exits):
+            c = int(np.sum(where == e))
+            med = f"{np.median(t[where == e]):.3g}" if c else "—"
+            out.append(f"| {e} | {angle:g}° | {c} | {100 * c / n:.1f}% | "
+                       f"{100 * float(low[e]):.1f}-{100 * float(high[e]):.1f}% | {med} |")
+        out.append("")
+        out.append("The interval treats the cells as a random sample of the plane; on a "
+                   "regular grid it says how far a share could move with the grid's "
+                   "resolution, roughly.")
+    if V.escaped_body in ds:
+        bodies = ds[V.escaped_body].values[escaped]
+        out.append("Bodies that escaped: " + ", ".join(
+            f"body {b} in {int(np.sum(bodies == b))}" for b in np.unique(bodies)) + ".")
+    return out + [""]
+
+
+def _approaches(ds, regime) -> list[str]:
+    """Close approaches and thin triangles by regime: whether the chaotic cells are those
+    whose bodies came close, or spent their run in the channels of long thin triangles."""
+    if V.closest_approach not in ds:
+        return []
+    started = ds[V.status].values != Status.INACCESSIBLE
+    closest = ds[V.closest_approach].min("pair").broadcast_like(ds[V.status]).values
+    thin = ds[V.thin_share].broadcast_like(ds[V.status]).values if V.thin_share in ds \
+        else None
+    out = ["## Close approaches" + (" and thin triangles" if thin is not None else ""), "",
+           "Per regime, over its cells: the closest approach of any pair (up to the cell's "
+           "end, at step ends)" + (", and the share of the run during which a triangle was "
+                                   "thin (|A|/P^2 below [outcomes] thin times the "
+                                   "equilateral's)" if thin is not None else "") + ".", "",
+           "| regime | cells | closest approach: median | least | "
+           + ("thin share: median | largest | cells thin over half the run |"
+              if thin is not None else ""),
+           "| --- | --- | --- | --- |" + (" --- | --- | --- |" if thin is not None else "")]
+    for r in Regime:
+        on = started & (regime == r)
+        if not on.any():
+            continue
+        row = (f"| {r.name.lower()} | {int(on.sum())} | {np.median(closest[on]):.3g} | "
+               f"{np.min(closest[on]):.3g} |")
+        if thin is not None:
+            row += (f" {np.median(thin[on]):.3g} | {np.max(thin[on]):.3g} | "
+                    f"{int(np.sum(thin[on] > 0.5))} |")
+        out.append(row)
+    out += ["", "The figure `approach` draws each cell's FTLE against these." if
+            V.ftle in ds and np.any(ds[V.ftle].values > 0) else "", ""]
+    return out
+
+
 def _quality(ds) -> list[str]:
     status = ds[V.status].values
     out = ["## Conservation and failures", ""]
@@ -921,7 +1002,8 @@ def _quality(ds) -> list[str]:
             f"{np.nanmax(ds[V.angular_momentum_error].values[finished]):.1e}")
         out.append(f"Relative energy error over the finished cells: median {np.median(dE):.1e}, "
                    f"largest {np.max(dE):.1e}{spin}.")
-    failed = [(s, int(np.sum(status == s))) for s in Status if s not in (Status.OK, Status.EVENT)]
+    failed = [(s, int(np.sum(status == s))) for s in Status
+              if s not in (Status.OK, Status.EVENT, Status.ESCAPED)]
     failed = [(s, k) for s, k in failed if k]
     if failed:
         out.append("")

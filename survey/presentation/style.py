@@ -14,12 +14,12 @@ REGIME_COLOURS = {Regime.TORUS: "#1f77b4", Regime.RESONANT: "#17becf",
                   Regime.PERIODIC: "#2ca02c", Regime.STICKY: "#ff7f0e",
                   Regime.CHAOTIC: "#d62728", Regime.COLLISION: "#000000",
                   Regime.INACCESSIBLE: "#d9d9d9", Regime.UNDETERMINED: "#9467bd",
-                  Regime.EQUILIBRIUM: "#bcbd22"}
+                  Regime.EQUILIBRIUM: "#bcbd22", Regime.ESCAPED: "#e7cb94"}
 
 
 STATUS_COLOURS = {Status.COLLISION: "#000000", Status.STEP_LIMIT: "#8c564b",
                   Status.NONFINITE: "#e377c2", Status.INACCESSIBLE: "#d9d9d9",
-                  Status.TIME_LIMIT: "#7f7f7f"}
+                  Status.TIME_LIMIT: "#7f7f7f", Status.ESCAPED: "#e7cb94"}
 
 
 def grid_axes(ds) -> list[str]:

@@ -25,7 +25,15 @@ coordinate = "phi"
 """
 
 # (what to change, expected fragment of the error: always the key)
+HH = "[system]\nbodies = 1\ninteractions = [{kind = 'external', expression = 'x**2 + y**2'}]\n[initial]\nfamily = 'field_section'\nenergy = 1.0\n"
 BAD = [
+    ("[outcomes]\nexits = [90.0]", "[outcomes].exits: are the exits of an external field's potential"),
+    (HH + "[outcomes]\nexits = [90.0, 210.0]", "[outcomes].exits: need escape_radius"),
+    (HH + "[outcomes]\nescape_radius = 3.0\nexits = []", "[outcomes].exits: give at least one direction"),
+    (HH + "[outcomes]\nescape_radius = 3.0\nescape_binding = 0.1", "[outcomes].escape_binding: bounds what other bodies pull"),
+    ("[outcomes]\nescape_radius = 5.0", "[outcomes].escape_binding: cannot be derived for this system"),
+    ("[outcomes]\nthin = 0.0", "[outcomes].thin: must be > 0"),
+    ("[outcomes]\nescape_radius = -1.0", "[outcomes].escape_radius: must be >= 0"),
     ("[check]\nseed = 0\nperturbations = 16\nnudge = 0.0\nvariants = [\"seed\"]", "[check]: the same seed, perturbations and nudge as [indicators] would repeat the survey"),
     ("[check]\nperturbations = -2", "[check].perturbations: must be >= -1"),
     ("[check]\nsed = 1", "[check].sed: unknown key (did you mean 'seed'?)"),
