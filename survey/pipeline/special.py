@@ -11,7 +11,7 @@ import numpy as np
 from ..analysis.refine import as_grid, cell_label, cell_values
 from ..numerics.integrate import integrate
 from ..numerics.periodic import periodic_orbit
-from ..physics.equilibria import forces, relative_equilibrium
+from ..physics.equilibria import equilibrium_positions, forces, relative_equilibrium
 from ..physics.system import System
 from .build import build_system
 
@@ -150,7 +150,47 @@ def report_attributes(ds) -> dict[str, str]:
             return x.tolist()
         raise TypeError(f"{type(x).__name__} is not JSON")
     return {"special_cells": json.dumps(special_cells(ds), default=plain),
-            "section_slice": json.dumps(section_slice(ds))}
+            "section_slice": json.dumps(section_slice(ds)),
+            "dissociation_energy": json.dumps(dissociation_energy(ds))}
+
+
+def dissociation_energy(ds) -> float | None:
+    """Where bodies that watch for escapes can start to lose one: the least potential
+    energy of the others alone, as a descent finds it -- from the first started cell's
+    positions less one body, each body in turn, the others' equilibrium (0 for a pair) --
+    the energy below which no body can leave (an upper bound of it where a descent misses
+    the others' lowest minimum). None for an archive without escapes, or in a field."""
+    from ..catalog.variables import V
+    from .config import parse_config
+    if V.escape_time not in ds or V.initial_state not in ds:
+        return None
+    config = parse_config(ds.attrs["config"], check_output=False)
+    status = ds[V.status].values.ravel()
+    started = np.flatnonzero(np.all(np.isfinite(ds[V.initial_state].values.reshape(
+        status.size, -1)), axis=1))
+    if not started.size:
+        return None
+    idx = np.unravel_index(started[0], ds[V.status].shape)
+    system = _cell_system(config, ds, idx)
+    if not system.translation_invariant:
+        return None
+    q = system.split(ds[V.initial_state].values[idx])[0]
+    if system.n_bodies == 2:
+        return 0.0
+    least = np.inf
+    # two bodies have no triangle: their triplet terms (the triple dipole) are nothing
+    terms = system.terms if system.n_bodies > 3 else \
+        tuple(t for t in system.terms if t.kind == "pair")
+    for k in range(system.n_bodies):
+        keep = np.arange(system.n_bodies) != k
+        rest = System(system.masses[keep], system.dim, terms)
+        try:
+            at = equilibrium_positions(rest, q[keep])
+        except (ValueError, np.linalg.LinAlgError):
+            continue
+        u = float(rest.potential_energy(np.concatenate([at.ravel(), np.zeros(at.size)])))
+        least = min(least, u)
+    return float(least) if np.isfinite(least) else None
 
 
 def section_slice(ds) -> dict:

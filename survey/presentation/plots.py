@@ -269,6 +269,24 @@ def _mark_handles(marks) -> list:
             for m, text in labels]
 
 
+def dissociation_lines(ds, ax, axes, at=None) -> list:
+    """A dashed line where a map's or scan's energy axis (one of `axes`) crosses the
+    dissociation energy (pipeline.special.dissociation_energy: below it no body can
+    leave); at: (values, positions) where an uneven scan draws a cell a step. Its legend
+    handle, or none."""
+    e = json.loads(ds.attrs.get("dissociation_energy", "null"))
+    if e is None or "energy" not in axes:
+        return []
+    values = at[0] if at is not None else ds["energy"].values
+    if not values.min() <= e <= values.max():
+        return []
+    where = float(np.interp(e, *at)) if at is not None else e
+    line = dict(color="k", ls="--", lw=1.2)
+    (ax.axvline if list(axes).index("energy") == 0 else ax.axhline)(where, **line)
+    return [Line2D([], [], **line, label=f"dissociation energy {e:.6g}: below it no body "
+                                         "can leave")]
+
+
 def regime_map(ds, special=()) -> Figure:
     fig, ax, hist, x, y, grid = _two_axis_figure(ds)
     regime = ds[V.regime].values
@@ -287,6 +305,7 @@ def regime_map(ds, special=()) -> Figure:
     handles = [Patch(color=REGIME_COLOURS[r], label=f"{r.name.lower()} ({n})")
                for r, n in counts if n]
     handles += _scale_free_lines(ds, ax, x, y, grid)
+    handles += dissociation_lines(ds, ax, map_axes(ds))
     marks = _special_marks(special)
     for idx, marker, _ in marks:     # black on a white halo: seen on any colour
         at = _cell_xy(ds, idx, *map_axes(ds))
@@ -567,6 +586,7 @@ def scan(ds, names, special=()) -> Figure:
             ax.plot(x[longer], final[longer], "^", ms=4, color="tab:orange", zorder=3,
                     label=f"cells run longer, at {', '.join(f'{f:g}' for f in factors)} T "
                           f"({int(longer.sum())})")
+        dissociation = dissociation_lines(ds, ax, [a], (values, x) if uneven else None)
         for level, style, text in _reference_lines(ds, name, common is not None):
             if np.ndim(level):        # per cell: each at its own horizon
                 ax.plot(x, level, color="0.3", ls=style, lw=0.8, label=text,
@@ -599,6 +619,7 @@ def scan(ds, names, special=()) -> Figure:
         if doubt.any():
             handles.append(Patch(**UNCONFIRMED, label=f"not confirmed ({int(doubt.sum())})"))
         handles += _mark_handles(_special_marks(special))
+        handles += dissociation
         fig.legend(handles=handles, loc="outside lower center", fontsize="small",
                    ncol=min(len(handles), 4), frameon=False,
                    title="regime (cells); paler where fewer lines of evidence vote for it")
@@ -876,6 +897,8 @@ def escape_map(ds) -> Figure:
             handles.append(Patch(color=colour, label=f"{name} ({int(on.sum())})"))
     basin.pcolormesh(x, y, np.moveaxis(grid(rgba), 0, 1), shading="nearest")
     handles += _mask_layer(basin, ds, x, y, grid, skip=(Status.ESCAPED,))
+    handles += dissociation_lines(ds, basin, map_axes(ds))
+    dissociation_lines(ds, timed, map_axes(ds))
     basin.legend(handles=handles, loc="lower left", bbox_to_anchor=(0.0, 1.0), ncol=2,
                  fontsize="small", frameon=False)
     t = np.where(escaped, ds[V.escape_time].values, np.nan)

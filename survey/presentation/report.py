@@ -879,8 +879,8 @@ def _relabel(m, raw, labelled):
 def _agreement(ds, th) -> list[str]:
     votes = evidence_votes(ds, th)
     keys = list(votes)
-    if len(keys) < 2:
-        return []
+    if len(keys) < 2 or not any(np.any(np.abs(v) == 1) for v in votes.values()):
+        return []       # (no cell was decided: every one escaped, say)
     out = ["## Where the indicators agree", "",
            "Share of the cells where both lines of evidence vote (regular or chaotic) in "
            "which they vote the same way; in brackets, how many cells both voted in.", "",
@@ -994,13 +994,14 @@ def _approaches(ds, regime) -> list[str]:
 def _quality(ds) -> list[str]:
     status = ds[V.status].values
     out = ["## Conservation and failures", ""]
-    finished = np.isin(status, [Status.OK, Status.EVENT])
+    finished = np.isin(status, [Status.OK, Status.EVENT, Status.ESCAPED])    # (to the end)
     if finished.any():
         dE = ds[V.energy_error].values[finished]
         spin = "" if in_field(ds) else (      # a field conserves no angular momentum
             f"; angular momentum error largest "
             f"{np.nanmax(ds[V.angular_momentum_error].values[finished]):.1e}")
-        out.append(f"Relative energy error over the finished cells: median {np.median(dE):.1e}, "
+        out.append(f"Relative energy error over the finished cells (escaped ones to their "
+                   f"escape): median {np.median(dE):.1e}, "
                    f"largest {np.max(dE):.1e}{spin}.")
     failed = [(s, int(np.sum(status == s))) for s in Status
               if s not in (Status.OK, Status.EVENT, Status.ESCAPED)]
