@@ -297,3 +297,18 @@ def test_no_cell_escapes_below_its_dissociation_energy():
             energy = ds[V.energy].broadcast_like(ds[V.status]).values
             assert np.all(energy[escaped] >= threshold), path.stem
     assert seen.get("ljat_trimer_map", 0) > 0 and seen.get("henon_heiles_escape", 0) > 0, seen
+
+
+def test_the_areal_maps_chaos_prose_holds():
+    """What results/README.md says of the areal map in words: its chaotic cells spend most
+    of their run in thin triangles (the median thin share above one half), and the FTLE
+    falls as the thin share grows (a negative rank correlation)."""
+    from survey.catalog.regimes import Regime
+    from survey.presentation.report import rank_correlation
+    with xr.open_dataset(RESULTS / "delta_energy_map_areal.nc") as ds:
+        chaotic = ds[V.regime].values == Regime.CHAOTIC
+        thin = ds[V.thin_share].values
+        assert np.median(thin[chaotic]) > 0.5
+        ftle = ds[V.ftle].values
+        drawn = np.isfinite(ftle) & (ftle > 0)
+        assert rank_correlation(ftle[drawn], thin[drawn]) < -0.3

@@ -986,9 +986,27 @@ def _approaches(ds, regime) -> list[str]:
             row += (f" {np.median(thin[on]):.3g} | {np.max(thin[on]):.3g} | "
                     f"{int(np.sum(thin[on] > 0.5))} |")
         out.append(row)
-    out += ["", "The figure `approach` draws each cell's FTLE against these." if
-            V.ftle in ds and np.any(ds[V.ftle].values > 0) else "", ""]
-    return out
+    ftle = ds[V.ftle].values if V.ftle in ds else np.full(closest.shape, np.nan)
+    drawn = np.isfinite(ftle) & (ftle > 0)
+    if drawn.sum() >= RANKED_CELLS:
+        against = [("the closest approach", closest)] + \
+            ([("the thin share", thin)] if thin is not None else [])
+        out += ["", f"Rank (Spearman) correlation of the FTLE, over the {int(drawn.sum())} "
+                    "cells with a positive one: " + "; ".join(
+                        f"with {name} {rank_correlation(ftle[drawn], x[drawn]):+.2f}"
+                        for name, x in against) + ". The figure `approach` draws them."]
+    return out + [""]
+
+
+RANKED_CELLS = 10       # fewer cells than this: no rank correlation is given
+
+
+def rank_correlation(a, b) -> float:
+    """Spearman's rank correlation of a and b (the Pearson correlation of their ranks;
+    ties, rare in these floats, ranked by order)."""
+    ra, rb = (np.argsort(np.argsort(x, kind="stable")).astype(float) for x in (a, b))
+    ra, rb = ra - ra.mean(), rb - rb.mean()
+    return float(np.sum(ra * rb) / np.sqrt(np.sum(ra * ra) * np.sum(rb * rb)))
 
 
 def _quality(ds) -> list[str]:
