@@ -387,7 +387,10 @@ def _horizons(ds, regime, steady, T) -> list[str]:
         return []
     factors = ds["horizon_factor"].values
     final = ds[V.regime_horizon].values
-    started = np.isfinite(final)
+    # cells decided by their evidence (an escaped or failed cell has none to check)
+    started = np.isfinite(final) & np.isin(ds[V.status].values, [Status.OK, Status.EVENT])
+    if not started.any():
+        return []
     out = ["## Verdicts against a longer horizon", "",
            f"Each cell's regime is decided at T/2 and T = {T:g} from its run."]
     if factors.size > 2:
@@ -499,6 +502,9 @@ def _onsets(ds, axes, regime, checks=None, th=None) -> list[str]:
             for i, j in runs(regime)] + ["", *skipped, ""]
     if len(axes) == 2 and not meaningful:
         return ["## Where chaos sets in", "", *skipped, ""]
+    if len(axes) == 2 and not np.isin(regime, REGULAR + IRREGULAR).any():
+        return ["## Where chaos sets in", "", "No cell is regular or irregular (see the "
+                "regimes above): there is no onset.", ""]
     if skipped:
         out += ["## Axes without an onset", "", *skipped, ""]
     if len(axes) == 1:
@@ -923,8 +929,9 @@ def _escapes(ds) -> list[str]:
     n, k = int(started.sum()), int(escaped.sum())
     attrs = ds[V.escape_time].attrs
     out = ["## Escapes", "",
-           f"A body escapes when its distance from the others' centre of mass (in a field: "
-           f"from the origin) rises through {attrs.get('escape_radius', float('nan')):.4g}"
+           "A body escapes when its distance from "
+           + ("the origin" if in_field(ds) else "the others' centre of mass")
+           + f" rises through {attrs.get('escape_radius', float('nan')):.4g}"
            + (f" with the kinetic energy of their relative motion above "
               f"{attrs['escape_binding']:.3g}" if attrs.get("escape_binding") else "")
            + "; the cell stops there and gets no regular or chaotic verdict.", ""]
