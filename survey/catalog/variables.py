@@ -150,8 +150,14 @@ def _field_crossing(q: str, momentum: bool):
                                and axis < c.settings.system.dim))
 
 
-def _bodies(least):
-    return lambda c: c.settings.system.bodies >= least
+def _pairs(c):
+    return c.settings.system.bodies >= 2
+
+
+def _triangle(c):
+    """Three bodies: the paper's measures of their triangle (of more bodies, some triangle
+    is nearly always thin -- three atoms in a row of a cluster -- and says nothing)."""
+    return c.settings.system.bodies == 3
 
 
 def _escapes(c):
@@ -159,10 +165,10 @@ def _escapes(c):
     return c.escape is not None
 
 
-def _near(name, long_name, at, symbol="", extra=(), bodies=3):
+def _near(name, long_name, at, symbol="", extra=(), when=_triangle):
     """A closest-approach variable: entries `at` (a slice or index) of the cell's record
     (numerics.driver.near_width), kept at step ends up to t_end."""
-    return Var(name, long_name, lambda r: r.near[at], extra=extra, when=_bodies(bodies),
+    return Var(name, long_name, lambda r: r.near[at], extra=extra, when=when,
                symbol=symbol)
 
 
@@ -275,25 +281,26 @@ VARIABLES = [
         lambda r: r.crossing_state, extra=("crossing", "component"),
         when=lambda c: _section(c) and c.settings.section.store_state),
     _near("closest_approach", "least distance of each pair of bodies up to t_end (at step "
-                              "ends)", slice(0, -5, 2), "closest approach", ("pair",), 2),
+                              "ends)", slice(0, -5, 2), "closest approach", ("pair",), _pairs),
     _near("closest_approach_time", "time of each pair's closest approach",
-          slice(1, -5, 2), extra=("pair",), bodies=2),
-    _near("least_perimeter", "least perimeter of a triangle of the bodies up to t_end (at "
+          slice(1, -5, 2), extra=("pair",), when=_pairs),
+    _near("least_perimeter", "least perimeter of the three bodies' triangle up to t_end (at "
                              "step ends)", -5, "least perimeter $P_{min}$"),
     _near("least_perimeter_time", "time of the least perimeter", -4),
-    _near("least_area", "least |area| of a triangle of the bodies up to t_end (at step "
+    _near("least_area", "least |area| of the three bodies' triangle up to t_end (at step "
                         "ends)", -3, r"least area $|A|_{min}$"),
     _near("least_area_time", "time of the least |area|", -2),
-    Var("thin_share", "share of the run up to t_end during which a triangle was thin "
-                      "(|A|/P^2 below [outcomes] thin times the equilateral's; step ends)",
-        lambda r: r.near[-1] / r.t_end if r.t_end > 0 else 0.0, when=_bodies(3),
+    Var("thin_share", "share of the run up to t_end during which the three bodies' "
+                      "triangle was thin (|A|/P^2 below [outcomes] thin times the "
+                      "equilateral's; step ends)",
+        lambda r: r.near[-1] / r.t_end if r.t_end > 0 else 0.0, when=_triangle,
         symbol="thin share"),
     Var("escape_time", "time at which a body escaped (NaN: none did)",
         lambda r: np.nan if r.escape is None else r.escape[0], when=_escapes,
         symbol="escape time"),
     Var("escaped_body", "the body that escaped (-1: none)",
         lambda r: -1 if r.escape is None else r.escape[1], dtype="i1",
-        when=lambda c: _bodies(2)(c) and _escapes(c)),
+        when=lambda c: _pairs(c) and _escapes(c)),
     Var("escape_exit", "index of the [outcomes] exit the body escaped through (-1: none)",
         lambda r: -1 if r.escape is None else r.escape[2], dtype="i1",
         when=lambda c: bool(c.settings.outcomes.exits) and _escapes(c)),

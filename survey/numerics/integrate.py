@@ -144,7 +144,7 @@ def integrate_batch(system: System, starts, t_span, *, tangents=None, record=Non
                           max_events=int(max_events), n_sub=int(event_substeps),
                           t_eval=t_eval, n_eval=n_eval, t_fine=t_fine,
                           near=0 if not approach or system.n_bodies < 2 else
-                          NEAR_TRIANGLES if system.n_bodies >= 3 else NEAR_PAIRS,
+                          NEAR_TRIANGLES if system.n_bodies == 3 else NEAR_PAIRS,
                           thin=float(thin))
     res = dop853(y0s[order], np.ascontiguousarray(rows[:, order]), model, control,
                  recording, L, rb, reuse_samples=bool(reuse_samples))

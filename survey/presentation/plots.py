@@ -918,7 +918,7 @@ def escape_map(ds) -> Figure:
 
 def approach_figure(ds) -> Figure:
     """Each decided cell's FTLE against its closest approach (the least distance of any
-    pair), and for three bodies or more against the share of the run a triangle was thin
+    pair), and for three bodies against the share of the run their triangle was thin
     (|A|/P^2 small: the areal potential's channels), coloured by regime: whether large
     FTLEs come from close encounters or from channel excursions."""
     thin = V.thin_share in ds

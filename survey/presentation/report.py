@@ -935,6 +935,11 @@ def _escapes(ds) -> list[str]:
            + (f" with the kinetic energy of their relative motion above "
               f"{attrs['escape_binding']:.3g}" if attrs.get("escape_binding") else "")
            + "; the cell stops there and gets no regular or chaotic verdict.", ""]
+    threshold = json.loads(ds.attrs.get("dissociation_energy", "null"))
+    if threshold is not None:
+        out += [f"Dissociation energy {threshold:.6g}: the least potential energy of the "
+                "others with one body gone, as a descent from the first start finds it; "
+                "below it no body can leave.", ""]
     if not k:
         return out + [f"None of the {n} started cells escaped by its horizon.", ""]
     t = ds[V.escape_time].values[escaped]

@@ -19,7 +19,7 @@ REGIME_COLOURS = {Regime.TORUS: "#1f77b4", Regime.RESONANT: "#17becf",
 
 STATUS_COLOURS = {Status.COLLISION: "#000000", Status.STEP_LIMIT: "#8c564b",
                   Status.NONFINITE: "#e377c2", Status.INACCESSIBLE: "#d9d9d9",
-                  Status.TIME_LIMIT: "#7f7f7f", Status.ESCAPED: "#e7cb94"}
+                  Status.TIME_LIMIT: "#7f7f7f", Status.ESCAPED: "#808000"}
 
 
 def grid_axes(ds) -> list[str]:
