@@ -284,15 +284,14 @@ VARIABLES = [
                               "ends)", slice(0, -5, 2), "closest approach", ("pair",), _pairs),
     _near("closest_approach_time", "time of each pair's closest approach",
           slice(1, -5, 2), extra=("pair",), when=_pairs),
-    _near("least_perimeter", "least perimeter of the three bodies' triangle up to t_end (at "
+    _near("least_perimeter", "least perimeter of a triangle of the bodies up to t_end (at "
                              "step ends)", -5, "least perimeter $P_{min}$"),
     _near("least_perimeter_time", "time of the least perimeter", -4),
-    _near("least_area", "least |area| of the three bodies' triangle up to t_end (at step "
+    _near("least_area", "least |area| of a triangle of the bodies up to t_end (at step "
                         "ends)", -3, r"least area $|A|_{min}$"),
     _near("least_area_time", "time of the least |area|", -2),
-    Var("thin_share", "share of the run up to t_end during which the three bodies' "
-                      "triangle was thin (|A|/P^2 below [outcomes] thin times the "
-                      "equilateral's; step ends)",
+    Var("thin_share", "share of the run up to t_end during which a triangle was thin "
+                      "(|A|/P^2 below [outcomes] thin times the equilateral's; step ends)",
         lambda r: r.near[-1] / r.t_end if r.t_end > 0 else 0.0, when=_triangle,
         symbol="thin share"),
     Var("escape_time", "time at which a body escaped (NaN: none did)",
