@@ -14,7 +14,7 @@ COMPILING_COMMANDS = ("run", "reproduce", "verify", "orbit", "bench", "equilibri
 # the embedded default survey (`python -m survey run`)
 DEFAULT_CONFIG = Path(__file__).parent / "default.toml"
 BENCH_PARTS = ["scan", "cell", "fixed", "integrator", "step", "indicators", "tori", "terms",
-               "survey", "refine", "memory", "newton"]
+               "survey", "refine", "memory", "scale", "newton"]
 
 
 def _bench(args):
@@ -37,6 +37,7 @@ def _bench(args):
              "survey": bench.survey_scaling,
              "refine": bench.refined_map,
              "memory": bench.survey_memory,
+             "scale": bench.survey_scale,
              "newton": bench.newton_step}
     for name in BENCH_PARTS:
         if name in (args.only or BENCH_PARTS):

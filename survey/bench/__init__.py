@@ -5,8 +5,9 @@ default cell against its bare orbit (`default_cell`), what a survey costs beside
 goes and one orbit's step against the same step in plain scalar code (`step_costs`),
 survey's DOP853 against scipy's DOP853 (NumPy right-hand side) and heyoka's
 Taylor integrator on the paper's two orbits (`run`), the cost of indicators, sections and
-the torus analysis, the scaling on 1 vs 2 workers, the driver's memory, and what the paper's
-one-term systems would pay on the general path of sums of terms (`interaction_terms`).
+the torus analysis, the scaling on 1 vs 2 workers and from 10^3 to 10^5 cells
+(`survey_scale`), the driver's memory, and what the paper's one-term systems would pay on
+the general path of sums of terms (`interaction_terms`).
 
 Speed claims are ratios against baselines timed here, never absolute numbers: machines
 differ, ratios on one machine in one run do not. Compilation (numba's cached load, heyoka's
@@ -28,9 +29,9 @@ from .costs import (
     torus_overhead,
 )
 from .steps import plain_step, step_costs
-from .surveys import refined_map, survey_memory, survey_scaling
+from .surveys import refined_map, survey_memory, survey_scale, survey_scaling
 
 __all__ = ["CASES", "GeneralPath", "default_cell", "fixed_costs", "indicator_overhead",
            "interaction_terms", "newton_step", "plain_step", "refined_map", "run",
-           "scan_vs_heyoka", "step_costs", "survey_memory", "survey_scaling", "timed_command",
-           "torus_overhead", "vector_doubles"]
+           "scan_vs_heyoka", "step_costs", "survey_memory", "survey_scale", "survey_scaling",
+           "timed_command", "torus_overhead", "vector_doubles"]

@@ -126,3 +126,79 @@ def _memory_run(n, folder):
     run_survey(cfg, progress=False, timings=timings)
     return (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, time.perf_counter() - t,
             timings["archive"])
+
+
+def _map(n: int, t_final: float, folder) -> dict:
+    """A (delta, energy) map of about n cells (the same ranges at any n, so the same mix
+    of tori and chaos), default verdict machinery."""
+    rows = max(1, round((n / 2.5) ** 0.5))
+    return {"survey": {"name": f"scale-{n}", "output": f"{folder}/scale-{n}.nc"},
+            "initial": {"family": "equilateral",
+                        "delta": {"start": 0.0, "stop": 8.0, "num": -(-n // rows)},
+                        "energy": {"start": 60.0, "stop": 120.0, "num": rows}},
+            "integration": {"t_final": t_final}}
+
+
+def survey_scale(sizes=(1_000, 10_000, 100_000), t_final=5.0, first=1_000_000,
+                 folder="results/bench", out=print):
+    """Cost per cell of a (delta, energy) map of 10^3..10^5 cells with the default verdict
+    machinery on 2 local workers (target: flat within 10%); and a grid of `first` cells
+    run as a user runs it, until its first chunk is saved: the seconds to that and the
+    driver's peak memory (its starts are built by the workers, chunk by chunk)."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    import psutil
+
+    from ..pipeline.checkpoints import checkpoint_dir
+    from ..pipeline.config import load_config
+    from ..pipeline.sweep import run_survey
+    from .common import user_env
+    out("")
+    out(f"Maps of (delta, energy) cells, default verdict machinery, t = {t_final:g}, 2 local "
+        "workers: seconds per cell (compute phase: first task submitted to last result "
+        "saved; whole command: its total)")
+    out(f"{'cells':>8s} {'compute':>9s} {'per cell ms':>12s} {'total':>8s} {'per cell ms':>12s}")
+    run_survey(_map(4, t_final, folder), progress=False)     # kernels loaded or compiled
+    rows = []
+    for n in sizes:
+        cfg = _map(n, t_final, folder)
+        timings = {}
+        run_survey(cfg, progress=False, timings=timings)
+        cells = load_config(cfg).n_cells
+        rows.append((cells, timings["compute"], timings["total"]))
+        out(f"{cells:8d} {timings['compute']:9.1f} {1e3 * timings['compute'] / cells:12.2f} "
+            f"{timings['total']:8.1f} {1e3 * timings['total'] / cells:12.2f}")
+    per = [c / n for n, c, _ in rows]
+    out(f"compute per cell, largest against smallest map: {per[-1] / per[0]:.2f}x "
+        "(target: within 10%)")
+    cfg = _map(first, t_final, folder)
+    config = load_config(cfg)
+    toml = Path(folder) / f"scale-{first}.toml"
+    toml.write_text(config.resolved_text)
+    chunks = checkpoint_dir(load_config(toml))
+    t0 = time.perf_counter()
+    proc = subprocess.Popen([sys.executable, "-m", "survey", "run", str(toml), "--no-report",
+                             "--no-progress"], env=user_env(), start_new_session=True,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    peak, saved = 0, None
+    try:
+        driver = psutil.Process(proc.pid)
+        while saved is None and proc.poll() is None and time.perf_counter() - t0 < 600:
+            peak = max(peak, driver.memory_info().rss)
+            if any(chunks.glob("chunk-*.npz")):
+                saved = time.perf_counter() - t0
+            time.sleep(0.05)
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+    import shutil
+    shutil.rmtree(chunks, ignore_errors=True)
+    out(f"a grid of {config.n_cells:,} cells (python -m survey run, warm kernel cache): its "
+        f"first chunk saved {saved:.1f} s after the command, the driver's peak memory "
+        f"{peak / 2**20:.0f} MiB by then (target: first task within 10 s)" if saved else
+        f"a grid of {config.n_cells:,} cells saved no chunk within 600 s")
+    return rows, saved, peak

@@ -134,13 +134,15 @@ def _finish(k, ln, out, status, rows):
     ln.job[k] = -1
 
 
-@helper
+@leaf
 def _start(k, j, ln, out, y0s, rows, t0, t1, model, n_tan, n_err,
            rtol, atol, h0, h_max, events, t_eval, n_eval, t_fine, renorm_dt, now, rb,
            near, thin):
     """Job j into lane k: its start, first evaluation, samples at t0, events' first values
     and closest approaches, and first step. Returns False if the job ended at once
-    (nonfinite start, zero span)."""
+    (nonfinite start, zero span). Once a job, so compiled apart (a leaf): inlined into
+    _run it cost a first run 9 s of compiling and no step measurably less (`bench --only
+    step`)."""
     L = ln.job.size
     nf = y0s.shape[1]
     masses, d = model.masses, model.d
@@ -190,7 +192,8 @@ def _start(k, j, ln, out, y0s, rows, t0, t1, model, n_tan, n_err,
             for i in range(rec.size - 1):
                 rec[i] = np.inf if i % 2 == 0 else np.nan
             rec[rec.size - 1] = 0.0
-            _near(rec, y, t0, 0.0, masses.size, d, rb, near, thin)
+            # the lane's strided copy, as at every step: one compiled layout
+            _near(rec, ln.Y[k::L], t0, 0.0, masses.size, d, rb, near, thin)
         for e in range(eoff.size - 1):
             if watch[e]:
                 # the lane's strided copies, as at every step: one compiled layout

@@ -66,7 +66,7 @@ def _dU(system: System, q: np.ndarray) -> float:
         x = float(portable.vnorm(v - u) + portable.vnorm(w - v) + portable.vnorm(u - w))
     else:
         x = 0.5 * abs((v - u)[0] * (w - u)[1] - (v - u)[1] * (w - u)[0])
-    return profile(system.potential.profile, system.potential.par, x)[1]
+    return profile(system.potential.profile, system.potential.pair, x)[1]
 
 
 def _equal_masses(system: System, family: str):

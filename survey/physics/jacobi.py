@@ -155,7 +155,7 @@ def reduced_potential(system: System, sigma, eta, phi):
         x = 0.5 * sigma * eta * np.abs(portable.vsin(phi))
     x = np.asarray(x, dtype=np.float64)
     out = np.empty(x.size)
-    _profile_values(pot.profile, pot.par, np.ascontiguousarray(x).ravel(), out)
+    _profile_values(pot.profile, pot.pair, np.ascontiguousarray(x).ravel(), out)
     return out.reshape(x.shape)
 
 

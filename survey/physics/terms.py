@@ -184,6 +184,13 @@ class Potential:
         return p
 
     @property
+    def pair(self) -> tuple[float, float]:
+        """par as the kernels' profile takes it from Python: a pair of floats, as the
+        terms pass theirs (an array compiles a second copy of every profile)."""
+        p = self.par
+        return float(p[0]), float(p[1]) if p.size > 1 else 0.0
+
+    @property
     def degree(self) -> float | None:
         """k if the term is homogeneous in the positions, U(s q) = s^k U(q), else None (a
         logarithm, a screening length, a barrier or a well sets a scale)."""

@@ -68,6 +68,47 @@ def build_starts(config: Config, ids=None) -> np.ndarray:
 
 
 @dataclass(frozen=True)
+class GridStarts:
+    """A grid's starts, built where its cells are integrated: a task carries this (the
+    config's axes, not 8 bytes a component of every start) and its worker builds its chunk's
+    starts, so that a grid of millions of cells starts computing at once and the driver
+    never holds them all. Called with cell ids: their starts (build_starts)."""
+
+    config: Config
+
+    def __call__(self, ids) -> np.ndarray:
+        return build_starts(self.config, ids)
+
+    def first(self, ids) -> np.ndarray:
+        """The first of `ids` with a start (none: empty), built in batches of 1, 2, 4, ...
+        (a grid's first cell has a start, unless its corner is out of reach)."""
+        at, batch = 0, 1
+        while at < len(ids):
+            some = np.asarray(ids[at:at + batch])
+            found = some[~np.isnan(self(some)[:, 0])]
+            if found.size:
+                return found[:1]
+            at, batch = at + batch, min(2 * batch, 4096)
+        return np.zeros(0, dtype=np.int64)
+
+    def check_corners(self):
+        """The starts of the grid's corners (every axis at its first or last value), built
+        before any work: a value that makes no start (a ConfigError) lies there in the
+        common case -- the end of a range -- and any other stops the survey when the worker
+        holding it builds it, its finished chunks kept."""
+        shape = self.config.shape
+        corners = {int(np.ravel_multi_index(at, shape)) for at in
+                   np.ndindex(*(2,) * len(shape))
+                   for at in [tuple((n - 1) * b for n, b in zip(shape, at))]}
+        self(sorted(corners))
+
+
+def resolved(starts, cell_ids) -> np.ndarray:
+    """A task's starts: given (the rows of its cells), or built here (GridStarts)."""
+    return starts(cell_ids) if callable(starts) else np.asarray(starts)
+
+
+@dataclass(frozen=True)
 class CellTask:
     """What a worker needs to integrate cells -- the result-determining tables and the
     archive's layout -- and nothing of the grid or the config text, which can be large."""
@@ -108,7 +149,9 @@ class CellTask:
 def run_cells(task: CellTask, cell_ids, starts) -> dict[str, np.ndarray]:
     """Integrate a chunk of cells (the unit of work a dask task does) and decide their
     verdicts, those in doubt on longer runs too (first_runs, then extend_cells, here); one
-    result row per cell in every array of the task's layout."""
+    result row per cell in every array of the task's layout (starts: the cells' rows, or
+    a GridStarts that builds them here)."""
+    starts = resolved(starts, cell_ids)
     res, doubt = first_runs(task, cell_ids, starts)
     if doubt.size:
         rows = extend_cells(task, np.asarray(cell_ids)[doubt], np.asarray(starts)[doubt],
@@ -124,6 +167,7 @@ def first_runs(task: CellTask, cell_ids, starts) -> tuple[dict, np.ndarray]:
     Returns the result rows and the rows whose verdict is in doubt (for extend_cells;
     their rows are as of this run until then)."""
     clock = time.perf_counter()
+    starts = resolved(starts, cell_ids)
     results = [CellResult(Status.INACCESSIBLE, 0.0)] * len(cell_ids)
     doubt = []
     decide = bool(task.indicators.which or task.tori.analyse)
@@ -145,6 +189,7 @@ def extend_cells(task: CellTask, cell_ids, starts, history) -> dict[str, np.ndar
     doubt (history: their regime_history rows so far). A cell's result depends on itself
     alone, so these may run in any task, with any others, and verify reproduces them."""
     clock = time.perf_counter()
+    starts = resolved(starts, cell_ids)
     results = [None] * len(cell_ids)
     for system, events, rows in _systems(task, cell_ids, starts):
         verdicts = np.array(history)[rows]

@@ -30,6 +30,7 @@ from ..machine.jit import kernels_cached
 from ..physics.lanes import SIMD_LANES
 from .cells import (
     CellTask,
+    GridStarts,
     build_starts,
     classify_rows,
     extend_cells,
@@ -280,9 +281,9 @@ def _write(config, load, command, cells, folder, progress) -> Path:
 def _grid(config, key, folder, workers, address, clock, progress) -> dict:
     """Every cell of the grid, from checkpoints where they are, computed where not:
     the checkpoint files and their cells."""
-    task = CellTask.of(config)
-    with notice(f"building the starts of {config.n_cells:,} cells", progress):
-        starts = build_starts(config)
+    task, starts = CellTask.of(config), GridStarts(config)
+    with notice("checking the starts at the grid's corners", progress):
+        starts.check_corners()
     with contextlib.ExitStack() as stack:
         client = bar = done = None
         for round_ in range(4):     # rounds after the first only if checkpoints vanish
@@ -305,8 +306,8 @@ def _grid(config, key, folder, workers, address, clock, progress) -> dict:
                 warn(f"{todo.size} finished cells went missing from {folder}; computing "
                      "them again")
             if client is None:
-                client = _start(stack, config, task, todo[~np.isnan(starts[todo, 0])][:1],
-                                starts, workers, address, clock, progress)
+                client = _start(stack, config, task, starts.first(todo), starts, workers,
+                                address, clock, progress)
                 from tqdm import tqdm
                 bar = stack.enter_context(tqdm(total=config.n_cells, unit="cell",
                                                disable=not progress, desc=config.name,
@@ -443,8 +444,8 @@ def _api_arguments(workers, scheduler, progress):
 def _start(stack, config, task, first, starts, workers, address, clock, progress):
     """Compile (or load from the disk cache) the kernels once, then start the cluster and
     let every worker load them before the first task (`first`: a cell with a start, if any;
-    starts: every cell's start, or a function giving given cells' starts)."""
-    at = (starts(first) if callable(starts) else starts[first])
+    starts: a function giving given cells' starts)."""
+    at = starts(first)
     cluster = f"connecting to the dask scheduler at {address}" if address else \
         f"starting {workers or config.settings.dask.workers} local dask workers"
     # A first run: the local workers start first (forked without the kernels, which they
@@ -564,7 +565,7 @@ def _compute(client, task, starts, todo, folder, key, config, bar, round_):
     # a chunk by its first cell: its ids, result rows, extensions pending
     chunks = {int(ids[0]): [ids, None, 0] for ids in _chunks(todo, count)}
     # a task's future: the first cell of its chunk, or the (chunk, row) of its extensions
-    futures = {client.submit(first_runs, task, ids, starts[ids], pure=False,
+    futures = {client.submit(first_runs, task, ids, starts, pure=False,
                              key=f"cells-{key}-{round_}-{first}",
                              retries=retries): first
                for first, (ids, _, _) in chunks.items()}
@@ -572,9 +573,10 @@ def _compute(client, task, starts, todo, folder, key, config, bar, round_):
 
     def extend(cells, worker=None):
         ids = np.array([chunks[first][0][k] for first, k in cells])
-        history = np.concatenate([chunks[first][1][V.regime_history][k:k + 1]
-                                  for first, k in cells])
-        extension = client.submit(extend_cells, task, ids, starts[ids], history,
+        rows = [(chunks[first][1], slice(k, k + 1)) for first, k in cells]
+        history = np.concatenate([res[V.regime_history][k] for res, k in rows])
+        begun = np.concatenate([res[V.initial_state][k] for res, k in rows])
+        extension = client.submit(extend_cells, task, ids, begun, history,
                                   pure=False, priority=1, retries=retries,
                                   workers=worker, allow_other_workers=worker is not None,
                                   key=f"longer-{key}-{round_}-{int(ids[0])}")

@@ -122,6 +122,8 @@ BAD = [
     ("[initial]\nfamily = 'equilateral'\ndelta = 'three'", "[initial].delta: expected a number, a list or {start, stop, num}"),
     ("[initial]\nfamily = 'sides'\na = 5.0", "[initial]: sides (a, b, c) = (5, 2, 1.8) do not make a non-degenerate triangle"),
     ("[initial]\nfamily = 'sides'\na = {start = 1.0, stop = 5.0, num = 3}", "[initial] at a = 5: sides"),
+    # inside the grid: found by the worker building that chunk's starts
+    ("[initial]\nfamily = 'sides'\na = [1.0, 5.0, 2.0]", "[initial] at a = 5: sides"),
     ("[initial]\nfamily = 'linear'\nvelocity_u = [1.0, 2.0, 3.0]", "[initial].velocity_u: expected finite numbers shaped like [1.5, -10.0711]"),
     ("[survey]\noutput = '/proc/no/such/x.nc'", "[survey].output: cannot write to /proc/no/such"),
     ("[survey]\noutput = 'tests'", "[survey].output: tests is a folder; give a file name"),

@@ -126,6 +126,25 @@ def test_a_first_run_starts_the_workers_first_and_gives_the_same_archive(tmp_pat
     assert ran.exists()
 
 
+def test_the_workers_build_the_starts_of_their_cells(tmp_path, reference, monkeypatch):
+    """A grid's starts are built where its cells are integrated: the driver builds only
+    the grid's corners (a bad value at the end of a range stops the survey before any
+    work) and its first start (the kernels' warm-up), so that a grid of millions of cells
+    starts at once -- and the archive is the same."""
+    import survey.pipeline.cells as cells
+    built, real = [], cells.build_starts
+
+    def counted(config, ids=None):
+        built.extend(ids)
+        return real(config, ids)
+
+    monkeypatch.setattr(cells, "build_starts", counted)
+    cfg = write_config(tmp_path, "ref", chunk=5, workers=2)
+    assert_same_data(run(cfg), reference[1])
+    # the corners of 12 x 2 cells, then the first start (found, then warmed up on)
+    assert sorted(built) == [0, 0, 0, 1, 22, 23]
+
+
 def test_the_same_start_gives_the_same_numbers_in_any_grid(tmp_path, reference):
     """Seeds follow the start, not the cell index: delta = ref[6] in a grid of one cell is
     the reference's cell (6, 0) bit for bit (its deviation vectors and perturbed start
