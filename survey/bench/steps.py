@@ -143,6 +143,100 @@ def _plain_dop853(z, t1, tol, h):
     return attempts, acc, y
 
 
+class _Counted(float):
+    """A float that counts the arithmetic done with it (`step_flops`)."""
+    ops = 0
+
+    def _op(f):
+        def op(a, b):
+            _Counted.ops += 1
+            return _Counted(f(float(a), float(b)))
+        return op
+
+    __add__ = __radd__ = _op(float.__add__)
+    __sub__ = _op(float.__sub__)
+    __rsub__ = _op(float.__rsub__)
+    __mul__ = __rmul__ = _op(float.__mul__)
+    __truediv__ = _op(float.__truediv__)
+    __rtruediv__ = _op(float.__rtruediv__)
+
+    def __neg__(a):             # a sign flip, no arithmetic
+        return _Counted(-float(a))
+
+
+def step_flops(n=16, n_err=8) -> tuple[int, int]:
+    """Floating-point operations (an FMA two) of one DOP853 step of the paper's reduced
+    system with a tangent vector (n components, the first n_err error-controlled): the 12
+    right-hand sides, counted by running `_plain_rhs`'s source on counting numbers (a
+    square root one operation), and the stage sums from the tableau -- a stage whose row
+    has m terms costs 2m + 1 a component (m products, m - 1 sums, the multiply-add of h),
+    the solution's row the same, the error norm 45 an error-controlled component (1/sk: a
+    multiply-add and a division; the solution's sum again, 15; three multiply-adds and a
+    product for the 3rd-order estimate, the 8 terms of ER and a product for the 5th; two
+    squares and two sums). Returns (right-hand sides, stage sums and norm)."""
+    import types as pytypes
+
+    class CountingMath:
+        @staticmethod
+        def sqrt(x):
+            _Counted.ops += 1
+            return _Counted(math.sqrt(float(x)))
+
+    f = _plain_rhs.py_func
+    counted = pytypes.FunctionType(f.__code__, {**f.__globals__, "math": CountingMath})
+    y = [_Counted(0.3 + 0.1 * i) for i in range(n)]
+    _Counted.ops = 0
+    counted(y, [0.0] * n)
+    rhs = 12 * _Counted.ops
+    rows = (A2, A3, A4, A5, A6, A7, A8, A9, A10, A11, A12, B)
+    combos = n * sum(2 * len(idx) + 1 for idx, _ in rows) + 45 * n_err
+    return rhs, combos
+
+
+@leaf
+def _fma_chains(x, reps, a, b):
+    """reps rounds of 8 multiply-adds x[i] = fma(x[i], a, b) on each of x's lanes: x.size
+    independent chains in a flat array, as the lanes' loops run them, each value kept in a
+    register for its 8 (the core's peak FMA rate, `fma_peak`)."""
+    for _ in range(reps):
+        for i in range(x.size):
+            v = x[i]
+            for _ in range(8):
+                v = fma(v, a, b)
+            x[i] = v
+    return x[0]
+
+
+def fma_peak(repeats=5, full_width=False) -> float:
+    """The core's peak rate of floating-point operations (an FMA two) in vectorised
+    multiply-adds: 64 independent chains (enough to cover an FMA's latency on both
+    pipes), best of `repeats`; at the vector width survey compiles for, or (full_width)
+    at the widest the core has, measured in a process compiled for it (an AVX-512 core
+    that survey runs at 256 bits: machine.jit.vector_width)."""
+    if full_width:
+        import subprocess
+        import sys
+        import tempfile
+
+        from llvmlite import binding as llvm
+
+        from .common import user_env
+        features = llvm.get_host_cpu_features()
+        if not features.get("avx512f"):
+            return fma_peak(repeats)
+        with tempfile.TemporaryDirectory() as cache:
+            env = user_env(NUMBA_CACHE_DIR=cache, NUMBA_CPU_NAME=llvm.get_host_cpu_name(),
+                           NUMBA_CPU_FEATURES=features.flatten() + ",-prefer-256-bit")
+            code = f"from survey.bench.steps import fma_peak; print(fma_peak({repeats}))"
+            res = subprocess.run([sys.executable, "-c", code], env=env, check=True,
+                                 capture_output=True, text=True)
+        return float(res.stdout.split()[-1])
+    x, reps = np.full(64, 0.5), 100_000
+    _fma_chains(x, 1, 0.999999, 1e-7)
+    best, _ = best_time(lambda: _fma_chains(x, reps, 0.999999, 1e-7), repeats)
+    return 2 * 8 * x.size * reps / best
+
+
 def plain_step(t_final, repeats):
     """ns per attempted step of `_plain_dop853` on the chaotic orbit of CASES, with a
     tangent vector (best of `repeats`), its steps, and its relative motion and survey's at
@@ -219,4 +313,22 @@ def step_costs(t_final=2000.0, repeats=5, lanes=(1, 4, 8, 16), out=print):
         f"function, the right-hand side inlined, no events, samples or lanes): {plain:.0f} ns "
         f"per attempted step ({plain_steps} steps); survey's one orbit alone {alone:.0f} ns, "
         f"{alone / plain:.2f}x (target <= 0.45 us)")
-    return rows, plain
+    rhs_flops, sum_flops = step_flops()
+    peak, full = fma_peak(repeats), fma_peak(repeats, full_width=True)
+    limit = 1e9 * (rhs_flops + sum_flops) / peak
+    widest = max(lanes)
+    _, _, _, steps, t_all, t_rhs, t_comb = next(
+        r for r in rows if r[0] == CASES[0][0] and r[1] == 1 and r[2] == widest)
+    step, arithmetic = 1e9 * t_all / steps, 1e9 * (t_rhs + t_comb) / steps
+    out(f"the machine's limit: {rhs_flops + sum_flops} floating-point operations an "
+        f"orbit-step with a tangent ({rhs_flops} in the 12 right-hand sides, {sum_flops} in "
+        f"the stage sums and error norm: bench.steps.step_flops) at this core's peak of "
+        f"{peak / 1e9:.1f} Gflop/s in vectorised multiply-adds (bench.steps.fma_peak) = "
+        f"{limit:.0f} ns; survey in {widest} lanes {step:.0f} ns, {step / limit:.2f}x the "
+        f"limit (target <= 2.5x), of which its stage and right-hand-side loops alone "
+        f"{arithmetic:.0f} ns ({arithmetic / limit:.2f}x)" + (
+            "" if full < 1.2 * peak else
+            f"; at the core's full vector width (peak {full / 1e9:.1f} Gflop/s, survey's "
+            f"lanes measured narrower: machine.jit.vector_width) the limit is "
+            f"{limit * peak / full:.0f} ns, survey {step * full / peak / limit:.2f}x it"))
+    return rows, plain, limit
