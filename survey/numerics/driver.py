@@ -140,9 +140,7 @@ def _start(k, j, ln, out, y0s, rows, t0, t1, model, n_tan, n_err,
            near, thin):
     """Job j into lane k: its start, first evaluation, samples at t0, events' first values
     and closest approaches, and first step. Returns False if the job ended at once
-    (nonfinite start, zero span). Once a job, so compiled apart (a leaf): inlined into
-    _run it cost a first run 9 s of compiling and no step measurably less (`bench --only
-    step`)."""
+    (nonfinite start, zero span). Once a job: a leaf (machine.jit)."""
     L = ln.job.size
     nf = y0s.shape[1]
     masses, d = model.masses, model.d
@@ -390,7 +388,7 @@ def _record(k, ln, out, rows, t0, t1, masses, d, n, n_tan, rb, megno, events, ma
     return RUNNING
 
 
-@helper
+@leaf
 def _fine_sample(sample, at, F, y, ynew, t, h, t_new, n, yd, rb):
     """The orbit's state at time `at` of the step [t, t_new] (t + h but for the last) from
     its dense output (F, y), into `sample` (in full: `put_sample`)."""
@@ -683,7 +681,7 @@ def _run(ln, out, y0s, rows, model, control, recording, next_job, iterations, no
 # dop853's step control, tangents' norms and growth terms).
 
 
-@helper
+@leaf
 def put_sample(sample, src, n_eval, rb):
     """A sample of the state src (n_eval components): as it is, or a reduced one (rb: the
     mass ratios) in full blocks of 12, the third body rebuilt as `integrate.Frame.full`

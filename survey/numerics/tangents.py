@@ -14,7 +14,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..machine import portable
-from ..machine.jit import helper, lanes
+from ..machine.jit import helper, lanes, leaf
 from .dop853 import norm_block
 
 
@@ -103,7 +103,7 @@ def accumulate(ends, acc, NW, L, k, n_tan, t0, t_old, t, megno):
     acc[0], acc[1], acc[2] = L_prev, int_L, Y_prev
 
 
-@helper
+@leaf
 def sample_at(row, ends, acc, src, n, n_tan, rb, part, elapsed, megno):
     """The accumulators at an output time inside the step after the last step end (`part`
     of it past that end, `elapsed` since t0) into a sample's row: the logs as they stand
