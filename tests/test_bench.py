@@ -19,8 +19,10 @@ def test_bench_parts_run_and_print_their_ratios(tmp_path):
     bench.fixed_costs(folder=str(tmp_path), repeats=1, out=lines.append, cold=False)
     rows = bench.interaction_terms(t_final=2.0, repeats=1, out=lines.append)
     assert all(r["same"] for r in rows)     # the two paths give the same orbit
-    steps, plain = bench.step_costs(t_final=2.0, repeats=1, lanes=(1, 16), out=lines.append)
-    assert plain > 0 and "plain scalar code" in lines[-1]
+    steps, plain, limit = bench.step_costs(t_final=2.0, repeats=1, lanes=(1, 16),
+                                           out=lines.append)
+    assert plain > 0 and "plain scalar code" in lines[-2]
+    assert limit > 0 and "the machine's limit" in lines[-1] and "16 lanes" in lines[-1]
     # the plain baseline integrates the orbit survey integrates (8 relative components)
     _, _, y, ref = bench.plain_step(t_final=20.0, repeats=1)
     assert np.max(np.abs(y - ref)) < 1e-9
@@ -29,6 +31,10 @@ def test_bench_parts_run_and_print_their_ratios(tmp_path):
     assert all(r[3] > 0 and r[5] > 0 for r in steps)      # steps taken, RHS time measured
     busy = bench.refined_map(t_final=20.0, levels=1, folder=str(tmp_path), out=lines.append)
     assert busy["cells"] >= 63 and len(busy["idle"]) == 2
+    rows, saved, peak = bench.survey_scale(sizes=(4, 12), t_final=1.0, first=40_000,
+                                           folder=str(tmp_path), out=lines.append)
+    assert [r[0] for r in rows] == [4, 12] and saved > 0 and peak > 0
+    assert "first chunk saved" in lines[-1]
     newton = bench.newton_step(repeats=1, out=lines.append)
     assert [r[1] >= 2 for r in newton] == [True, True]    # converged in a few shooting runs
     text = "\n".join(lines)
@@ -68,3 +74,17 @@ def test_the_cold_runs_timer_hears_a_terminals_first_word():
     assert math.isnan(quiet[0]) and quiet[1] > 0.0
     with pytest.raises(RuntimeError, match="exited with 3"):
         bench.timed_command([sys.executable, "-c", "raise SystemExit(3)"])
+
+
+def test_the_step_flop_count_counts_arithmetic_not_sign_flips():
+    """step_flops counts by running code on numbers that count their arithmetic: a product,
+    a quotient, a sum and a difference are four; a negation none; the paper's right-hand
+    side with a tangent costs tens of operations an evaluation, a step's stage sums
+    thousands (2m + 1 a component for a row of m terms)."""
+    from survey.bench.steps import _Counted
+    x = [_Counted(v) for v in (2.0, 3.0, 4.0)]
+    _Counted.ops = 0
+    y = x[0] * x[1] + x[2] / 3.0 - (-x[0])
+    assert _Counted.ops == 4 and float(y) == 2.0 * 3.0 + 4.0 / 3.0 + 2.0
+    rhs, sums = bench.step_flops()
+    assert rhs % 12 == 0 and 40 < rhs // 12 < 200 and 1000 < sums < 5000

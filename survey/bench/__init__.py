@@ -28,10 +28,11 @@ from .costs import (
     newton_step,
     torus_overhead,
 )
-from .steps import plain_step, step_costs
+from .steps import fma_peak, plain_step, step_costs, step_flops
 from .surveys import refined_map, survey_memory, survey_scale, survey_scaling
 
-__all__ = ["CASES", "GeneralPath", "default_cell", "fixed_costs", "indicator_overhead",
-           "interaction_terms", "newton_step", "plain_step", "refined_map", "run",
-           "scan_vs_heyoka", "step_costs", "survey_memory", "survey_scale", "survey_scaling",
-           "timed_command", "torus_overhead", "vector_doubles"]
+__all__ = ["CASES", "GeneralPath", "default_cell", "fixed_costs", "fma_peak",
+           "indicator_overhead", "interaction_terms", "newton_step", "plain_step",
+           "refined_map", "run", "scan_vs_heyoka", "step_costs", "step_flops", "survey_memory",
+           "survey_scale", "survey_scaling", "timed_command", "torus_overhead",
+           "vector_doubles"]
