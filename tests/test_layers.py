@@ -177,6 +177,7 @@ NOT_VARIABLES = {
     ("pipeline/cells.py", "resonance_order"): "the [tori] threshold",
     ("pipeline/archive.py", "status"): "the git command",
     ("presentation/plots.py", "energy"): "the [initial] energy axis of a map",
+    ("bench/surveys.py", "energy"): "the [initial] energy axis of the scale bench's maps",
     ("presentation/report.py", "energy"): "the [initial] energy axis of a map",
     ("pipeline/families.py", "energy"): "an [equilibria] / [periodic] key, a family variable",
     ("pipeline/families.py", "angular_momentum"): "an [equilibria] key, a family variable",

@@ -7,6 +7,7 @@ import contextlib
 import math
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -272,6 +273,43 @@ def default_cell(t_final=2000.0, repeats=5, folder="results/bench", out=print):
     return rows
 
 
+def compile_times(config=None) -> list[tuple[str, float, float]]:
+    """Where a first run's compiling goes, by numba's own compile events: the kernels a
+    survey cell compiles (cells.warm_up and warm_beside, in this process) from an empty
+    cache, each function's (name, seconds with what it compiled, seconds of its own).
+    Run it in a process of its own with NUMBA_CACHE_DIR an empty folder (fixed_costs)."""
+    from numba.core import event
+
+    from ..pipeline.cells import CellTask, GridStarts, warm_beside, warm_up
+    from ..pipeline.config import load_config
+
+    class Listener(event.Listener):
+        def __init__(self):
+            self.open, self.rows = [], []
+
+        def on_start(self, ev):
+            f = ev.data["dispatcher"].py_func
+            self.open.append([f"{f.__module__.removeprefix('survey.')}.{f.__qualname__}",
+                              time.perf_counter(), 0.0])
+
+        def on_end(self, ev):
+            name, began, inner = self.open.pop()
+            took = time.perf_counter() - began
+            if self.open:
+                self.open[-1][2] += took
+            self.rows.append((name, took, took - inner))
+
+    config = load_config(config or str(Path(__file__).parents[1] / "default.toml"),
+                         check_output=False)
+    task, starts = CellTask.of(config), GridStarts(config)
+    first = starts.first(np.arange(config.n_cells))
+    listener = Listener()
+    with event.install_listener("numba:compile", listener):
+        warm_up(task, first, starts(first))
+        warm_beside(task, first, starts(first))
+    return listener.rows
+
+
 def fixed_costs(folder="results/bench", repeats=3, out=print, cold=True):
     """What a survey costs beside its cells: a 1-cell survey ('sides', default settings
     otherwise, t = 10) end to end with numba's disk cache warm, by phase, best of
@@ -288,7 +326,6 @@ def fixed_costs(folder="results/bench", repeats=3, out=print, cold=True):
             best = timings
     import subprocess
     import sys
-    from pathlib import Path
     toml = Path(folder) / "bench-1cell.toml"
     toml.write_text(f'[survey]\nname = "bench-1cell"\noutput = "{toml.with_suffix(".nc")}"\n'
                     '[initial]\nfamily = "sides"\n[integration]\nt_final = 10.0\n')
@@ -299,10 +336,18 @@ def fixed_costs(folder="results/bench", repeats=3, out=print, cold=True):
         subprocess.run(run, check=True, capture_output=True, env=user_env())
         command = min(command, time.perf_counter() - t)
     first = compiling = math.nan
+    rows = []
     if cold:
+        import json
         import tempfile
         with tempfile.TemporaryDirectory() as cache:
             first, compiling = timed_command(run, user_env(NUMBA_CACHE_DIR=cache))
+        with tempfile.TemporaryDirectory() as cache:
+            code = ("import json; from survey.bench.costs import compile_times; "
+                    "print(json.dumps(compile_times()))")
+            res = subprocess.run([sys.executable, "-c", code], check=True, text=True,
+                                 capture_output=True, env=user_env(NUMBA_CACHE_DIR=cache))
+            rows = json.loads(res.stdout.splitlines()[-1])
     out("")
     out(f"Fixed costs: a 1-cell survey ('sides', t = 10, warm cache, best of {repeats}), "
         "seconds")
@@ -311,7 +356,13 @@ def fixed_costs(folder="results/bench", repeats=3, out=print, cold=True):
         f"warm {command:.2f}" + (f"; cold (every kernel compiled into an empty cache) "
                                  f"{compiling:.1f}, its first word on the terminal after "
                                  f"{first:.2f}" if cold else ""))
-    best.update(command=command, cold=compiling, first_word=first)
+    if rows:
+        own = sorted(rows, key=lambda r: -r[2])
+        out(f"where compiling goes (the default survey's kernels in one process from an "
+            f"empty cache, numba's compile events; {sum(r[2] for r in rows):.1f} s in all): "
+            "seconds of its own (with what it compiled)")
+        out("  " + "; ".join(f"{name} {mine:.1f} ({took:.1f})" for name, took, mine in own[:8]))
+    best.update(command=command, cold=compiling, first_word=first, compiling=rows)
     return best
 
 
