@@ -127,12 +127,14 @@ def check(spec: OrbitSpec, where: str = "orbit", cli: bool = False) -> OrbitSpec
                                     or spec.potential_params):
         raise ConfigError(key_name("system"), "give either system or potential/"
                                               "potential_params, not both")
+    def spec_error(exc):
+        return ConfigError(_spec_key(exc.key, key_name, cli, spec.system is not None),
+                           str(exc).split(": ", 1)[1])
+
     try:
         config = spec.config()
-        starts = build_starts(config)
     except ConfigError as exc:
-        raise ConfigError(_spec_key(exc.key, key_name, cli, spec.system is not None),
-                          str(exc).split(": ", 1)[1]) from None
+        raise spec_error(exc) from None
     cells = spec.cells or tuple(range(config.n_cells))
     if len(cells) > MAX_ORBITS:
         raise ConfigError("--cell" if cli else key_name("params"),
@@ -146,7 +148,11 @@ def check(spec: OrbitSpec, where: str = "orbit", cli: bool = False) -> OrbitSpec
     if bad:
         raise ConfigError("--cell", f"{bad[0]} is not a cell of the grid (0.."
                                     f"{config.n_cells - 1})")
-    if all(np.isnan(starts[c, 0]) for c in cells):
+    try:        # the chosen cells' only: a grid of millions of cells has one picked
+        starts = build_starts(config, cells)
+    except ConfigError as exc:
+        raise spec_error(exc) from None
+    if np.all(np.isnan(starts[:, 0])):
         raise ConfigError(key_name("params"), "no start exists there (inaccessible: the "
                                               "potential energy exceeds the energy)")
     return spec
@@ -223,11 +229,10 @@ def run_orbits(spec: OrbitSpec) -> list[OrbitRun]:
     """Every orbit of a spec (one per cell of its set), each with one tangent vector,
     sampled at `samples` times; a cell without a start is skipped."""
     config = spec.config()
-    starts = build_starts(config)
+    cells = spec.cells or range(config.n_cells)
     t_eval = np.linspace(0.0, spec.t_final, spec.samples)
     runs = []
-    for cell in spec.cells or range(config.n_cells):
-        y0 = starts[cell]
+    for cell, y0 in zip(cells, build_starts(config, cells)):
         if np.isnan(y0[0]):
             continue
         system = config.system(cell)

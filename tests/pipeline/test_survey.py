@@ -145,6 +145,26 @@ def test_the_workers_build_the_starts_of_their_cells(tmp_path, reference, monkey
     assert sorted(built) == [0, 0, 0, 1, 22, 23]
 
 
+def test_orbit_of_a_cell_of_a_million_cell_grid_builds_that_cell_alone(tmp_path, monkeypatch):
+    """`orbit grid.toml --cell K` builds the start of cell K, not the grid's million: the
+    same start a survey of the grid gives it."""
+    import survey.pipeline.orbits as orbits
+    from survey.pipeline.cells import build_starts
+    built = []
+
+    def counted(config, ids=None):
+        built.append(list(ids))
+        return build_starts(config, ids)
+
+    monkeypatch.setattr(orbits, "build_starts", counted)
+    path = write_config(tmp_path, "big", num=1000, energy="{start = 60.0, stop = 120.0, "
+                                                        "num = 1000}")
+    spec = orbits.from_survey_config(path, cells=(123456,))
+    run, = orbits.run_orbits(spec)
+    assert built == [[123456], [123456]]            # checked, then run
+    assert run.y0.tobytes() == build_starts(load_config(path), [123456])[0].tobytes()
+
+
 def test_the_same_start_gives_the_same_numbers_in_any_grid(tmp_path, reference):
     """Seeds follow the start, not the cell index: delta = ref[6] in a grid of one cell is
     the reference's cell (6, 0) bit for bit (its deviation vectors and perturbed start
