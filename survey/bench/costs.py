@@ -303,10 +303,10 @@ def compile_times(config=None) -> list[tuple[str, float, float]]:
                          check_output=False)
     task, starts = CellTask.of(config), GridStarts(config)
     first = starts.first(np.arange(config.n_cells))
-    listener = Listener()
+    at, listener = starts(first), Listener()
     with event.install_listener("numba:compile", listener):
-        warm_up(task, first, starts(first))
-        warm_beside(task, first, starts(first))
+        warm_up(task, first, at)
+        warm_beside(task, first, at)
     return listener.rows
 
 

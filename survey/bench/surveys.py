@@ -146,6 +146,7 @@ def survey_scale(sizes=(1_000, 10_000, 100_000), t_final=5.0, first=1_000_000,
     run as a user runs it, until its first chunk is saved: the seconds to that and the
     driver's peak memory (its starts are built by the workers, chunk by chunk)."""
     import os
+    import shutil
     import signal
     import subprocess
     import sys
@@ -195,7 +196,6 @@ def survey_scale(sizes=(1_000, 10_000, 100_000), t_final=5.0, first=1_000_000,
     finally:
         os.killpg(proc.pid, signal.SIGKILL)
         proc.wait()
-    import shutil
     shutil.rmtree(chunks, ignore_errors=True)
     out(f"a grid of {config.n_cells:,} cells (python -m survey run, warm kernel cache): its "
         f"first chunk saved {saved:.1f} s after the command, the driver's peak memory "
