@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import textwrap
 from pathlib import Path
 
 from .catalog import defaults
@@ -13,8 +14,31 @@ COMPILING_COMMANDS = ("run", "reproduce", "verify", "orbit", "bench", "equilibri
                       "periodic")
 # the embedded default survey (`python -m survey run`)
 DEFAULT_CONFIG = Path(__file__).parent / "default.toml"
-BENCH_PARTS = ["scan", "cell", "fixed", "integrator", "step", "indicators", "tori", "terms",
-               "survey", "refine", "memory", "scale", "newton"]
+# the parts of `bench`, in the order they run, with what each measures (its --help)
+BENCH_PARTS = {
+    "scan": "a 101-orbit grid end to end against heyoka's SIMD batch ensemble (on the same "
+            "work, and survey's default with its re-runs of verdicts in doubt)",
+    "cell": "a default survey cell against its orbit with one tangent vector",
+    "fixed": "what a 1-cell survey costs by phase and on the command line, warm and cold "
+             "(every kernel compiled into an empty cache, with the time to its first word "
+             "and where the compiling goes, function by function)",
+    "integrator": "survey's DOP853 against scipy's DOP853 and heyoka on the paper's orbits",
+    "step": "where a DOP853 step's time goes (right-hand side, stage combinations and error "
+            "norm, the rest of the loop) and the machine's limit (the step's floating-point "
+            "operations, counted, at the core's measured peak multiply-add rate)",
+    "indicators": "what MEGNO and a section add to an orbit",
+    "tori": "what the torus analysis adds to a cell",
+    "terms": "the paper's system on its own compiled path against the general path of sums "
+             "of terms, and other systems (LJAT, 3-D, four bodies) alone and in SIMD lanes",
+    "survey": "the scaling on 1 vs 2 workers",
+    "refine": "how busy a refined map keeps 2 workers (each one's idle share of the compute "
+              "phase)",
+    "memory": "the driver's peak memory for 10^4 and 10^5 cells",
+    "scale": "the cost per cell of (delta, energy) maps of 10^3 to 10^5 cells, and how soon "
+             "a 10^6-cell grid saves its first chunk, with the driver's memory then",
+    "newton": "a step of the periodic-orbit shooting against the orbit with its full "
+              "tangent block",
+}
 
 
 def _bench(args):
@@ -41,8 +65,53 @@ def _bench(args):
              "newton": bench.newton_step}
     for name in BENCH_PARTS:
         if name in (args.only or BENCH_PARTS):
-            parts[name]()
+            if args.record is None:
+                parts[name]()
+                continue
+            import contextlib
+            import io
+            import time
+
+            printed, start = io.StringIO(), time.time()
+            with contextlib.redirect_stdout(Tee(sys.stdout, printed)):
+                parts[name]()
+            print(f"recorded {record_bench(name, printed.getvalue(), args.record, start)}")
     return 0
+
+
+class Tee:
+    """A text stream writing to several (what a bench part prints, shown and recorded)."""
+
+    def __init__(self, *streams):
+        self.streams = streams
+
+    def write(self, text):
+        for s in self.streams:
+            s.write(text)
+        return len(text)
+
+    def flush(self):
+        for s in self.streams:
+            s.flush()
+
+
+def record_bench(part: str, printed: str, folder, started: float) -> Path:
+    """What a bench part printed, as the page docs/bench/PART.md: the output itself, never
+    retyped, with when, where and by which commit it was measured."""
+    import os
+    import time
+
+    from .pipeline.archive import git_commit, machine
+    when = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(started))
+    text = (f"## `{part}`\n\n`python -m survey bench --only {part}`, recorded {when} at "
+            f"commit `{git_commit()}` on {machine()}, {os.cpu_count()} cores.\n\n"
+            f"```text\n{printed.rstrip()}\n```\n")
+    path = Path(folder) / f"{part}.md"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    tmp.replace(path)
+    return path
 
 
 def _orbit(args):
@@ -160,9 +229,13 @@ def _plot(args):
     out = ensure_folder(args.out or Path(args.archive).parent, "--out")
     with open_archive(args.archive) as ds:
         _survey_archive(args.archive, ds, "plot")
+        from .pipeline.progress import notice
         from .presentation import plots
-        figs = plots.figures(_with_report_attributes(ds), args.var or None)
-        for path in plots.save(figs, out, Path(args.archive).stem):
+        ds = _with_report_attributes(ds)
+        with notice("drawing the figures", sys.stderr.isatty()):
+            figs = plots.figures(ds, args.var or None)
+            paths = plots.save(figs, out, Path(args.archive).stem)
+        for path in paths:
             print(f"wrote {path}")
     return 0
 
@@ -178,8 +251,13 @@ def _with_report_attributes(ds):
             ds.attrs["config"], check_output=False).resolved_text)
     if "special_cells" in ds.attrs:
         return ds
+    from .pipeline.progress import notice, watch_compiles
     from .pipeline.special import report_attributes
-    return ds.assign_attrs(report_attributes(ds))
+    if sys.stderr.isatty():
+        watch_compiles()
+    with notice("solving the special solutions the cells start on (an archive written "
+                "before survey stored them)", sys.stderr.isatty()):
+        return ds.assign_attrs(report_attributes(ds))
 
 
 def _survey_archive(path, ds, command: str):
@@ -195,6 +273,7 @@ def _report(args):
     import contextlib
 
     from .pipeline.archive import check_archives, open_archive
+    from .pipeline.progress import notice
     from .presentation import report
     from .pipeline.resources import ensure_folder
     archive = Path(args.archive)
@@ -202,7 +281,9 @@ def _report(args):
     with open_archive(archive) as ds, contextlib.ExitStack() as stack:
         _survey_archive(archive, ds, "report")
         checks = {v: stack.enter_context(open_archive(f)) for v, f in check_archives(archive)}
-        path = report.write(_with_report_attributes(ds), out, archive.stem, checks=checks)
+        ds = _with_report_attributes(ds)
+        with notice("writing the report and drawing its figures", sys.stderr.isatty()):
+            path = report.write(ds, out, archive.stem, checks=checks)
     print(f"wrote {path} and its figures")
     return 0
 
@@ -358,8 +439,11 @@ def _survey(config, command, summary=False, write_report=True, **kw) -> Path:
         if summary:
             print("\n".join(summarise(ds)))
         if write_report:      # imported here: matplotlib alone takes 0.3 s to import
+            from .pipeline.progress import notice
             from .presentation import report
-            written = report.write(ds, path.parent, path.stem, checks=others)
+            with notice("writing the report and drawing its figures",
+                        kw.get("progress") is not False and sys.stderr.isatty()):
+                written = report.write(ds, path.parent, path.stem, checks=others)
             if summary:
                 print(f"report and figures: {written} (and {path.stem}_*.png beside it)")
     return path
@@ -391,6 +475,33 @@ def _verify(args):
     return 0 if ok else 1
 
 
+DESCRIPTIONS = {
+    "equilibria": "The relative equilibria (rigid rotations, or rest) of a config's [system] "
+                  "near its one [initial] start, [equilibria] starts seeded configurations "
+                  "and (three bodies in the plane) a cover of the shape sphere, distinct up "
+                  "to rotations, reflections and permutations: shape, rotation rate, E, J, "
+                  "the reduced linearisation's eigenvalues, normal-mode frequencies with "
+                  "Krein signs, stable or not. With [equilibria] parameter: the family along "
+                  "it and where its stability changes, each member checked.",
+    "periodic": "The periodic orbit ([periodic] rotating = true: relative periodic) through "
+                "a config's [initial] start by Newton shooting from [periodic] period (or a "
+                "Lyapunov orbit of an equilibrium's normal mode: mode): the period, the Newton "
+                "residuals, the non-trivial Floquet multipliers, elliptic / hyperbolic / "
+                "complex unstable, the rates at which nearby orbits leave, Greene's residues. "
+                "With [periodic] parameter: the family along it with its folds and "
+                "bifurcations, each member checked.",
+    "orbit": "Integrate orbits with a tangent vector and print E, J, conservation errors, "
+             "steps, the finite-time Lyapunov exponent, the ranges of P, |A| and I, each "
+             "pair's closest approach with its time and the bound P_max. The orbit is a "
+             "family member given by flags; or FILE is a survey config (its [system], "
+             "[initial] and tolerance: all its cells, up to 8, or those given by --cell); or "
+             "FILE is an orbit workflow ([[orbit]] and [[plane]] tables, with --plot). With "
+             "--plot DIR the paper's single-orbit figures: paths with the disk of radius "
+             "P_max/3, inequity space, P and A against time, side lengths with near "
+             "collisions.",
+}
+
+
 def build_parser():
     parser = argparse.ArgumentParser(prog="python -m survey",
                                      description="Order and chaos in triplet-interaction "
@@ -398,7 +509,13 @@ def build_parser():
     sub = parser.add_subparsers(dest="command", required=True)
     r = sub.add_parser("run", help="run a survey: integrate every cell of a TOML grid on dask "
                                    "workers and write one NetCDF archive (no config: the "
-                                   "embedded default)")
+                                   "embedded default)",
+                       description="Integrate every cell of a TOML grid on dask workers and "
+                                   "write one NetCDF archive, then its figures and report "
+                                   "beside it; a bare `run` uses the embedded default "
+                                   "(survey/default.toml). `python -m survey grid.toml` is "
+                                   "`run grid.toml`. An interrupted survey resumes from its "
+                                   "checkpoints when the same command runs again.")
     r.add_argument("config", nargs="?", help="survey TOML file (python -m survey FILE.toml "
                                               "is the same)")
     r.add_argument("--workers", type=int, help="local worker processes (default: [dask] "
@@ -410,26 +527,49 @@ def build_parser():
                                                            "the archive")
     r.set_defaults(func=_run)
     pl = sub.add_parser("plot", help="figures of an archive: maps, scans, the section, "
-                                     "convergence histories, the frequency map")
-    pl.add_argument("archive")
+                                     "convergence histories, the frequency map",
+                        description="The figures that fit the grid: for two axes maps of the "
+                                    "regime, MEGNO, FTLE, FLI and Birkhoff digits with "
+                                    "histograms (on a section grid the MEGNO map with the "
+                                    "crossings overlaid); for one axis the indicators with "
+                                    "their spread and the regime shaded behind; the section "
+                                    "crossings, one panel per shell, and for one shell a 3-D "
+                                    "slice of its 4-D section; for seeded starts per grid "
+                                    "point their regular share; convergence histories; the "
+                                    "frequency map with its resonance lines.")
+    pl.add_argument("archive", help="a survey archive (.nc)")
     pl.add_argument("--out", help="folder (default: the archive's)")
     pl.add_argument("--var", action="append", help="only these indicators (repeatable)")
     pl.set_defaults(func=_plot)
     rp = sub.add_parser("report", help="the KAM-torus detection report of an archive "
-                                       "(Markdown, with its figures)")
-    rp.add_argument("archive")
+                                       "(Markdown, with its figures)",
+                        description="The KAM-torus detection report (Markdown) with its "
+                                    "figures: what was run, the share of each regime, the "
+                                    "spread of the indicators over nearby orbits, where chaos "
+                                    "sets in, the tori with their frequencies and nearest "
+                                    "resonances, where the indicators agree, the thresholds "
+                                    "and why, conservation and failures. Every sentence is "
+                                    "computed from the archive.")
+    rp.add_argument("archive", help="a survey archive (.nc)")
     rp.add_argument("--out", help="folder (default: the archive's)")
     rp.set_defaults(func=_report)
     rr = sub.add_parser("reproduce", help="run every workflow in workflows/ and the "
                                           "embedded default, and write results/: archives, "
-                                          "figures, reports")
-    rr.add_argument("--workflows", default="workflows")
+                                          "figures, reports",
+                        description="Run every workflow in workflows/ and the embedded "
+                                    "default into results/.staging, then replace a file in "
+                                    "results/ only where its content changed (an archive's "
+                                    "results, a report's text without its provenance line, a "
+                                    "figure's bytes), so unchanged code leaves the checkout "
+                                    "clean.")
+    rr.add_argument("--workflows", default="workflows",
+                    help="the folder of workflows (default workflows)")
     rr.add_argument("--results", default="results", help="the folder to update (default results)")
     rr.add_argument("--check", action="store_true",
                     help="change nothing; exit 1 naming the files that are not what the "
                          "current code makes")
     rr.add_argument("--only", action="append", help="only these workflows (file stem)")
-    rr.add_argument("--no-progress", action="store_true")
+    rr.add_argument("--no-progress", action="store_true", help="no progress bars")
     rr.set_defaults(func=_reproduce)
     for name, what in (("equilibria", "relative equilibria (rigid rotations, or rest) of a "
                                       "config's system near its [initial] start, with their "
@@ -437,7 +577,8 @@ def build_parser():
                        ("periodic", "the periodic orbit (or relative periodic orbit) through "
                                     "a config's [initial] start, by Newton shooting, with its "
                                     "Floquet multipliers")):
-        sp = sub.add_parser(name, help=f"{what}; table [{name}]")
+        sp = sub.add_parser(name, help=f"{what}; table [{name}]",
+                            description=DESCRIPTIONS[name])
         sp.add_argument("config", help=f"TOML file: [system], one [initial] start, [{name}]")
         sp.add_argument("--json", action="store_true", help="print the numbers as JSON")
         sp.add_argument("--output", help=f"with [{name}] parameter: write the family (NetCDF)")
@@ -446,24 +587,49 @@ def build_parser():
                                       "stored config and compare bit for bit (a family "
                                       "archive: every member; a manifold archive: its "
                                       "orbits, a sample of its points and its first "
-                                      "homoclinic point)")
-    v.add_argument("archive")
+                                      "homoclinic point)",
+                       description="Check a survey archive against the config stored in it "
+                                   "(the config's sha256, the grid coordinates, the "
+                                   "variables, their dimensions and attributes), then "
+                                   "recompute K cells (first, last, random) and compare every "
+                                   "reproducible variable bit for bit, on any machine (the "
+                                   "archive names the one that made it). A family archive "
+                                   "(equilibria/periodic --output) is computed again whole "
+                                   "and compared member by member; a manifold archive "
+                                   "([[plane]] manifolds) by its orbits, a sample of its "
+                                   "points and its first homoclinic point. Exit 0 if all "
+                                   "agree, 1 if not.")
+    v.add_argument("archive", help="a survey, family or manifold archive (.nc)")
     v.add_argument("--cells", type=int, default=8,
                    help="cells (a manifold archive: points) to recompute (default 8)")
     v.set_defaults(func=_verify)
-    b = sub.add_parser("bench", help="survey's DOP853 vs scipy and heyoka on the paper's orbits")
-    b.add_argument("--t-final", type=float, default=defaults.T_FINAL)
+    b = sub.add_parser("bench", help="speed as ratios against baselines measured in the same "
+                                     "run (pip install -e '.[bench]')",
+                       formatter_class=argparse.RawDescriptionHelpFormatter,
+                       description="Speed as ratios against baselines measured in the same "
+                                   "run, printed beside\neach target. Parts (--only):\n\n"
+                                   + "\n".join(textwrap.fill(f"{k}: {v}", 88,
+                                                              subsequent_indent="    ")
+                                                for k, v in BENCH_PARTS.items()))
+    b.add_argument("--t-final", type=float, default=defaults.T_FINAL,
+                   help=f"span of the timed orbits (default {defaults.T_FINAL:g})")
     b.add_argument("--t-scipy", type=float, default=50.0,
                    help="span scipy is run over before extrapolating (default 50)")
-    b.add_argument("--repeats", type=int, default=2)
-    b.add_argument("--only", action="append", choices=BENCH_PARTS,
+    b.add_argument("--repeats", type=int, default=2,
+                   help="runs of each timing, the best kept (default 2)")
+    b.add_argument("--only", action="append", choices=list(BENCH_PARTS),
                    help="run only these parts (repeatable)")
+    b.add_argument("--record", nargs="?", const="docs/bench", metavar="DIR",
+                   help="also write what each part printed, with the date and the machine, "
+                        "to DIR/PART.md (default docs/bench: the documentation's "
+                        "performance page)")
     b.set_defaults(func=_bench)
     o = sub.add_parser("orbit", help="integrate orbits -- a family member given by flags, "
                                      "the cells of a survey config, or an orbit workflow -- "
                                      "and report conservation, the Lyapunov exponent, the "
                                      "ranges of P, |A|, I and the closest approaches; --plot "
-                                     "DIR draws the paper's single-orbit figures")
+                                     "DIR draws the paper's single-orbit figures",
+                       description=DESCRIPTIONS["orbit"])
     o.add_argument("workflow", nargs="?", metavar="FILE",
                    help="an orbit workflow ([[orbit]] tables) or a survey config (its "
                         "[system], [initial] and tolerance; --cell picks grid cells)")
@@ -504,6 +670,8 @@ def main(argv=None):
         if not kernels_cached():
             print("survey: first run here: the kernels compile before the work starts "
                   f"({FIRST_COMPILE}, once)", file=sys.stderr, flush=True)
+        from .pipeline.progress import watch_compiles
+        watch_compiles()        # any other kernel a command compiles says so too
     try:
         if getattr(args, "workers", None) is not None and args.workers < 1:
             raise ConfigError("--workers", f"must be >= 1, got {args.workers}")

@@ -1,6 +1,7 @@
 """The benchmark's parts in miniature: they run, and print the rows the performance issue
 asks for (the speed numbers themselves are never asserted: they live in the bench)."""
 import math
+import re
 import sys
 
 import numpy as np
@@ -16,7 +17,8 @@ def test_bench_parts_run_and_print_their_ratios(tmp_path):
     bench.default_cell(t_final=2.0, repeats=1, folder=str(tmp_path), out=lines.append)
     # the cold run compiles every kernel into an empty cache (half a minute on 2 cores; the
     # portability test compiles them all cold already): its timer is checked on its own below
-    bench.fixed_costs(folder=str(tmp_path), repeats=1, out=lines.append, cold=False)
+    bench.fixed_costs(folder=str(tmp_path), repeats=1, out=lines.append, cold=False,
+                      commands=[("orbit", ["orbit", "--family", "sides", "--t-final", "1"])])
     rows = bench.interaction_terms(t_final=2.0, repeats=1, out=lines.append)
     assert all(r["same"] for r in rows)     # the two paths give the same orbit
     steps, plain, limit = bench.step_costs(t_final=2.0, repeats=1, lanes=(1, 16),
@@ -62,14 +64,18 @@ def test_bench_parts_run_and_print_their_ratios(tmp_path):
     assert "Newton shooting: one step" in text and "largest idle share" in text
     assert "general/own" in text and "Fixed costs" in text and "shutdown" in text and "python -m survey run" in text
     assert "warm " in text and "cold (every" not in text
+    assert "Every command on a terminal" in text and re.search(
+        r"\n  orbit +warm +\d+\.\d\d / +\d+\.\d\d / ", text)
+    assert "longest silence of any command" in text
 
 
 def test_the_cold_runs_timer_hears_a_terminals_first_word():
     """bench's `_timed_command` (the cold run's clock) gives the command a terminal for its
     stderr and times its first word there; a command that fails raises."""
     speak = [sys.executable, "-c", "import os, sys\nif os.isatty(2): sys.stderr.write('x')"]
-    first, total = bench.timed_command(speak)
+    first, total, silence = bench.timed_command(speak)
     assert 0.0 < first <= total             # NaN (never spoke) fails
+    assert first <= silence <= total
     quiet = bench.timed_command([sys.executable, "-c", "pass"])
     assert math.isnan(quiet[0]) and quiet[1] > 0.0
     with pytest.raises(RuntimeError, match="exited with 3"):

@@ -150,9 +150,10 @@ def unsourced(text: str, sources: str) -> list[str]:
 def number_sources() -> str:
     """Where a typed number may come from: the paper, the workflows, the embedded default
     and the configuration reference (SCHEMA's defaults)."""
-    from survey.pipeline.config import markdown_tables
+    from survey.reference import config_page
     texts = [(ROOT / "tests" / "data" / "triplet-interactions.tex").read_text(),
-             (ROOT / "survey" / "default.toml").read_text(), markdown_tables()]
+             (ROOT / "survey" / "default.toml").read_text(), config_page(),
+             (ROOT / "pyproject.toml").read_text()]
     texts += [p.read_text() for p in sorted((ROOT / "workflows").glob("*.toml"))]
     return "\n".join(texts)
 
@@ -168,24 +169,26 @@ def test_results_readme_is_what_reproduce_renders_and_every_number_has_a_source(
                         f"{missing}"
 
 
-SCIENCE = ("Chaos indicators and sections", "Tori, resonances and chaos", "Special solutions",
-           "Notes on the paper")
+# the docs' engineering history: each number measured when its change was made (dated
+# there), not a claim about the code as it is
+HISTORY = "## Engineering notes on speed"
 
 
-def test_the_readme_science_types_no_number_without_a_source():
-    """The README's science sections describe methods; what survey finds is in
-    results/README.md. A number they type must be the paper's, a workflow's, a default's
-    or a constant's of the code, one a test asserts, or one a generated file in results/
-    quotes -- so a measurement typed by hand and since changed fails."""
-    sections = re.split(r"(?m)^## ", (ROOT / "README.md").read_text())
-    science = [s for s in sections if s.startswith(SCIENCE)]
-    assert len(science) == len(SCIENCE)
+def test_the_docs_type_no_number_without_a_source():
+    """The README and the documentation describe methods; what survey finds is in
+    results/README.md and the reports, what it costs in the bench's recorded pages. A
+    number they type must be the paper's, a workflow's, a default's or a constant's of the
+    code, one a test asserts, or one a generated file in results/ quotes -- so a
+    measurement typed by hand and since changed fails."""
+    pages = [ROOT / "README.md"] + sorted(p for p in (ROOT / "docs").rglob("*.md")
+                                          if p.parent.name not in ("_generated", "bench"))
+    assert len(pages) > 20
     sources = "\n".join([number_sources()] + [p.read_text() for p in sorted(
         [*RESULTS.glob("*.md"), *(ROOT / "tests").rglob("*.py"),
          *(ROOT / "survey").rglob("*.py")])])
-    for section in science:
-        missing = unsourced(section, sources)
-        assert not missing, f"README, {section.splitlines()[0]!r}: {missing}"
+    for page in pages:
+        missing = unsourced(page.read_text().split(HISTORY)[0], sources)
+        assert not missing, f"{page.relative_to(ROOT)}: {missing}"
 
 
 def test_the_number_source_test_can_fail():

@@ -2,12 +2,9 @@
 run as a user runs it, with its phases."""
 from __future__ import annotations
 
-
 import math
 import time
-
-
-
+from typing import NamedTuple
 
 CASES = [("chaotic 'sides'", "sides", {}),
          ("regular equilateral d=3", "equilateral", {"delta": 3.0})]
@@ -66,17 +63,31 @@ def command_phases(argv) -> dict:
     return phases
 
 
-def timed_command(args, env=None):
-    """(seconds to the first output on stderr, seconds to the end) of a command whose
-    stderr is a terminal (the command line speaks to terminals only)."""
+class Timed(NamedTuple):
+    """A command run on a terminal: seconds to its first word, to its end, and the longest
+    it said nothing (from the start, between words, or before the end)."""
+
+    first: float
+    total: float
+    silence: float
+
+
+def timed_command(args, env=None, cwd=None) -> Timed:
+    """A command run with a terminal (120 columns, as a user's) for its stdout and stderr
+    -- the command line speaks to terminals only -- timed word by word: when it first
+    writes, when it ends, and its longest silence. A command that fails raises."""
+    import fcntl
     import os
     import pty
+    import struct
     import subprocess
+    import termios
     master, slave = pty.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 40, 120, 0, 0))
     start = time.perf_counter()
-    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=slave, env=env)
+    proc = subprocess.Popen(args, stdout=slave, stderr=slave, env=env, cwd=cwd)
     os.close(slave)
-    first = math.nan
+    first, last, silence = math.nan, 0.0, 0.0
     while True:
         try:
             chunk = os.read(master, 4096)
@@ -84,11 +95,13 @@ def timed_command(args, env=None):
             break
         if not chunk:
             break
+        now = time.perf_counter() - start
+        silence, last = max(silence, now - last), now
         if math.isnan(first):
-            first = time.perf_counter() - start
+            first = now
     proc.wait()
     total = time.perf_counter() - start
     os.close(master)
     if proc.returncode:
-        raise RuntimeError(f"{' '.join(args)} exited with {proc.returncode}")
-    return first, total
+        raise RuntimeError(f"{' '.join(map(str, args))} exited with {proc.returncode}")
+    return Timed(first, total, max(silence, total - last))

@@ -310,11 +310,12 @@ def compile_times(config=None) -> list[tuple[str, float, float]]:
     return listener.rows
 
 
-def fixed_costs(folder="results/bench", repeats=3, out=print, cold=True):
+def fixed_costs(folder="results/bench", repeats=3, out=print, cold=True, commands=None):
     """What a survey costs beside its cells: a 1-cell survey ('sides', default settings
     otherwise, t = 10) end to end with numba's disk cache warm, by phase, best of
     `repeats`; and (`cold`) the command line compiling every kernel into an empty cache
-    (what a new machine's first run costs), with the time to its first word."""
+    (what a new machine's first run costs), with the time to its first word; and whether
+    every command (or those given: command_talk) talks on a terminal."""
     from ..pipeline.sweep import run_survey
     cfg = {"survey": {"name": "bench-1cell", "output": f"{folder}/bench-1cell.nc"},
            "initial": {"family": "sides"}, "integration": {"t_final": 10.0}}
@@ -341,7 +342,7 @@ def fixed_costs(folder="results/bench", repeats=3, out=print, cold=True):
         import json
         import tempfile
         with tempfile.TemporaryDirectory() as cache:
-            first, compiling = timed_command(run, user_env(NUMBA_CACHE_DIR=cache))
+            first, compiling, _ = timed_command(run, user_env(NUMBA_CACHE_DIR=cache))
         with tempfile.TemporaryDirectory() as cache:
             code = ("import json; from survey.bench.costs import compile_times; "
                     "print(json.dumps(compile_times()))")
@@ -362,8 +363,58 @@ def fixed_costs(folder="results/bench", repeats=3, out=print, cold=True):
             f"empty cache, numba's compile events; {sum(r[2] for r in rows):.1f} s in all): "
             "seconds of its own (with what it compiled)")
         out("  " + "; ".join(f"{name} {mine:.1f} ({took:.1f})" for name, took, mine in own[:8]))
-    best.update(command=command, cold=compiling, first_word=first, compiling=rows)
+    best.update(command=command, cold=compiling, first_word=first, compiling=rows,
+                talk=command_talk(folder, cold=cold, commands=commands, out=out))
     return best
+
+
+def talking_commands(folder) -> list[tuple[str, list[str]]]:
+    """Every command a user runs, as (name, arguments) in an order that makes each one's
+    input first: the default survey, its report, figures and verification, an orbit, the
+    relative equilibria and a periodic orbit of shipped workflows, and reproduce's default
+    into a folder of its own."""
+    folder = Path(folder).resolve()
+    archive, flows = str(folder / "talk" / "default.nc"), Path(__file__).parents[2] / "workflows"
+    return [("run", ["run", "--output", archive]),
+            ("report", ["report", archive, "--out", str(folder / "talk" / "report")]),
+            ("plot", ["plot", archive, "--out", str(folder / "talk" / "plot")]),
+            ("verify", ["verify", archive, "--cells", "2"]),
+            ("orbit", ["orbit", "--family", "sides", "--t-final", "100"]),
+            ("equilibria", ["equilibria", str(flows / "rotating_triangle_equilibria.toml")]),
+            ("periodic", ["periodic", str(flows / "figure_eight_periodic.toml")]),
+            ("reproduce", ["reproduce", "--only", "default", "--workflows", str(flows),
+                           "--results", str(folder / "talk" / "results")])]
+
+
+def command_talk(folder, cold=True, commands=None, out=print) -> dict:
+    """Whether every command talks on a terminal: each run as a user runs it, with a
+    terminal for its output, warm (numba's cache holding its kernels) and (`cold`) with an
+    empty cache of its own, timed word by word -- its first word and its longest silence
+    (the target: none over 2 s)."""
+    import sys
+    import tempfile
+    commands = commands or talking_commands(folder)
+    (Path(folder) / "talk").mkdir(parents=True, exist_ok=True)
+    rows = {}
+    for name, args in commands:
+        argv = [sys.executable, "-m", "survey", *args]
+        cold_run = None
+        if cold:
+            with tempfile.TemporaryDirectory() as cache:
+                cold_run = timed_command(argv, user_env(NUMBA_CACHE_DIR=cache))
+        timed_command(argv, user_env())             # fills the cache for the warm run
+        rows[name] = (cold_run, timed_command(argv, user_env()))
+    out("")
+    out("Every command on a terminal: first word / longest silence / whole, seconds "
+        "(target: silent at most 2 s)" + ("; cold: an empty kernel cache of its own" if cold
+                                          else ""))
+    for name, (c, w) in rows.items():
+        cold_text = f"cold {c.first:5.2f} / {c.silence:5.2f} / {c.total:6.1f}   " if c else ""
+        out(f"  {name:<11} {cold_text}warm {w.first:5.2f} / {w.silence:5.2f} / {w.total:6.1f}")
+    loudest = max(max(w.silence, c.silence if c else 0.0) for c, w in rows.values())
+    out(f"  longest silence of any command: {loudest:.2f} s "
+        f"({'met' if loudest <= 2.0 else 'not met'})")
+    return rows
 
 
 def newton_step(repeats=5, out=print):

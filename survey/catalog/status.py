@@ -1,5 +1,5 @@
 """Outcome codes of an integration and of a survey cell: one definition, used by the compiled
-integrator (as plain integers), the archive's CF flag variable and the README.
+integrator (as plain integers), the archive's CF flag variable and the documentation's reference.
 
 Kept free of numba and numpy so that reading an archive never compiles anything.
 """

@@ -1,7 +1,7 @@
 """The archive's variables, each declared once: name, units, long name, fill, which cells
 carry it, how a cell's result fills it, whether it is reproducible. Everything else follows
 from VARIABLES: the arrays a task returns, how a cell fills them, the archive's variables and
-attributes, the schema `verify` expects and the README's variable table.
+attributes, the schema `verify` expects and the documentation's variable reference.
 
 Dimensions: the grid axes (in the order the config writes them), then a variable's own:
 `crossing` (section points, NaN-padded, with n_crossings), `history_time` (convergence
@@ -333,19 +333,6 @@ def label(name: str) -> str:
     """The figure label of an archive variable or grid axis (its name if none is declared)."""
     symbol = BY_NAME[name].symbol if name in BY_NAME else ""
     return symbol or PARAMETER_SYMBOLS.get(name, name)
-
-
-def markdown_table() -> str:
-    """The README's table of archive variables."""
-    lines = ["| variable | meaning | units | dimensions beyond the grid | cells |",
-             "| --- | --- | --- | --- | --- |"]
-    for v in VARIABLES:
-        units = "flags" if v.name == "status" else v.units
-        extra = "spatial (3-D)" if v.name == "angular_momentum" else ", ".join(v.extra)
-        note = "" if v.reproducible else " (not reproducible)"
-        text = (v.long_name + note).replace("|", "\\|").replace("<", "&lt;").replace(">", "&gt;")
-        lines.append(f"| `{v.name}` | {text} | {units} | {extra} | {v.cells} |")
-    return "\n".join(lines)
 
 
 def history_times(t_final: float, points: int) -> np.ndarray:

@@ -72,7 +72,8 @@ def tangent(A: np.ndarray, previous: np.ndarray) -> np.ndarray:
 
 def follow(solve: Callable, x0: np.ndarray, to: float, steps: int, tests: dict[str, Callable],
            signature: Callable | None = None, bisect: float = 1e-9,
-           max_members: int = 1000, margin: Callable | None = None) -> Branch:
+           max_members: int = 1000, margin: Callable | None = None,
+           on_member: Callable | None = None) -> Branch:
     """The family from scaled x0 (its parameter held at x0[-1]) to the scaled parameter
     value `to`. The step advances the parameter by 1/steps where the family runs along it
     (the state by at most 0.1) and is halved where a step fails a check: the corrector
@@ -89,7 +90,8 @@ def follow(solve: Callable, x0: np.ndarray, to: float, steps: int, tests: dict[s
     the real line); a step along which one comes nearer its edge than it moves is halved
     too, down to EDGE_FLOOR of the nominal step, so that an index does not leave the band
     and come back between members unseen (findings.family_stability says where it still
-    might)."""
+    might). `on_member(count, share)`: called with each member found and the share of the
+    parameter's span from its start to `to` covered (a progress display)."""
     direction = np.zeros(x0.size)
     direction[-1] = np.sign(to - x0[-1])
     first = solve(x0, direction, linalg.dot(direction, x0))
@@ -127,6 +129,8 @@ def follow(solve: Callable, x0: np.ndarray, to: float, steps: int, tests: dict[s
             continue
         members.append(located.pop())
         jacobian = got[2]
+        if on_member is not None:
+            on_member(len(members), (members[-1][1][-1] - start) / (to - start))
         again = next((at for at in located if _seen(at, found)), None)
         if again is not None:
             return Branch(members, found, False, f"it comes back to the {again.test} it "
@@ -233,7 +237,8 @@ def _bisect(previous, xb, solve, name, test, bisect):
 def equilibrium_family(systems: Callable, start, p0: float, to: float, steps: int = 20,
                        angular_momentum: float | None = None,
                        rotation_rate: float | None = None, bisect: float = 1e-9,
-                       max_members: int = 1000, spin_parameter: bool = False):
+                       max_members: int = 1000, spin_parameter: bool = False,
+                       on_member: Callable | None = None):
     """The family of the relative equilibrium reached from positions `start` in
     systems(p0), followed by pseudo-arclength continuation in p to `to` at the given J (or
     rate; with `spin_parameter` p is J itself and systems ignores it): the gradient of the
@@ -292,7 +297,7 @@ def equilibrium_family(systems: Callable, start, p0: float, to: float, steps: in
 
     tests = {"fold": lambda e, t: bool(t[-1] > 0), "axis": lambda e, t: e.on_axis}
     branch = follow(solve, np.concatenate([xi0, [p0]]) / scale, to / scale[-1], steps, tests,
-                    bisect=bisect, max_members=max_members)
+                    bisect=bisect, max_members=max_members, on_member=on_member)
     values, branch = at_labels(branch, scale[-1], to, lambda p, e: [
         ("J", e.angular_momentum, spin(p)) if spin(p) is not None else
         ("Omega", e.rotation_rate, rotation_rate)], 1e-9)

@@ -457,7 +457,8 @@ class Family(NamedTuple):
 def periodic_family(systems: Callable[[float], System], orbit: PeriodicOrbit, p0: float,
                     to: float, steps: int = 20, rotating: bool = False,
                     pinned: str | None = None, tol: float = 1e-13,
-                    bisect: float = 1e-9, max_members: int = 1000) -> Family:
+                    bisect: float = 1e-9, max_members: int = 1000,
+                    on_member: Callable | None = None) -> Family:
     """The family of `orbit` (a periodic orbit of systems(p0)) followed by pseudo-arclength
     continuation (numerics.continuation) from p0 to `to`: p the energy or, for a rotating
     orbit, the angular momentum (`pinned` = "energy" or "angular_momentum": the other one
@@ -523,7 +524,7 @@ def periodic_family(systems: Callable[[float], System], orbit: PeriodicOrbit, p0
 
     tests = {"fold": lambda o, t: bool(t[-1] > 0), "circle": lambda o, t: o.on_circle}
     branch = follow(solve, pack(orbit, p0), to / scale[-1], steps, tests, lambda o: o.indices,
-                    bisect, max_members, margin=index_margins)
+                    bisect, max_members, margin=index_margins, on_member=on_member)
 
     def held(p, o):
         """What the member labelled p must have: the energy (p, or the start's) and, for a

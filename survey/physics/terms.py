@@ -1,6 +1,6 @@
 """Interaction terms, each declared once in TERMS: its kind, name, formula, the integer codes
 the compiled kernels select it by, and its parameters with their defaults, bounds and
-meaning. `make_potential`'s checks, the config's error messages, the README's table of
+meaning. `make_potential`'s checks, the config's error messages, the documentation's table of
 potentials and a test battery run on every term (tests/physics/test_terms.py) all come from
 these declarations.
 
@@ -288,14 +288,3 @@ def make_expression(kind: str, expression: str, params: dict | None = None,
     return Potential(f"{kind}_formula", measure, EXPRESSION,
                      tuple(float(v) for v in params.values()), tuple(params),
                      mass_weighted, expression, inputs)
-
-
-def markdown_table() -> str:
-    """The README's table of interaction terms."""
-    lines = ["| kind | name | U | parameters (defaults, bounds) | notes |",
-             "| --- | --- | --- | --- | --- |"]
-    for t in TERMS:
-        params = ", ".join(p.describe() for p in t.parameters)
-        lines.append(f"| {t.kind} | `{t.name}` | {t.formula.replace('|', chr(92) + '|')} | "
-                     f"{params} | {t.note.replace('|', chr(92) + '|')} |")
-    return "\n".join(lines)

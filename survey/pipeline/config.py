@@ -2,7 +2,7 @@
 
 Every key is declared once in SCHEMA (pipeline.schema) with its type, default, unit,
 allowed range and meaning; validation happens before any work and each problem is one
-`ConfigError` naming the key and what to do. The README's configuration table is checked against SCHEMA by the tests.
+`ConfigError` naming the key and what to do. The documentation's configuration reference is generated from SCHEMA (survey.reference).
 """
 from __future__ import annotations
 
@@ -53,24 +53,6 @@ def settings_of(tables: dict) -> Settings:
     """Validated tables as typed records (pipeline.records)."""
     return Settings(**{table: getattr(records, record_name(table))(**tables[table])
                        for table in SCHEMA}, **{f: tables[f] for f in FLAGS})
-
-
-def markdown_tables() -> str:
-    """The README's tables of config keys, one per table of SCHEMA."""
-    def show(v):
-        if v is None or v == "":
-            return "—"
-        if isinstance(v, list):
-            return "[" + ", ".join(map(str, v)) + "]"
-        return "{}" if v == {} else str(v).replace("|", "\\|")
-    out = []
-    for table, keys in SCHEMA.items():
-        out += [f"**[{table}]**", "", "| key | meaning | unit | default |",
-                "| --- | --- | --- | --- |"]
-        out += [f"| `{k}` | {spec.doc.replace('<', '&lt;').replace('>', '&gt;').replace('|', '&#124;')} | "
-                f"{spec.unit or '—'} | {show(spec.default)} |" for k, spec in keys.items()]
-        out.append("")
-    return "\n".join(out).rstrip()
 
 
 @dataclass(frozen=True)

@@ -12,6 +12,8 @@ member (`family = "explicit"` with `positions` and `velocities` for any start; e
 use its positions only), plus an [equilibria] or a [periodic] table."""
 from __future__ import annotations
 
+import sys
+
 import tomllib
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -36,6 +38,7 @@ from .build import build_system
 from .cells import build_starts
 from .config import _decode, check_table, read_toml, validate
 from .orbits import PlaneSpec, check_plane
+from .progress import family_bar
 from .resources import ensure_writable
 from .schema import Key
 
@@ -199,9 +202,11 @@ def _equilibrium_family(path, config, system, start, table):
         raise ConfigError("[equilibria].to", f"equals the parameter's start value {p0:g}; "
                                              "give the family's other end")
     try:
-        return equilibrium_family(
-            systems, start, p0, table["to"], table["steps"], table["angular_momentum"],
-            table["rotation_rate"], spin_parameter=spin)
+        with family_bar(f"following the equilibria along {table['parameter']}",
+                        sys.stderr.isatty()) as on_member:
+            return equilibrium_family(
+                systems, start, p0, table["to"], table["steps"], table["angular_momentum"],
+                table["rotation_rate"], spin_parameter=spin, on_member=on_member)
     except ValueError as exc:
         raise SurveyError(f"{path}: the family does not start: {exc}") from None
 
@@ -287,9 +292,11 @@ def _periodic_family(path, config, system, table, orbit) -> Family:
         raise ConfigError("[periodic].to", f"equals the parameter's start value {p0:g}; "
                                            "give the family's other end")
     try:
-        family = periodic_family(systems, orbit, p0, table["to"], table["steps"],
-                                 table["rotating"], name if name in (
-                                     "energy", "angular_momentum") else None, table["tol"])
+        with family_bar(f"following the orbit along {name}", sys.stderr.isatty()) as on_member:
+            family = periodic_family(systems, orbit, p0, table["to"], table["steps"],
+                                     table["rotating"], name if name in (
+                                         "energy", "angular_momentum") else None,
+                                     table["tol"], on_member=on_member)
     except ValueError as exc:
         raise SurveyError(f"{path}: the family does not start: {exc}") from None
     return family

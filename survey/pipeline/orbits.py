@@ -69,6 +69,7 @@ from ..numerics.isosceles import (
     plane_start,
     plane_state,
 )
+from ..physics.families import FAMILIES
 from ..physics.geometry import area, sides
 from ..physics.system import System
 from ..physics.terms import PERIMETER, POWER
@@ -76,6 +77,7 @@ from .cells import build_starts
 from .config import Config, load_config, read_toml
 from .progress import COMPILING, notice
 from .resources import check_bytes
+from .schema import Key
 
 MAX_ORBITS = 8          # more cells than this in one orbit set: pick one with --cell
 
@@ -237,7 +239,7 @@ def run_orbits(spec: OrbitSpec) -> list[OrbitRun]:
             continue
         system = config.system(cell)
         w0 = deviation_vectors(system, y0, 1, seed=0)[0]
-        with notice(COMPILING, sys.stderr.isatty()):                  # load the kernels
+        with notice(COMPILING, sys.stderr.isatty(), compiling=True):     # load the kernels
             integrate(system, y0, 1e-3, tangents=w0, t_eval=t_eval[:1])
         start = time.perf_counter()
         out = integrate(system, y0, spec.t_final, tangents=w0, t_eval=t_eval, rtol=spec.tol,
@@ -317,7 +319,25 @@ def closest(t, r) -> tuple[float, float]:
     return float(t[k]), float(r[k])
 
 
-KEYS = {f for f in OrbitSpec.__dataclass_fields__}
+ORBIT_KEYS = {      # an [[orbit]] table's keys (OrbitSpec's fields; the docs' reference)
+    "name": Key("str", None, "names the figure files NAME_paths.png, ... (required; a plain "
+                             "file name)"),
+    "family": Key("str", None, "initial-condition family (required)", choices=tuple(FAMILIES)),
+    "params": Key("table", {}, "family parameters; one of them may be a list: a set of "
+                               "orbits, drawn together"),
+    "potential": Key("str", defaults.POTENTIAL, "triplet potential, as [system] potential"),
+    "potential_params": Key("table", {}, "its parameters, as [system] params"),
+    "system": Key("table", None, "any survey [system] table instead of potential/"
+                                 "potential_params (masses, interactions, ...)"),
+    "t_final": Key("float", defaults.ORBIT_T_FINAL, "end time", "time", above=0),
+    "tol": Key("float", defaults.RTOL, "rtol = atol of the integration", low=RTOL_MIN),
+    "zoom_until": Key("float", 0.0, "paths and side lengths drawn for t <= this (P, |A| "
+                                    "and inequities: the whole run); 0: no zoom", "time",
+                      low=0),
+    "samples": Key("int", 20001, "dense-output samples of the orbit the figures draw", low=2),
+    "cells": Key("ints", (), "the orbits of the set to integrate (default all; `orbit "
+                               "--cell K` for a survey config)", low=0),
+}
 
 
 @dataclass(frozen=True)
@@ -348,7 +368,30 @@ class PlaneSpec:
                            check_output=False).system()
 
 
-PLANE_KEYS = {f for f in PlaneSpec.__dataclass_fields__}
+PLANE_KEYS = {      # a [[plane]] table's keys (PlaneSpec's fields; the docs' reference)
+    "name": Key("str", None, "names the figure NAME_plane.png and archive NAME_plane.nc "
+                             "(required)"),
+    V.energy: Key("float", None, "the energy of every orbit (required)"),
+    "starts": Key("table", None, "[[b, p_b], ...]: starts on the section, p_h > 0 from the "
+                                 "energy (required)"),
+    "height": Key("float", 0.0, "the section h = height, crossed upwards", "length"),
+    "potential": Key("str", defaults.POTENTIAL, "triplet potential, as [system] potential"),
+    "potential_params": Key("table", {}, "its parameters, as [system] params"),
+    "system": Key("table", None, "a survey [system] table instead (three unit masses in "
+                                 "the plane)"),
+    "t_final": Key("float", 2000.0, "longest time each orbit runs", "time", above=0),
+    "crossings": Key("int", 500, "section points per orbit, at most", low=1),
+    "tol": Key("float", 1e-13, "rtol = atol", low=RTOL_MIN, high=1e-3),
+    "periodic": Key("table", (), "[[b, p_b], [b, p_b, k], ...]: guesses of periodic orbits "
+                                 "with k points on the section (default 1), found by Newton's "
+                                 "method on the section map and marked with their stability"),
+    "manifolds": Key("table", (), "guesses like periodic of hyperbolic orbits whose stable "
+                                  "and unstable manifolds are grown, drawn and archived"),
+    "manifold_length": Key("float", 3.0, "arclength each manifold branch is grown to",
+                           low=1e-3, high=1e3),
+    "manifold_gap": Key("float", 0.02, "largest distance between neighbouring points of a "
+                                       "branch", low=1e-4, high=1.0),
+}
 
 
 # bytes an orbit of the plane holds per section crossing while it runs (its state, time
@@ -373,7 +416,7 @@ def _finite(v) -> bool:
 
 def check_plane(table: dict, where: str) -> PlaneSpec:
     """A [[plane]] table as a PlaneSpec, every key checked before any work."""
-    extra = sorted(set(table) - PLANE_KEYS)
+    extra = sorted(set(table) - set(PLANE_KEYS))
     if extra:
         raise ConfigError(f"{where}.{extra[0]}", f"unknown key; keys are "
                                                  f"{', '.join(sorted(PLANE_KEYS))}")
@@ -458,7 +501,7 @@ class PlaneRun(NamedTuple):
 
 def run_plane(spec: PlaneSpec) -> PlaneRun:
     system = spec.build()
-    with notice(COMPILING, sys.stderr.isatty()):                  # load the kernels
+    with notice(COMPILING, sys.stderr.isatty(), compiling=True):     # load the kernels
         plane_section(system, plane_start(system, spec.energy, spec.height,
                                           *spec.starts[0]), 1e-3, spec.height, 1)
     clock = time.perf_counter()
@@ -575,9 +618,9 @@ def load_workflow(path) -> list:
     specs = [check_plane(table, f"[[plane]] {k + 1}") for k, table in enumerate(planes)]
     for k, table in enumerate(tables):
         where = f"[[orbit]] {k + 1}"
-        extra = sorted(set(table) - KEYS)
+        extra = sorted(set(table) - set(ORBIT_KEYS))
         if extra:
-            raise ConfigError(f"{where}.{extra[0]}", f"unknown key; keys are {', '.join(sorted(KEYS))}")
+            raise ConfigError(f"{where}.{extra[0]}", f"unknown key; keys are {', '.join(sorted(ORBIT_KEYS))}")
         if "name" not in table or "family" not in table:
             raise ConfigError(where, "needs a name and a family")
         check_name(table["name"], f"{where}.name")

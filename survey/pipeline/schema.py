@@ -1,5 +1,5 @@
 """Every key a survey config may hold, declared once: its type, default, unit, allowed
-range and meaning (data: pipeline.config validates against it, the README's configuration
+range and meaning (data: pipeline.config validates against it, the documentation's configuration
 tables are generated from it, and the tests check both)."""
 from __future__ import annotations
 

@@ -269,8 +269,12 @@ def _write(config, load, command, cells, folder, progress) -> Path:
     """The archive from the checkpoints `load` reads; a failed write is a SurveyError that
     says what to do."""
     try:
+        def annotate(ds):
+            with notice("solving the special solutions the cells start on, for the report",
+                        progress):
+                return report_attributes(ds)
         with notice(f"writing {config.output}", progress):
-            return archive.write(config, load, command, cells, annotate=report_attributes)
+            return archive.write(config, load, command, cells, annotate=annotate)
     except OSError as exc:
         raise write_error(exc, config.output, folder) from None
     except RuntimeError as exc:     # netCDF4 reports a full disk as an HDF error
@@ -378,10 +382,12 @@ def _refined(config, key, folder, workers, address, clock, progress):
                                                retries=config.settings.dask.retries)
                         flight[future] = ids
                         queue.add(future)
-                if bar is not None:
+                if bar is not None:     # the cells and levels decided so far
                     bar.total = len(p.cells)
                     bar.n = sum(1 for c in p.cells.tolist() if c in known)
-                    bar.refresh()
+                    bar.set_postfix_str(f"refinement level {int(lattice.level(p.cells).max(initial=0))}"
+                                        f" of {config.settings.refine.max_level}",
+                                        refresh=True)
                 if not flight:
                     break
                 future = next(queue)
@@ -458,7 +464,7 @@ def _start(stack, config, task, first, starts, workers, address, clock, progress
         with notice(cluster, progress):
             client = stack.enter_context(_client(config, workers, address))
         beside = client.submit(_head_start, warm_beside, task, first, at, pure=False)
-    with notice(COMPILING, progress):
+    with notice(COMPILING, progress, compiling=True):
         warm_up(task, first, at)
         if beside is not None:
             beside.result()

@@ -218,22 +218,6 @@ def test_config_values_are_data_not_code(tmp_path, capsys):
     assert not (tmp_path / "pwned").exists()
 
 
-def test_the_readme_tables_are_the_declarations():
-    """The README's config tables, variable table and status list are generated from SCHEMA,
-    VARIABLES and Status; regenerate them with survey.pipeline.config.markdown_tables() and
-    survey.catalog.variables.markdown_table() when a declaration changes."""
-    import pathlib
-
-    from survey.catalog.status import Status
-    from survey.catalog.variables import markdown_table
-    from survey.pipeline.config import markdown_tables
-    readme = (pathlib.Path(__file__).parents[2] / "README.md").read_text()
-    assert markdown_tables() in readme
-    assert markdown_table() in readme
-    for s in Status:
-        assert f"- `{s.value}` `{s.name.lower()}`: {s.meaning}" in readme
-
-
 def test_shipped_workflows_and_the_embedded_default_validate():
     import pathlib
     root = pathlib.Path(__file__).parents[2]
