@@ -154,7 +154,9 @@ def _orbit(args):
             t_final=defaults.ORBIT_T_FINAL if args.t_final is None else args.t_final,
             tol=defaults.RTOL if args.tol is None else args.tol,
             zoom_until=args.zoom_until), "orbit", cli=True)
-    runs = orbits.run_orbits(spec)
+    from .pipeline.progress import notice
+    with notice(f"integrating the orbits to t = {spec.t_final:g}", sys.stderr.isatty()):
+        runs = orbits.run_orbits(spec)
     print("\n".join(line for run in runs for line in orbits.describe(spec, run)))
     if args.plot:
         from .presentation import orbit_plots, plots
@@ -219,8 +221,11 @@ def _plot(args):
     from .catalog.errors import ConfigError
     from .catalog.indicators import REGISTRY
     from .catalog.variables import V
-    from .pipeline.archive import open_archive
-    from .pipeline.resources import ensure_folder
+    from .pipeline.progress import notice
+    with notice(f"reading {args.archive}", sys.stderr.isatty()):    # xarray, matplotlib
+        from .pipeline.archive import open_archive
+        from .pipeline.resources import ensure_folder
+        from .presentation import plots
     known = [V.regime] + [i.headline for i in REGISTRY if i.map is not None]
     for name in args.var or []:
         if name not in known:
@@ -229,8 +234,6 @@ def _plot(args):
     out = ensure_folder(args.out or Path(args.archive).parent, "--out")
     with open_archive(args.archive) as ds:
         _survey_archive(args.archive, ds, "plot")
-        from .pipeline.progress import notice
-        from .presentation import plots
         ds = _with_report_attributes(ds)
         with notice("drawing the figures", sys.stderr.isatty()):
             figs = plots.figures(ds, args.var or None)
@@ -272,11 +275,12 @@ def _survey_archive(path, ds, command: str):
 def _report(args):
     import contextlib
 
-    from .pipeline.archive import check_archives, open_archive
     from .pipeline.progress import notice
-    from .presentation import report
-    from .pipeline.resources import ensure_folder
     archive = Path(args.archive)
+    with notice(f"reading {archive}", sys.stderr.isatty()):         # xarray, matplotlib
+        from .pipeline.archive import check_archives, open_archive
+        from .pipeline.resources import ensure_folder
+        from .presentation import report
     out = ensure_folder(args.out or archive.parent, "--out")
     with open_archive(archive) as ds, contextlib.ExitStack() as stack:
         _survey_archive(archive, ds, "report")
@@ -465,12 +469,14 @@ def _special(args):
 
 def _verify(args):
     from .catalog.errors import ConfigError
-    from .pipeline.families import is_family, verify_family
-    from .pipeline.sweep import verify
+    from .pipeline.progress import notice
     if args.cells < 1:
         raise ConfigError("--cells", f"must be >= 1, got {args.cells}")
-    ok, lines = verify_family(args.archive, args.cells) if is_family(args.archive) else \
-        verify(args.archive, cells=args.cells)
+    with notice(f"verifying {args.archive}", sys.stderr.isatty()):
+        from .pipeline.families import is_family, verify_family
+        from .pipeline.sweep import verify
+        ok, lines = verify_family(args.archive, args.cells) if is_family(args.archive) \
+            else verify(args.archive, cells=args.cells)
     print("\n".join(lines))
     return 0 if ok else 1
 

@@ -8,7 +8,7 @@ difference in its last bit, and a family continued from one decides its steps by
 so both must be the same bits on every machine."""
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Callable, NamedTuple
 
 import numpy as np
 
@@ -406,7 +406,8 @@ class Search(NamedTuple):
 
 def relative_equilibria(system: System, start, angular_momentum: float | None = None,
                         rotation_rate: float | None = None, starts: int = 0,
-                        seed: int = 0, shapes: int = SHAPES) -> Search:
+                        seed: int = 0, shapes: int = SHAPES,
+                        on_guess: Callable | None = None) -> Search:
     """The distinct relative equilibria reached from `start`, from `shapes` points of the
     shape sphere (three bodies in the plane: a deterministic cover of every triangle,
     each tried by Newton's method, which converges to saddles as readily as to minima,
@@ -414,7 +415,8 @@ def relative_equilibria(system: System, start, angular_momentum: float | None = 
     seeded random configurations (positions normal about the centre with the start's
     radius of gyration), all at the start's size. Two are the same up to rotations,
     reflections and permutations of the bodies when their energies and sorted mutual
-    distances agree to 1e-7."""
+    distances agree to 1e-7. `on_guess(tried, total, distinct)` after each guess (a
+    progress display)."""
     q0 = np.asarray(start, dtype=float).reshape(system.n_bodies, system.dim)
     q0 = q0 - centre_of_mass(system.masses, q0)
     radius = np.sqrt(np.sum(system.masses[:, None] * q0 ** 2) / system.masses.sum())
@@ -426,7 +428,9 @@ def relative_equilibria(system: System, start, angular_momentum: float | None = 
         + [(rng.normal(0.0, radius, q0.shape), False) for _ in range(starts)]
     found: list[RelativeEquilibrium] = []
     hits: list[int] = []
-    for guess, descend in guesses:
+    for tried, (guess, descend) in enumerate(guesses, 1):
+        if on_guess is not None and tried > 1:
+            on_guess(tried - 1, len(guesses), len(found))
         try:
             if descend:
                 guess = _descend(system, guess, angular_momentum, rotation_rate)
@@ -439,6 +443,8 @@ def relative_equilibria(system: System, start, angular_momentum: float | None = 
             hits.append(1)
         else:
             hits[same] += 1
+    if on_guess is not None:
+        on_guess(len(guesses), len(guesses), len(found))
     order = np.argsort([e.energy for e in found], kind="stable")
     return Search([found[k] for k in order], [hits[k] for k in order], len(guesses),
                   len(covered), starts)

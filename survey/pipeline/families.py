@@ -38,7 +38,7 @@ from .build import build_system
 from .cells import build_starts
 from .config import _decode, check_table, read_toml, validate
 from .orbits import PlaneSpec, check_plane
-from .progress import family_bar
+from .progress import count_bar, family_bar
 from .resources import ensure_writable
 from .schema import Key
 
@@ -177,9 +177,13 @@ def solve_equilibria(path):
     config, system, start, table = load_equilibria(path)
     if table["parameter"]:
         return system, table, _equilibrium_family(path, config, system, start, table)
-    return system, table, relative_equilibria(system, start, table["angular_momentum"],
-                                              table["rotation_rate"], table["starts"],
-                                              table["seed"])
+    with count_bar("solving for relative equilibria from each starting configuration",
+                   sys.stderr.isatty()) as update:
+        found = relative_equilibria(
+            system, start, table["angular_momentum"], table["rotation_rate"],
+            table["starts"], table["seed"], on_guess=None if update is None else
+            lambda done, total, distinct: update(done, total, f"{distinct} distinct"))
+    return system, table, found
 
 
 

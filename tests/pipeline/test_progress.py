@@ -1,5 +1,5 @@
-"""A phase without a progress bar says what it is doing once it has taken a second, and
-nothing if it is quick."""
+"""A phase without a progress bar says what it is doing once it has taken half a second,
+its time every second after that, and nothing if it is quick; so does any numba compile."""
 import io
 from pathlib import Path
 import time
@@ -22,6 +22,49 @@ def test_a_slow_phase_is_announced_and_timed_a_quick_one_is_silent():
     lines = err.getvalue().splitlines()
     assert lines[0] == "survey: compiling ..." and lines[1].startswith("survey: ... done in ")
     assert len(lines) == 2
+
+
+def wait_for(stream, text):
+    deadline = time.monotonic() + 60
+    while text not in stream.getvalue() and time.monotonic() < deadline:
+        time.sleep(0.01)
+
+
+def test_a_long_phase_ticks_and_a_phase_that_ends_after_another_names_itself():
+    err = io.StringIO()
+    with redirect_stderr(err):
+        with notice("writing", after=0.01):
+            wait_for(err, "writing ... 1 s")           # its time, on its own line
+            with notice("solving", after=0.01):
+                wait_for(err, "survey: solving ...")
+            wait_for(err, "done in")
+    text = err.getvalue()
+    assert "\rsurvey: writing ... 1 s" in text
+    lines = text.replace("\r", "\n").splitlines()
+    assert lines[-1].startswith("survey: ... writing: done in ")       # not the last line
+    assert lines[-3:-1] == ["survey: solving ...", lines[-2]]
+    assert lines[-2].startswith("survey: ... done in ")     # solving's, right after its line
+
+
+def test_any_compile_that_takes_time_says_so_on_a_terminal():
+    import numba
+
+    from survey.pipeline import progress
+    err = io.StringIO()
+    progress._watching.clear()
+    progress.watch_compiles(after=0.0)
+    try:
+        @numba.njit
+        def announced(x):
+            return x + 1
+        with redirect_stderr(err):
+            assert announced(1) == 2
+    finally:
+        from numba.core import event
+        event.unregister("numba:compile", progress._watching.pop())
+    text = err.getvalue()
+    assert "announced and what it calls (numba; the first time" in text
+    assert "survey: ... done in " in text
 
 
 def test_a_cold_kernel_cache_is_recognised(tmp_path):
