@@ -94,3 +94,10 @@ def test_the_step_flop_count_counts_arithmetic_not_sign_flips():
     assert _Counted.ops == 4 and float(y) == 2.0 * 3.0 + 4.0 / 3.0 + 2.0
     rhs, sums = bench.step_flops()
     assert rhs % 12 == 0 and 40 < rhs // 12 < 200 and 1000 < sums < 5000
+
+
+def test_the_memory_part_measures_a_survey_in_a_process_of_its_own(tmp_path):
+    lines = []
+    bench.survey_memory(sizes=(4,), folder=str(tmp_path), out=lines.append)
+    assert re.match(r" +4 cells: peak RSS +\d+\.\d MiB, +\d+\.\d s, of which writing the "
+                    r"archive +\d+\.\d s", lines[-1]), lines[-1]

@@ -103,7 +103,8 @@ def survey_memory(sizes=(10_000, 100_000), folder="results/bench", out=print):
     out("Peak memory of the process driving a survey (cells of t = 0.01, orbit + indicators, "
         "no section; the workers are separate processes)")
     for n in sizes:
-        code = f"from survey.bench import _memory_run; print(*_memory_run({n}, {folder!r}))"
+        code = (f"from survey.bench.surveys import _memory_run; "
+                f"print(*_memory_run({n}, {folder!r}))")
         res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                              check=True)
         peak, seconds, archive = map(float, res.stdout.split()[-3:])
