@@ -315,3 +315,15 @@ def test_the_areal_maps_chaos_prose_holds():
         ftle = ds[V.ftle].values
         drawn = np.isfinite(ftle) & (ftle > 0)
         assert rank_correlation(ftle[drawn], thin[drawn]) < -0.3
+
+
+@pytest.mark.parametrize("name", ["delta_energy_map_areal", "linear_family", "default",
+                                  "ljat_trimer_map"])
+def test_the_special_solutions_an_archive_stores_are_what_the_code_computes(name):
+    """The report's special solutions (the homographic orbits shot, the equilibria, the
+    dissociation energy of a map over a term's parameter) are computed once, when the
+    archive is written: computed again from the archive, they are the same text."""
+    from survey.pipeline.special import report_attributes
+    with xr.open_dataset(RESULTS / f"{name}.nc") as ds:
+        fresh = report_attributes(ds.load())
+        assert fresh == {k: ds.attrs[k] for k in fresh}

@@ -8,7 +8,7 @@ import json
 
 import numpy as np
 
-from ..analysis.refine import as_grid, cell_label, cell_values
+from ..analysis.refine import as_grid, cell_label
 from ..numerics.integrate import integrate
 from ..numerics.periodic import periodic_orbit
 from ..physics.equilibria import equilibrium_positions, forces, relative_equilibrium
@@ -30,9 +30,9 @@ def equilibrium_cells(ds, most: int = 8) -> list[dict]:
     if not cells.size:
         return []
     config = parse_config(ds.attrs["config"], check_output=False)
-    out = []
+    systems, out = _cell_systems(config, ds), []
     for idx in map(tuple, cells):
-        system = _cell_system(config, ds, idx)
+        system = systems(idx)
         start = ds[V.initial_state].values[idx]
         spin = float(ds[V.angular_momentum].values[idx]) if system.dim == 2 else 0.0
         try:
@@ -96,11 +96,11 @@ def homographic_cells(ds, most: int = 8) -> list[dict]:
     horizon = float(config.settings.integration.t_final)
     axes = list(ds[V.status].dims)
     starts = ds[V.initial_state].values.reshape(-1, ds[V.initial_state].shape[-1])
-    out = []
+    systems, out = _cell_systems(config, ds), []
     for flat, y in enumerate(starts):
         if len(out) == most or not np.all(np.isfinite(y)):
             continue
-        system = _cell_system(config, ds, np.unravel_index(flat, ds[V.status].shape))
+        system = systems(np.unravel_index(flat, ds[V.status].shape))
         period = homographic_period(system, y, min(horizon, 100.0))
         if period is None:
             continue
@@ -118,13 +118,21 @@ def homographic_cells(ds, most: int = 8) -> list[dict]:
     return out
 
 
-def _cell_system(config, ds, idx) -> System:
-    """The System of an archive's cell at index `idx` of its grid: the [system] table with
-    the cell's values of any interaction-term axes (read from the archive's coordinates,
-    so a refined survey's cells are read too)."""
-    values = cell_values(ds, idx)
-    return build_system(config.system_table, {a.name: values[a.name] for a in config.axes
-                                                  if a.term >= 0})
+def _cell_systems(config, ds):
+    """idx -> the System of an archive's cell at index `idx` of its grid: the [system]
+    table with the cell's values of any interaction-term axes (read from the archive's
+    coordinates, each broadcast over the grid once, so a refined survey's cells are read
+    too); one System for every cell where no term parameter is an axis. Built per cell,
+    this was most of the time writing a large archive took."""
+    from ..catalog.variables import V
+    term = [a.name for a in config.axes if a.term >= 0]
+    if not term:
+        system = build_system(config.system_table, {})
+        return lambda idx: system
+    status = ds[V.status]
+    grids = {a: ds[a].broadcast_like(status).transpose(*status.dims).values for a in term}
+    return lambda idx: build_system(config.system_table,
+                                    {a: float(g[idx]) for a, g in grids.items()})
 
 
 def special_cells(ds) -> list[dict]:
@@ -171,7 +179,7 @@ def dissociation_energy(ds) -> float | None:
     if not started.size:
         return None
     idx = np.unravel_index(started[0], ds[V.status].shape)
-    system = _cell_system(config, ds, idx)
+    system = _cell_systems(config, ds)(idx)
     if not system.translation_invariant:
         return None
     q = system.split(ds[V.initial_state].values[idx])[0]
