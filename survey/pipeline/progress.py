@@ -138,32 +138,26 @@ def watch_compiles(after: float = 0.5) -> None:
 
 
 @contextlib.contextmanager
-def count_bar(what: str, enabled: bool):
-    """A progress bar on a terminal over a count of tries; yields update(done, total,
-    note), the total given by the work as it starts."""
+def count_bar(what: str, enabled: bool, counted: str = "{n}/{total}"):
+    """A progress bar on a terminal; yields update(done, total, note), the total given by
+    the work as it starts (None when disabled). `counted`: how the bar shows its count."""
     if not enabled:
         yield None
         return
     from tqdm import tqdm
     with tqdm(total=1, desc=f"survey: {what}", file=sys.stderr, leave=True,
-              bar_format="{desc}: {n}/{total} |{bar}| [{elapsed}]") as bar:
-        def update(done: int, total: int, note: str):
+              bar_format="{desc}: " + counted + " |{bar}| [{elapsed}]") as bar:
+        def update(done, total, note: str):
             bar.total, bar.n = total, done
             bar.set_description_str(f"survey: {what}, {note}", refresh=True)
         yield update
 
+
 @contextlib.contextmanager
 def family_bar(what: str, enabled: bool):
-    """A progress bar for a continuation on a terminal: the share of the parameter's span
-    covered (it moves back where the family folds) and the members found so far. Yields
-    the continuation's on_member callback (None when disabled)."""
-    if not enabled:
-        yield None
-        return
-    from tqdm import tqdm
-    with tqdm(total=100, desc=f"survey: {what}", file=sys.stderr, leave=True,
-              bar_format="{desc}: {n:3.0f}% of the span |{bar}| [{elapsed}]") as bar:
-        def on_member(count: int, share: float):
-            bar.n = min(100.0, max(0.0, 100.0 * share))
-            bar.set_description_str(f"survey: {what}, {count} members", refresh=True)
-        yield on_member
+    """count_bar for a continuation: the share of the parameter's span covered (it moves
+    back where the family folds) and the members found so far. Yields the continuation's
+    on_member callback (None when disabled)."""
+    with count_bar(what, enabled, "{n:3.0f}% of the span") as update:
+        yield None if update is None else lambda count, share: update(
+            min(100.0, max(0.0, 100.0 * share)), 100, f"{count} members")

@@ -183,3 +183,17 @@ def test_the_kernels_compiled_beside_the_driver_are_those_a_survey_uses(tmp_path
                          cwd=tmp_path, timeout=900)
     assert out.returncode == 0, out.stderr[-3000:]
     assert out.stdout.strip() == "{}", out.stdout
+
+
+def test_a_continuations_bar_shows_the_span_covered_and_the_members_found():
+    from survey.pipeline.progress import family_bar
+    err = io.StringIO()
+    with redirect_stderr(err):
+        with family_bar("following", True) as on_member:
+            on_member(3, 0.5)
+            on_member(4, 1.7)           # past the end: the bar stays at 100%
+    text = err.getvalue()
+    assert "survey: following, 3 members:  50% of the span" in text
+    assert "survey: following, 4 members: 100% of the span" in text
+    with family_bar("following", False) as on_member:
+        assert on_member is None
