@@ -12,7 +12,7 @@ import numpy as np
 
 from ..catalog import defaults
 from ..catalog.status import Status
-from ..machine import portable
+from ..machine import linalg, portable
 from ..machine.jit import leaf
 from ..physics.lanes import SIMD_LANES, SIMD_MIN
 from ..physics.system import System
@@ -183,7 +183,17 @@ class Frame(NamedTuple):
         moments = np.concatenate([(m[:, None] * w[:, :, 0]).sum(2), w[:, :, 1].sum(2)], -1)
         if np.any(np.abs(moments) > 1e-12 * np.abs(w).max(initial=0.0)):
             return None
-        # full state = R x + C (place, velocity of the centre of mass) for reduced states x
+        relative = relative_events(events, system, *Frame.basis(masses))
+        if relative is None:
+            return None
+        q, p = starts[:, :6].reshape(-1, 3, 2), starts[:, 6:].reshape(-1, 3, 2)
+        return Frame(masses, (m * q).sum(1) / masses.sum(), p.sum(1) / masses.sum(),
+                      relative)
+
+    @staticmethod
+    def basis(masses):
+        """(R, C): a full state is R x + C c for the reduced state x (bodies 0 and 1 in the
+        centre-of-mass frame) and c, the centre of mass's place and velocity."""
         R, C = np.zeros((12, 8)), np.zeros((12, 4))
         for k in range(2):
             for b in range(2):                        # bodies 0, 1: q at 2b, p at 6 + 2b
@@ -192,12 +202,23 @@ class Frame(NamedTuple):
                 R[10 + k, 4 + 2 * b + k] = -1.0
             C[k:6:2, k] = 1.0
             C[6 + k::2, 2 + k] = masses
-        relative = relative_events(events, system, R, C)
-        if relative is None:
-            return None
-        q, p = starts[:, :6].reshape(-1, 3, 2), starts[:, 6:].reshape(-1, 3, 2)
-        return Frame(masses, (m * q).sum(1) / masses.sum(), p.sum(1) / masses.sum(),
-                      relative)
+        return R, C
+
+    @staticmethod
+    def coordinates(masses):
+        """The inverse of [R C] (`basis`): a full state's reduced state (8 rows), then the
+        centre of mass's place and velocity (4)."""
+        m, M = masses, masses.sum()
+        inv = np.zeros((12, 12))
+        for k in range(2):
+            for b in range(2):
+                inv[2 * b + k, k:6:2] = -m / M
+                inv[2 * b + k, 2 * b + k] += 1.0
+                inv[4 + 2 * b + k, 6 + k::2] = -m[b] / M
+                inv[4 + 2 * b + k, 6 + 2 * b + k] += 1.0
+            inv[8 + k, k:6:2] = m / M
+            inv[10 + k, 6 + k::2] = 1.0 / M
+        return inv
 
     @property
     def ratios(self) -> tuple[float, float]:
@@ -316,6 +337,27 @@ def _outcome(res, j, rows, n, n_tan, tan, megno, max_events, t_eval, n_eval, t_f
         near=res.near[j].copy() if res.near.size and re >= 0 else np.zeros(0),
         **outcome_fields(res.ends[j], res.sampled[rs] if rs >= 0 else None, n_tan,
                          portable.vnorm(tans), sample_norms, megno))
+
+
+def flow_jacobian(system: System, y0, period: float, **options):
+    """(the Outcome of y0 integrated over period with its full tangent block, the flow's
+    Jacobian dy(T)/dy(0), n x n). Where the batch runs reduced (`Frame`), the tangents are
+    the 8 columns of R, free of centre-of-mass motion, and the 4 of C are carried exactly (a
+    translation stays, a boost adds its velocity times the period: the forces depend on
+    relative places alone): the kernel is the one the orbit alone runs, not a second
+    specialisation for full states (36 s of a cold first run's compiling)."""
+    n = system.n
+    y0 = np.asarray(y0, dtype=np.float64).ravel()
+    if system.model.masses.size == 3 and n == 12:
+        R, C = Frame.basis(system.model.masses)
+        if Frame.of(system, y0[None], R.T[None], ()) is not None:
+            out = integrate(system, y0, period, tangents=R.T, **options)
+            carried = C.copy()
+            carried[:, 2:] += period * C[:, :2]
+            return out, linalg.dot(np.hstack([out.deviations.T, carried]),
+                                   Frame.coordinates(system.model.masses))
+    out = integrate(system, y0, period, tangents=np.eye(n), **options)
+    return out, out.deviations.T
 
 
 def integrate(system: System, y0, t_span, *, tangents=None, **options) -> Outcome:

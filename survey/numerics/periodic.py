@@ -33,7 +33,7 @@ from ..physics.equilibria import (
 )
 from ..physics.system import System, rhs
 from .continuation import NAMED, at_labels, follow, on_row
-from .integrate import integrate
+from .integrate import flow_jacobian, integrate
 
 UNIT_CIRCLE = 1e-6          # ||mu| - 1| below which a multiplier is on the unit circle
 
@@ -232,13 +232,15 @@ def _centre(system: System) -> np.ndarray:
 
 def flow_map(system, y, period, tol, tangents=True):
     """(y(T), dy(T)/dy(0)) from the orbit with its full tangent block (or y(T) alone)."""
-    out = integrate(system, y, period, tangents=np.eye(system.n) if tangents else None,
-                    rtol=tol, atol=tol, control_tangents=tangents,
-                    renorm_interval=2.0 * abs(period) + 1.0)
+    if tangents:
+        out, phi = flow_jacobian(system, y, period, rtol=tol, atol=tol, control_tangents=True,
+                                 renorm_interval=2.0 * abs(period) + 1.0)
+    else:
+        out = integrate(system, y, period, rtol=tol, atol=tol)
     if not out.ok:
         raise ValueError(f"the orbit from the guess did not reach t = {period:g} "
                          f"({out.status.name.lower()})")
-    return (out.y, out.deviations.T) if tangents else out.y
+    return (out.y, phi) if tangents else out.y
 
 
 class _Shooting(NamedTuple):
@@ -310,7 +312,9 @@ class _Shooting(NamedTuple):
         W = nontrivial_subspace(Mi - np.eye(Mi.shape[0]), known,
                                 linalg.chain(internal.T, J, internal))
         mu = linalg.eigvals(linalg.chain(W.T, Mi, W))
-        mu = mu[np.lexsort((linalg.modulus(mu), linalg.argument(mu)))]
+        # (by angle, then modulus: a quartet's mu and 1/conj(mu) share their angle but for
+        # roundoff, which alone would order them)
+        mu = mu[np.lexsort((linalg.modulus(mu), np.round(linalg.argument(mu), 9)))]
         moved = motion(system, y, T, theta if self.rotating else 0.0, self.tol)
         problem = moved.problem(residuals[-1], self.tol)
         if problem:

@@ -11,7 +11,7 @@ import pytest
 from survey.bench import GeneralPath as Full
 from survey.numerics.events import Event, Linear
 from survey.numerics.indicators import deviation_vectors
-from survey.numerics.integrate import Frame, integrate_batch
+from survey.numerics.integrate import Frame, flow_jacobian, integrate_batch
 from survey.numerics.sections import section_event
 from survey.physics.families import initial_state
 from survey.physics.system import System
@@ -101,3 +101,22 @@ def test_what_the_relative_motion_cannot_hold_runs_full():
         a = integrate_batch(system, y0[None], 20.0, **kw)[0]
         b = integrate_batch(full, y0[None], 20.0, **kw)[0]
         assert np.array_equal(a.y, b.y) and a.n_steps == b.n_steps
+
+
+def test_the_flows_jacobian_from_the_relative_motion_is_the_full_ones():
+    """A periodic orbit's monodromy from 8 tangent vectors of the relative motion and the 4
+    centre-of-mass directions carried exactly (a translation stays, a boost moves): the
+    general path's 12 tangent vectors give the same matrix, and it is symplectic --
+    unequal masses, the centre of mass moving, backwards in time too."""
+    system = System(np.array((1.0, 1.3, 0.8)), 2, (make_potential("perimetric_power"),))
+    full = Full(system.masses, system.dim, system.terms)
+    y0 = moving(system, initial_state(system, "sides")[None])[0]
+    omega = np.block([[np.zeros((6, 6)), np.eye(6)], [-np.eye(6), np.zeros((6, 6))]])
+    for T in (2.5, -1.5):
+        kw = dict(rtol=1e-12, atol=1e-12, control_tangents=True)
+        out, J = flow_jacobian(system, y0, T, **kw)
+        ref, K = flow_jacobian(full, y0, T, **kw)
+        assert out.tangents.shape == (8, 12) and ref.tangents.shape == (12, 12)
+        assert np.abs(out.y - ref.y).max() <= 1e-10 * np.abs(ref.y).max()
+        assert np.abs(J - K).max() <= 1e-9 * np.abs(K).max()
+        assert np.abs(J.T @ omega @ J - omega).max() <= 1e-9 * np.abs(J).max() ** 2
