@@ -10,7 +10,7 @@ from pathlib import Path
 from .catalog import defaults
 
 # commands that run the integrator, so compile its kernels on a machine's first run
-COMPILING_COMMANDS = ("run", "reproduce", "verify", "orbit", "bench", "equilibria",
+COMPILING_COMMANDS = ("run", "reproduce", "verify", "orbit", "explore", "bench", "equilibria",
                       "periodic")
 # the embedded default survey (`python -m survey run`)
 DEFAULT_CONFIG = Path(__file__).parent / "default.toml"
@@ -38,6 +38,9 @@ BENCH_PARTS = {
              "a 10^6-cell grid saves its first chunk, with the driver's memory then",
     "newton": "a step of the periodic-orbit shooting against the orbit with its full "
               "tangent block",
+    "explore": "the explorer on a 10^4-cell map in headless Chromium: the command to an "
+               "interactive page, a click to the cell's orbit (t = 2000) drawn, beside the "
+               "`orbit` command on the same kind of orbit",
 }
 
 
@@ -62,7 +65,8 @@ def _bench(args):
              "refine": bench.refined_map,
              "memory": bench.survey_memory,
              "scale": bench.survey_scale,
-             "newton": bench.newton_step}
+             "newton": bench.newton_step,
+             "explore": bench.explorer_latency}
     for name in BENCH_PARTS:
         if name in (args.only or BENCH_PARTS):
             if args.record is None:
@@ -481,6 +485,11 @@ def _verify(args):
     return 0 if ok else 1
 
 
+def _explore(args):
+    from .presentation import explore
+    return explore.main(args.archive, args.host, args.port, browser=not args.no_browser)
+
+
 DESCRIPTIONS = {
     "equilibria": "The relative equilibria (rigid rotations, or rest) of a config's [system] "
                   "near its one [initial] start, [equilibria] starts seeded configurations "
@@ -497,7 +506,9 @@ DESCRIPTIONS = {
                 "With [periodic] parameter: the family along it with its folds and "
                 "bifurcations, each member checked.",
     "orbit": "Integrate orbits with a tangent vector and print E, J, conservation errors, "
-             "steps, the finite-time Lyapunov exponent, the ranges of P, |A| and I, each "
+             "steps, the finite-time Lyapunov exponent and MEGNO, the crossings of the "
+             "surface of section (the config's [section]; three bodies in the plane: phi = "
+             "pi/2 without one), the ranges of P, |A| and I, each "
              "pair's closest approach with its time and the bound P_max. The orbit is a "
              "family member given by flags; or FILE is a survey config (its [system], "
              "[initial] and tolerance: all its cells, up to 8, or those given by --cell); or "
@@ -609,6 +620,31 @@ def build_parser():
     v.add_argument("--cells", type=int, default=8,
                    help="cells (a manifold archive: points) to recompute (default 8)")
     v.set_defaults(func=_verify)
+    x = sub.add_parser("explore", help="a survey archive's maps in a browser: hover a cell "
+                                       "for its evidence, click it for its orbit",
+                       description="Serve an archive's maps (the regime and every mapped "
+                                   "indicator; a one-axis scan as a line; a one-shell "
+                                   "archive's section, and its 4-D section of three bodies "
+                                   "in the plane turned in 3-D) as a web page on this "
+                                   "machine. The pointer over a cell shows its parameters, "
+                                   "regime, confidence, horizon and indicators; a click "
+                                   "integrates its orbit with survey's kernels (what `orbit "
+                                   "CONFIG --cell K` prints, the same numbers) and draws its "
+                                   "paths, section crossings and indicators' convergence, "
+                                   "with the archive's frequencies, the cell as a config "
+                                   "([initial] family = \"explicit\") and the command that "
+                                   "reproduces it. Needs Bokeh: pip install "
+                                   "'survey[explore]'.")
+    x.add_argument("archive", help="a survey archive (.nc)")
+    x.add_argument("--port", type=int, default=5006,
+                   help="the port to serve on (default 5006; 0: any free port)")
+    x.add_argument("--host", default="127.0.0.1",
+                   help="the address to listen on (default 127.0.0.1: this machine only; "
+                        "from elsewhere, reach it over an SSH tunnel: ssh -L 5006:"
+                        "127.0.0.1:5006 HOST)")
+    x.add_argument("--no-browser", action="store_true",
+                   help="print the address, open no browser")
+    x.set_defaults(func=_explore)
     b = sub.add_parser("bench", help="speed as ratios against baselines measured in the same "
                                      "run (pip install -e '.[bench]')",
                        formatter_class=argparse.RawDescriptionHelpFormatter,

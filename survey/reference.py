@@ -283,10 +283,34 @@ def gallery_page(results: Path, workflows: Path, image_prefix: str) -> str:
         out += [f"## {owner}", "", workflow_summary(path), "",
                 f"Made by `{path.relative_to(path.parents[1])}` (`python -m survey "
                 f"reproduce --only {owner}`).", ""]
+        archive = results / f"{owner}.nc"
+        explorable = _explorable(archive)
+        if explorable:
+            out += [f"In the explorer (hover a cell, click it for its orbit): `python -m "
+                    f"survey explore results/{archive.name}`.", ""]
         for name, what in groups[owner]:
             out += [f"### {name}", "", what[0].upper() + what[1:] + ".", "",
                     f"![{name}]({image_prefix}{name})", ""]
+            layer = name.removesuffix(".png").removeprefix(f"{owner}_map_")
+            if explorable and f"{owner}_map_{layer}.png" == name and layer in explorable:
+                out += [f"The same map in the explorer: <http://127.0.0.1:5006/?layer="
+                        f"{layer}> while `python -m survey explore results/{archive.name}` "
+                        "runs.", ""]
     return "\n".join(out)
+
+
+def _explorable(archive: Path) -> set[str]:
+    """The layers the explorer colours a survey archive's map by (the regime and the
+    mapped indicators it holds), or an empty set for a file that is none."""
+    if not archive.exists():
+        return set()
+    import netCDF4
+    from .catalog.indicators import REGISTRY
+    with netCDF4.Dataset(archive) as nc:
+        if "grid_axes" not in nc.ncattrs() or "regime" not in nc.variables:
+            return set()
+        return {"regime", "regular_share"} & set(nc.variables) | \
+            {i.headline for i in REGISTRY if i.map is not None and i.headline in nc.variables}
 
 
 def bench_page(folder: Path) -> str:

@@ -7,7 +7,8 @@ survey's DOP853 against scipy's DOP853 (NumPy right-hand side) and heyoka's
 Taylor integrator on the paper's two orbits (`run`), the cost of indicators, sections and
 the torus analysis, the scaling on 1 vs 2 workers and from 10^3 to 10^5 cells
 (`survey_scale`), the driver's memory, and what the paper's one-term systems would pay on
-the general path of sums of terms (`interaction_terms`).
+the general path of sums of terms (`interaction_terms`), and the explorer's latency
+(`explorer_latency`).
 
 Speed claims are ratios against baselines timed here, never absolute numbers: machines
 differ, ratios on one machine in one run do not. Compilation (numba's cached load, heyoka's
@@ -28,10 +29,11 @@ from .costs import (
     newton_step,
     torus_overhead,
 )
+from .explorer import explorer_latency
 from .steps import fma_peak, plain_step, step_costs, step_flops
 from .surveys import refined_map, survey_memory, survey_scale, survey_scaling
 
-__all__ = ["CASES", "GeneralPath", "default_cell", "fixed_costs", "fma_peak",
+__all__ = ["CASES", "GeneralPath", "default_cell", "explorer_latency", "fixed_costs", "fma_peak",
            "indicator_overhead", "interaction_terms", "newton_step", "plain_step",
            "refined_map", "run", "scan_vs_heyoka", "step_costs", "step_flops", "survey_memory",
            "survey_scale", "survey_scaling", "timed_command", "torus_overhead",

@@ -45,7 +45,7 @@ import math
 import sys
 import time
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import NamedTuple
 
@@ -73,6 +73,7 @@ from ..physics.families import FAMILIES
 from ..physics.geometry import area, sides
 from ..physics.system import System
 from ..physics.terms import PERIMETER, POWER
+from .build import section_event_for
 from .cells import build_starts
 from .config import Config, load_config, read_toml
 from .progress import COMPILING, notice
@@ -183,7 +184,11 @@ def _spec_key(key: str, key_name, cli: bool, system_table: bool) -> str:
 def from_survey_config(path, cells=(), t_final=None, zoom_until=0.0) -> OrbitSpec:
     """The orbits of a survey config's cells (all if `cells` is empty), with its [system],
     [initial] and tolerance; t_final its own unless given."""
-    config = load_config(path, check_output=False)
+    return from_config(load_config(path, check_output=False), cells, t_final, zoom_until)
+
+
+def from_config(config: Config, cells=(), t_final=None, zoom_until=0.0) -> OrbitSpec:
+    """`from_survey_config` of a loaded config (an archive's stored one: survey explore)."""
     raw = tomllib.loads(config.text)
     initial = dict(raw.get("initial", {}))
     integration = config.settings.integration
@@ -220,6 +225,7 @@ class OrbitRun(NamedTuple):
     outcome: Outcome
     wall: float
     p_max: float | None
+    section: object = None       # the surface its crossings are of (section_of), or None
 
     @property
     def label(self) -> str:
@@ -227,10 +233,30 @@ class OrbitRun(NamedTuple):
                          if isinstance(v, (int, float)))
 
 
+def section_of(config: Config):
+    """The surface whose crossings an orbit records (records.SectionTable): the config's
+    [section]; for three bodies in the plane without one, the paper's phi = pi/2 crossed
+    with phi increasing; else None."""
+    settings = config.settings
+    if settings.section_enabled:
+        return settings.section
+    system = config.system()
+    if system.n_bodies == 3 and system.dim == 2:
+        return replace(settings.section, coordinate="phi", value=math.pi / 2, direction=1)
+    return None
+
+
+def section_text(section) -> str:
+    way = {1: "increasing", -1: "decreasing", 0: "either way"}[section.direction]
+    return f"{section.coordinate} = {section.value:.6g} ({way})"
+
+
 def run_orbits(spec: OrbitSpec) -> list[OrbitRun]:
-    """Every orbit of a spec (one per cell of its set), each with one tangent vector,
-    sampled at `samples` times; a cell without a start is skipped."""
+    """Every orbit of a spec (one per cell of its set), each with one tangent vector and its
+    MEGNO, both sampled at `samples` times, and its crossings of `section_of` its config; a
+    cell without a start is skipped."""
     config = spec.config()
+    section = section_of(config)
     cells = spec.cells or range(config.n_cells)
     t_eval = np.linspace(0.0, spec.t_final, spec.samples)
     runs = []
@@ -239,17 +265,19 @@ def run_orbits(spec: OrbitSpec) -> list[OrbitRun]:
             continue
         system = config.system(cell)
         w0 = deviation_vectors(system, y0, 1, seed=0)[0]
+        events = () if section is None else (section_event_for(section, system),)
+        kw = dict(tangents=w0, megno=True, sample_tangents=True, events=events)
         with notice(COMPILING, sys.stderr.isatty(), compiling=True):     # load the kernels
-            integrate(system, y0, 1e-3, tangents=w0, t_eval=t_eval[:1])
+            integrate(system, y0, 1e-3, t_eval=t_eval[:1], **kw)
         start = time.perf_counter()
-        out = integrate(system, y0, spec.t_final, tangents=w0, t_eval=t_eval, rtol=spec.tol,
-                        atol=spec.tol)
+        out = integrate(system, y0, spec.t_final, t_eval=t_eval, rtol=spec.tol, atol=spec.tol,
+                        **kw)
         wall = time.perf_counter() - start
         params = {**config.cell_parameters(cell), **config.axis_values(cell, terms=True)}
         params = {k: v for k, v in params.items()          # as given, and the grid's
                   if k in spec.params or k in {a.name for a in config.axes}}
         bound = p_max(system, system.energy(y0), float(np.sum(system.angular_momentum(y0))))
-        runs.append(OrbitRun(params, system, y0, out, wall, bound))
+        runs.append(OrbitRun(params, system, y0, out, wall, bound, section))
     return runs
 
 
@@ -271,7 +299,10 @@ def describe(spec: OrbitSpec, run: OrbitRun) -> list[str]:
              f"max |J - J0| = {dJ:.2e}, "
              f"max |p_total| = {np.abs(system.momentum(s)).max():.2e}",
              f"finite-time Lyapunov exponent ln(|w(t)|/|w0|)/t = "
-             f"{out.log_growth[0] / out.t:.5f}"]
+             f"{out.log_growth[0] / out.t:.5f}"
+             + (f", MEGNO {out.megno_sums[1] / out.t:.5g}" if out.t > 0 else "")]
+    if run.section is not None:
+        lines.append(f"{out.n_crossings} crossings of the section {section_text(run.section)}")
     lines += shape_ranges(system, t, s)
     bound = run.p_max
     if bound is not None:
