@@ -621,7 +621,8 @@ def build_parser():
                    help="cells (a manifold archive: points) to recompute (default 8)")
     v.set_defaults(func=_verify)
     x = sub.add_parser("explore", help="a survey archive's maps in a browser: hover a cell "
-                                       "for its evidence, click it for its orbit",
+                                       "for its evidence, click it for its orbit (a family "
+                                       "archive: its diagram, click a member)",
                        description="Serve an archive's maps (the regime and every mapped "
                                    "indicator; a one-axis scan as a line; a one-shell "
                                    "archive's section, and its 4-D section of three bodies "
@@ -633,9 +634,13 @@ def build_parser():
                                    "paths, section crossings and indicators' convergence, "
                                    "with the archive's frequencies, the cell as a config "
                                    "([initial] family = \"explicit\") and the command that "
-                                   "reproduces it. Needs Bokeh: pip install "
+                                   "reproduces it. A family archive (periodic or "
+                                   "equilibria --output): its diagram along the parameter, "
+                                   "stable and unstable members, bifurcations; a click "
+                                   "integrates a member over its period with its "
+                                   "multipliers. Needs Bokeh: pip install "
                                    "'survey[explore]'.")
-    x.add_argument("archive", help="a survey archive (.nc)")
+    x.add_argument("archive", help="a survey archive, or a family archive (.nc)")
     x.add_argument("--port", type=int, default=5006,
                    help="the port to serve on (default 5006; 0: any free port)")
     x.add_argument("--host", default="127.0.0.1",

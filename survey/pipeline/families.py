@@ -132,7 +132,7 @@ def load_equilibria(path):
 
 
 
-def _family_systems(config_system: dict, parameter: str, table: str = "equilibria"):
+def family_systems(config_system: dict, parameter: str, table: str = "equilibria"):
     """(p0, p -> System): the parameter's value in [system] and the System at another."""
     from .build import term_axis_names
     if parameter.startswith("mass_"):
@@ -200,7 +200,7 @@ def _equilibrium_family(path, config, system, start, table):
                                                     "angular_momentum: give it, not "
                                                     "rotation_rate")
     p0, systems = (table["angular_momentum"], lambda p: system) if spin else \
-        _family_systems(config.system_table, table["parameter"])
+        family_systems(config.system_table, table["parameter"])
     _reachable(systems, table["to"], "equilibria")
     if table["to"] == p0:
         raise ConfigError("[equilibria].to", f"equals the parameter's start value {p0:g}; "
@@ -290,7 +290,7 @@ def _periodic_family(path, config, system, table, orbit) -> Family:
                                                       "orbit's J is its own")
         p0, systems = orbit.angular_momentum, lambda p: system
     else:
-        p0, systems = _family_systems(config.system_table, name, "periodic")
+        p0, systems = family_systems(config.system_table, name, "periodic")
         _reachable(systems, table["to"], "periodic")
     if table["to"] == p0:
         raise ConfigError("[periodic].to", f"equals the parameter's start value {p0:g}; "

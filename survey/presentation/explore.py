@@ -1,13 +1,14 @@
 """The explorer (`python -m survey explore ARCHIVE`): a survey archive's maps (or its scan,
-or the section of its one energy shell) in a browser, each cell's parameters and evidence
+or the section of its one energy shell), or a family archive's diagram, in a browser, each cell's parameters and evidence
 under the pointer; a click integrates that cell's orbit with survey's own kernels -- the
 `orbit` command's run, so the same numbers -- and draws its paths, its section crossings
 and its indicators' convergence beside the archive's frequencies, with the config and the
 command that reproduce it. Served by Bokeh on 127.0.0.1 (docs/guide/explorer.md says why
 Bokeh: the tornado server it runs on is dask's own, and a map is sent as one raster).
 
-`CellView` holds what the page shows and computes -- no Bokeh -- so that the numbers a page
-prints are tested without a browser; `document` lays them out; `serve` runs the server."""
+`CellView` and `FamilyView` hold what a page shows and computes -- no Bokeh -- so that the
+numbers a page prints are tested without a browser; `document` and `family_document` lay
+them out; `serve` runs the server."""
 from __future__ import annotations
 
 import socket
@@ -15,18 +16,21 @@ import sys
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import NamedTuple
+from typing import Callable, NamedTuple
 
 import numpy as np
 
 from ..catalog.errors import ArchiveError, ConfigError, SurveyError
+from ..catalog.families import EQUILIBRIA, PERIODIC
 from ..catalog.indicators import REGISTRY
 from ..catalog.regimes import Regime
 from ..catalog.status import Status
 from ..catalog.variables import V, label
+from ..numerics.integrate import integrate
 from ..physics.jacobi import reduced
 from ..pipeline import archive, orbits
-from ..pipeline.config import _to_toml, parse_config
+from ..pipeline.config import _to_toml, load_config, parse_config
+from ..pipeline.families import family_systems, is_family
 from .sections import SLAB, section_axes, shells
 from .style import REGIME_COLOURS
 
@@ -88,8 +92,8 @@ class CellView:
         path = Path(path)
         with archive.open_archive(path) as ds:
             if "family" in ds.attrs:
-                raise ArchiveError(f"{path}: a family archive ({ds.attrs['family']}); the "
-                                   "explorer shows survey archives (python -m survey run)")
+                raise ArchiveError(f"{path}: a family archive ({ds.attrs['family']}): "
+                                   "FamilyView shows it")
             # read now, the convergence histories left (the bulk of a large archive, and
             # not drawn): HDF5 is not to be read from the server's thread and another
             histories = [v for v in ds.data_vars if "history_time" in ds[v].dims]
@@ -329,6 +333,112 @@ def _velocities(p, masses) -> np.ndarray:
     return v
 
 
+@dataclass
+class FamilyView:
+    """A family archive (`periodic` or `equilibria --output`) as the explorer shows it: its
+    diagram along the parameter, and a member's orbit on demand."""
+
+    path: Path
+    ds: object               # the archive, read
+    system_at: Callable      # the parameter's value -> the member's System
+
+    @classmethod
+    def open(cls, path) -> "FamilyView":
+        path = Path(path)
+        with archive.open_archive(path) as ds:
+            kind = ds.attrs.get("family")
+            if kind not in (PERIODIC, EQUILIBRIA):
+                raise ArchiveError(f"{path}: a {kind} archive; the explorer shows survey "
+                                   "archives and families of periodic orbits or equilibria")
+            data = ds.load()
+        tables = tomllib.loads(data.attrs["config"])
+        tables.pop(kind)        # (the command's table: the rest is a survey config)
+        config = load_config(tables, check_output=False)
+        name = next(iter(data.coords))
+        if name in ("energy", "angular_momentum"):     # one Hamiltonian along the family
+            system = config.system()
+            return cls(path, data, lambda p: system)
+        return cls(path, data, family_systems(config.system_table, name, kind)[1])
+
+    @property
+    def kind(self) -> str:
+        return self.ds.attrs["family"]
+
+    @property
+    def parameter(self) -> str:
+        return next(iter(self.ds.coords))
+
+    @property
+    def values(self) -> np.ndarray:
+        return self.ds[self.parameter].values.astype(float)
+
+    def measure(self) -> tuple[str, np.ndarray]:
+        """What the diagram draws against the parameter: the period, or the energy."""
+        name = "period" if self.kind == PERIODIC else "energy"
+        return name, self.ds[name].values.astype(float)
+
+    def describe(self, member: int) -> list[str]:
+        """A member's numbers as the archive holds them."""
+        d, p = self.ds.isel(member=member), self.values[member]
+        lines = [f"member {member}: {self.parameter} = {p:.10g}, E = "
+                 f"{float(d['energy']):.10g}, J = {float(d['angular_momentum']):.10g}"]
+        if self.kind == PERIODIC:
+            mu = d["multiplier_real"].values + 1j * d["multiplier_imag"].values
+            mu = mu[np.isfinite(mu)]
+            lines += [f"period {float(d['period']):.10g}, returning rotated by "
+                      f"{float(d['rotation']):.10g} rad: {str(d['kind'].values)}, "
+                      + ("linearly stable" if bool(d["stable"]) else "unstable"),
+                      "non-trivial Floquet multipliers (|mu|, angle/pi): " + ", ".join(
+                          f"{abs(m):.9g} {np.angle(m) / np.pi:+.6f}" for m in mu)]
+        else:
+            lam = d["eigenvalue_real"].values + 1j * d["eigenvalue_imag"].values
+            lam = lam[np.isfinite(lam)]
+            lines += [f"rotation rate Omega = {float(d['rotation_rate']):.10g}: "
+                      + ("linearly stable" if bool(d["stable"]) else "unstable"),
+                      "reduced eigenvalues: " + ", ".join(f"{z.real:+.6g}{z.imag:+.6g}i"
+                                                         for z in lam)]
+        return lines
+
+    def member_orbit(self, member: int, samples: int = 2001):
+        """(times, positions (samples, N, d), the relative return error) of the member
+        integrated with survey's kernels over one period (an equilibrium: one turn of its
+        rigid rotation, or nothing where it rests)."""
+        d = self.ds.isel(member=member)
+        system = self.system_at(self.values[member])
+        if self.kind == PERIODIC:
+            y0, T = d["initial_state"].values.astype(float), float(d["period"])
+        else:
+            q = d["positions"].values.astype(float)
+            omega = float(d["rotation_rate"])
+            p = system.masses[:, None] * omega * np.stack([-q[:, 1], q[:, 0]], axis=-1)
+            y0 = system.state(q, p)
+            T = 2 * np.pi / abs(omega) if omega else 1.0
+        t = np.linspace(0.0, T, samples)
+        out = integrate(system, y0, T, t_eval=t, rtol=1e-12, atol=1e-12)
+        q, _ = system.split(out.samples[:, :system.n])
+        rotated = out.y if self.kind == EQUILIBRIA else _rotated(system, out.y,
+                                                                 -float(d["rotation"]))
+        error = float(np.linalg.norm(rotated - y0) / np.linalg.norm(y0))
+        return t, q, error
+
+
+def _rotated(system, y, angle: float) -> np.ndarray:
+    """A planar state turned by `angle` about the origin."""
+    if system.dim != 2 or angle == 0.0:
+        return y
+    c, s = np.cos(angle), np.sin(angle)
+    q, p = system.split(y)
+    turn = np.array([[c, -s], [s, c]])
+    return system.state(q @ turn.T, p @ turn.T)
+
+
+def open_view(path):
+    """The explorer's view of the file at `path`: a survey archive's, or a family's."""
+    if is_family(path):
+        return FamilyView.open(path)
+    return CellView.open(path)
+
+
 # ---------------------------------------------------------------------------- the page
 
 def _image_geometry(values: np.ndarray):
@@ -540,6 +650,83 @@ def document(view: CellView, doc) -> None:
     doc.title = f"survey explore: {view.path.name}"
 
 
+def family_document(view: FamilyView, doc) -> None:
+    """The page of a family archive: its diagram along the parameter (stable members blue,
+    unstable red, bifurcations marked) over its stability indices (a periodic family) or
+    its normal-mode frequencies (equilibria); a click on a member integrates it."""
+    from bokeh.events import Tap
+    from bokeh.layouts import column, row
+    from bokeh.models import ColumnDataSource, Div
+    from bokeh.plotting import figure
+    p, (name, y) = view.values, view.measure()
+    stable = view.ds["stable"].values.astype(bool)
+    colour = np.where(stable, REGIME_COLOURS[Regime.TORUS], REGIME_COLOURS[Regime.CHAOTIC])
+    kinds = view.ds["kind"].values.astype(str) if "kind" in view.ds else \
+        np.where(stable, "stable", "unstable")
+    src = ColumnDataSource({"p": p, "y": y, "colour": colour, "member": np.arange(p.size),
+                            "kind": kinds})
+    title = Div(text=f"<h3 style='margin:4px 0'>{view.path.name}: {view.ds.attrs['title']}"
+                     f"</h3><div>{p.size} members; blue linearly stable, red unstable; "
+                     "click a member to integrate it</div>")
+    diagram = figure(width=760, height=380, title=f"{name} along {view.parameter}",
+                     x_axis_label=_tex(label(view.parameter)), y_axis_label=name,
+                     tools="pan,wheel_zoom,box_zoom,reset,hover,save", name="diagram",
+                     tooltips=[("member", "@member"), (view.parameter, "@p{%.10g}"),
+                               (name, "@y{%.10g}"), ("kind", "@kind")])
+    diagram.hover.formatters = {"@p": "printf", "@y": "printf"}
+    diagram.line("p", "y", source=src, color="#999999")
+    diagram.scatter("p", "y", source=src, color="colour", size=6)
+    where = view.ds["bifurcation_parameter"].values.astype(float)
+    if where.size:
+        at = np.argsort(p)
+        diagram.scatter(where, np.interp(where, p[at], y[at]), marker="x", size=14,
+                        color="black", line_width=2,
+                        legend_label="bifurcations: " + ", ".join(
+                            view.ds["bifurcation_kind"].values.astype(str)))
+    below = figure(width=760, height=260, x_range=diagram.x_range, name="stability",
+                   x_axis_label=_tex(label(view.parameter)),
+                   y_axis_label="stability indices (mu + 1/mu)/2" if view.kind == PERIODIC
+                   else "normal-mode frequencies |Im lambda|")
+    values = view.ds["index_real"].values if view.kind == PERIODIC else \
+        np.abs(view.ds["eigenvalue_imag"].values)
+    for k in range(values.shape[1]):
+        below.line(p, values[:, k], color=("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd")[k % 4])
+    status = Div(text="", name="status", width=900)
+    lines = Div(text="", name="orbit-text", width=900)
+    paths = figure(width=460, height=440, title="the member over one period", name="paths",
+                   match_aspect=True, x_axis_label="x", y_axis_label="y")
+    n_bodies = view.system_at(p[0]).n_bodies
+    path_sources = [ColumnDataSource({"x": [], "y": []}) for _ in range(n_bodies)]
+    for k, source in enumerate(path_sources):
+        paths.line("x", "y", source=source, line_width=1.5,
+                   color=("#d62728", "#2ca02c", "#1f77b4", "#9467bd", "#8c564b")[k % 5])
+
+    def draw(member):
+        try:
+            t, q, error = view.member_orbit(member)
+        except Exception as exc:       # the page's boundary: said there, the app goes on
+            why = str(exc) if isinstance(exc, ValueError) else f"{type(exc).__name__}: {exc}"
+            status.text = f"<b>member {member} could not be integrated</b>: {_html(why)}"
+            return
+        for k, source in enumerate(path_sources):
+            source.data = {"x": q[:, k, 0], "y": q[:, k, 1]}
+        back = "its start turned by the rotation" if view.kind == PERIODIC else "its start"
+        lines.text = "<pre>" + _html("\n".join(view.describe(member) + [
+            f"integrated over t = {t[-1]:.10g} with survey's kernels: it returns to {back} "
+            f"within {error:.2g} of its size"])) + "</pre>"
+        status.text = f"member {member} ({view.parameter} = {p[member]:.10g}): integrated"
+
+    def clicked(event):
+        span = np.array([np.ptp(p) or 1.0, np.ptp(y) or 1.0])
+        d = np.hypot((p - event.x) / span[0], (y - event.y) / span[1])
+        member = int(np.argmin(d))
+        status.text = f"{SPINNER}integrating member {member} ..."
+        doc.add_timeout_callback(lambda: draw(member), 60)
+    diagram.on_event(Tap, clicked)
+    doc.add_root(column(title, diagram, below, status, row(paths, lines)))
+    doc.title = f"survey explore: {view.path.name}"
+
+
 def _section_views(view, integrate) -> list:
     """A one-shell archive's section, crossings coloured by regime (a click integrates the
     crossing's cell), and its 4-D section of three bodies in the plane in three
@@ -658,9 +845,10 @@ def serve(path, host: str = HOST, port: int = PORT) -> Running:
         from bokeh.server.server import Server
     except ImportError:
         raise SurveyError("the explorer needs Bokeh: pip install 'survey[explore]'") from None
-    view = CellView.open(path)
+    view = open_view(path)
     check_port(host, port)
-    app = Application(FunctionHandler(lambda doc: document(view, doc)))
+    page = family_document if isinstance(view, FamilyView) else document
+    app = Application(FunctionHandler(lambda doc: page(view, doc)))
     for attempt in range(5):
         # port 0: a free port found here (the page's origin must name it), taken again
         # by another process before the server binds it only by a rare chance: retried

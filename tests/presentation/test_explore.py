@@ -111,6 +111,8 @@ def test_bad_input_is_named_before_a_server_starts(tmp_path):
         explore.CellView.open(text)
     with pytest.raises(ArchiveError, match="no such file"):
         explore.CellView.open(tmp_path / "absent.nc")
+    with pytest.raises(ArchiveError, match="a manifolds archive; the explorer shows survey"):
+        explore.open_view(RESULTS / "isosceles_perimetric_plane.nc")
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", 0))
         busy.listen()
@@ -135,3 +137,56 @@ def test_the_gallery_opens_each_map_in_the_explorer(view):
     for layer in ("regime", "megno", "birkhoff_digits"):
         assert f"delta_energy_map_areal_map_{layer}.png" in page
         assert f"http://127.0.0.1:5006/?layer={layer}>" in page
+
+
+BREATHING = ('[initial]\nfamily = "equilateral"\ndelta = 0.0\n\n'
+             '[periodic]\nmode = 3\nparameter = "energy"\nto = 150.0\nsteps = 3\n')
+ROUTH = '''
+[system]
+masses = [1.0, 0.01, 0.0001]
+interactions = [{kind = "pair", potential = "gravity", params = {G = 1.0}}]
+[initial]
+family = "explicit"
+positions = [[1.0, 0.0], [-0.5, 0.8660254037844386], [-0.5, -0.8660254037844386]]
+[equilibria]
+rotation_rate = 1.0
+parameter = "mass_1"
+to = 0.06
+steps = 5
+'''
+
+
+@pytest.fixture(scope="module")
+def families(tmp_path_factory):
+    """A periodic family (the homographic breathing orbits in energy) and a family of
+    relative equilibria (Lagrange's triangle along a mass), each as --output writes it."""
+    folder = tmp_path_factory.mktemp("families")
+    out = {}
+    for kind, text in (("periodic", BREATHING), ("equilibria", ROUTH)):
+        (folder / f"{kind}.toml").write_text(text)
+        out[kind] = folder / f"{kind}.nc"
+        assert main([kind, str(folder / f"{kind}.toml"), "--output", str(out[kind])]) == 0
+    return out
+
+
+def test_a_family_member_is_integrated_and_closes(families):
+    """A member of each family integrated with survey's kernels returns to its start (a
+    periodic orbit turned by its rotation, an equilibrium after one turn) -- a check of the
+    archived member by what would show it wrong -- and its numbers are the archive's."""
+    view = explore.open_view(families["periodic"])
+    assert isinstance(view, explore.FamilyView) and view.parameter == "energy"
+    last = view.values.size - 1
+    t, q, error = view.member_orbit(last)
+    assert error < 1e-9 and t[-1] == pytest.approx(float(view.ds["period"][last]))
+    text = "\n".join(view.describe(last))
+    assert f"period {float(view.ds['period'][last]):.10g}" in text and "multipliers" in text
+    name, period = view.measure()
+    assert name == "period" and np.allclose(period, np.pi / 3, rtol=1e-11)
+    routh = explore.open_view(families["equilibria"])
+    assert routh.parameter == "mass_1" and routh.measure()[0] == "energy"
+    for member in (0, routh.values.size - 1):
+        t, q, error = routh.member_orbit(member)
+        assert error < 1e-9 and q.shape[1:] == (3, 2)
+        # the member's own system: the mass along the family is the member's
+        assert routh.system_at(routh.values[member]).masses[1] == routh.values[member]
+    assert "reduced eigenvalues" in "\n".join(routh.describe(0))

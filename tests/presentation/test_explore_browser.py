@@ -170,3 +170,24 @@ def test_the_bench_times_the_explorer_as_a_user_meets_it(browser, tmp_path):
     text = "\n".join(lines)
     assert "command to interactive page" in text and "click to drawn orbit" in text
     assert "warm click / command" in text
+
+
+def test_a_family_members_orbit_is_drawn_on_a_click(browser, tmp_path):
+    cfg = tmp_path / "breathing.toml"
+    cfg.write_text('[initial]\nfamily = "equilateral"\ndelta = 0.0\n\n'
+                   '[periodic]\nmode = 3\nparameter = "energy"\nto = 150.0\nsteps = 3\n')
+    assert main(["periodic", str(cfg), "--output", str(tmp_path / "family.nc")]) == 0
+    server = Server(tmp_path / "family.nc")
+    try:
+        page = Page(browser, server.running.url)
+        box = page.page.locator("canvas").first.bounding_box()
+        page.page.mouse.click(box["x"] + box["width"] * 0.5, box["y"] + box["height"] * 0.5)
+        page.until("status", "m.text.includes('integrated')", timeout=120_000)
+        text = page.model("orbit-text", "m.text")
+        assert "non-trivial Floquet multipliers" in text and "returns to its start" in text
+        error = float(re.search(r"within ([0-9.e+-]+) of its size", text).group(1))
+        assert error < 1e-9
+        page.shot("explore_family")
+        assert page.errors == []
+    finally:
+        server.close()
