@@ -477,7 +477,6 @@ def document(view: CellView, doc) -> None:
         Div,
         FixedTicker,
         LinearColorMapper,
-        LogColorMapper,
         NumericInput,
         Select,
         TextAreaInput,
@@ -499,12 +498,14 @@ def document(view: CellView, doc) -> None:
                            value="", rows=12, width=900, name="export")
     command = Div(text="", name="command", width=900)
 
-    def mapper(layer: Layer):
-        cls = LogColorMapper if layer.log else LinearColorMapper
-        lo = max(layer.low, 1e-6) if layer.log else layer.low
-        return cls(palette=list(layer.palette), low=lo, high=max(layer.high, lo * 2 if
-                                                                 layer.log else lo + 1e-12),
-                   nan_color="#bbbbbb")
+    def shown(layer: Layer):
+        """(values, low, high) as the map colours them: a log layer in log10."""
+        if not layer.log:
+            return layer.values, layer.low, max(layer.high, layer.low + 1e-12)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            v = np.where(layer.values > 0, np.log10(layer.values), np.nan)
+        lo = np.log10(max(layer.low, 1e-6))
+        return v, lo, max(np.log10(max(layer.high, 1e-6)), lo + 1e-12)
 
     hovered = view.hover_columns()
     tips = [(k, f"@{{{k}}}" + ("" if v.dtype.kind in "iU" else "{%.6g}"))
@@ -531,21 +532,29 @@ def document(view: CellView, doc) -> None:
                       tools="pan,wheel_zoom,box_zoom,reset,hover,save", tooltips=tips,
                       name="map")
         plot.x_range.range_padding = plot.y_range.range_padding = 0
-        glyph = plot.image("image", x="x", y="y", dw="dw", dh="dh", source=source,
-                           color_mapper=mapper(layers[V.regime]))
-        regimes = dict(ticker=FixedTicker(ticks=[int(r) for r in Regime]),
-                       major_label_overrides={int(r): r.name.lower() for r in Regime})
-        plain = dict(ticker=BasicTicker(), major_label_overrides={})
-        bar = ColorBar(color_mapper=glyph.glyph.color_mapper, width=12, **regimes)
-        plot.add_layout(bar, "right")
+        # one mapper, changed in place from layer to layer (BokehJS redraws an image when
+        # its mapper changes, not when the mapper is replaced); the regimes' bar has its own
+        first = layers[V.regime]
+        colours = LinearColorMapper(palette=list(first.palette), low=first.low,
+                                    high=first.high, nan_color="#bbbbbb", name="colours")
+        plot.image("image", x="x", y="y", dw="dw", dh="dh", source=source,
+                   color_mapper=colours)
+        regime_bar = ColorBar(color_mapper=LinearColorMapper(
+            palette=list(first.palette), low=first.low, high=first.high), width=12,
+            ticker=FixedTicker(ticks=[int(r) for r in Regime]),
+            major_label_overrides={int(r): r.name.lower() for r in Regime})
+        value_bar = ColorBar(color_mapper=colours, width=12, ticker=BasicTicker(),
+                             visible=False)
+        plot.add_layout(regime_bar, "right")
+        plot.add_layout(value_bar, "right")
 
         def recolour(attr, old, new):
             layer = layers[new]
-            source.data["image"] = [image(layer.values)]
-            glyph.glyph.color_mapper = mapper(layer)
-            bar.update(color_mapper=glyph.glyph.color_mapper,
-                       **(regimes if new == V.regime else plain))
-            plot.title.text = new
+            values, low, high = shown(layer)
+            colours.update(palette=list(layer.palette), low=low, high=high)
+            source.data["image"] = [image(values)]
+            regime_bar.visible, value_bar.visible = new == V.regime, new != V.regime
+            plot.title.text = f"log10 {new}" if layer.log else new
         choose.on_change("value", recolour)
 
         def cell_at(x, y):

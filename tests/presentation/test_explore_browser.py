@@ -115,12 +115,33 @@ def test_a_click_integrates_the_cell_the_pointer_names(browser, map_server, tmp_
 
 
 def test_the_layers_recolour_the_map(browser, map_server):
+    """Colour by MEGNO: the pixel under the pointer is the colour MEGNO's colour map gives
+    the cell the pointer names (its range the registry's), the regimes' bar gone."""
+    import io
+
+    from matplotlib.colors import to_rgb
+    from matplotlib.image import imread
     page = Page(browser, map_server.running.url)
-    before = page.page.locator("canvas").first.screenshot()
     page.page.locator("select").first.select_option("megno")
     page.until("map", "m.title.text === 'megno'")
-    page.page.wait_for_timeout(500)
-    assert page.page.locator("canvas").first.screenshot() != before
+    assert page.model("colours", "[m.low, m.high]") == [0, 8]
+    canvas = page.page.locator("canvas").first
+    box = canvas.bounding_box()
+    for fx, fy in ((0.3, 0.4), (0.1, 0.9)):
+        at = (box["x"] + box["width"] * fx, box["y"] + box["height"] * fy)
+        page.page.mouse.move(*at)
+        tip = page.page.get_by_text(re.compile(r"cell:\s*\d+")).first
+        tip.wait_for(timeout=30_000)
+        cell = int(re.search(r"cell:\s*(\d+)", tip.inner_text()).group(1))
+        page.page.mouse.move(box["x"] + 2, box["y"] + 2)      # the tooltip out of the way
+        page.page.wait_for_timeout(300)
+        pixels = imread(io.BytesIO(canvas.screenshot()))
+        got = pixels[int(at[1] - box["y"]), int(at[0] - box["x"]), :3]
+        layer = explore.CellView.open(RESULTS / "delta_energy_map_areal.nc").layers()["megno"]
+        v = layer.values[cell]
+        want = "#bbbbbb" if not np.isfinite(v) else layer.palette[
+            int(np.clip((v - layer.low) / (layer.high - layer.low) * 256, 0, 255))]
+        assert np.allclose(got, to_rgb(want), atol=0.02), (cell, v, got, want)
     page.shot("explore_map_megno")
     assert page.errors == []
 
