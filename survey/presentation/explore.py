@@ -572,10 +572,17 @@ def document(view: CellView, doc) -> None:
                       tooltips=tips, name="map")
         plot.line("x", "y", source=source, color="#999999")
         plot.scatter("x", "y", source=source, color="colour", size=7)
+        ticks = plot.yaxis[0]
+        named = dict(ticker=FixedTicker(ticks=[int(r) for r in Regime]),
+                     major_label_overrides={int(r): r.name.lower() for r in Regime})
+        ticks.update(**named)
+        plain = dict(ticker=BasicTicker(), major_label_overrides={})
 
         def recolour(attr, old, new):
-            source.data["y"] = layers[new].values
-            plot.title.text = new
+            values, _, _ = shown(layers[new])
+            source.data["y"] = values
+            ticks.update(**(named if new == V.regime else plain))
+            plot.title.text = f"log10 {new}" if layers[new].log else new
         choose.on_change("value", recolour)
 
         def cell_at(x, y):

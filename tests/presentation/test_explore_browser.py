@@ -212,3 +212,19 @@ def test_a_family_members_orbit_is_drawn_on_a_click(browser, tmp_path):
         assert page.errors == []
     finally:
         server.close()
+
+
+def test_a_scan_is_a_line_of_cells_named_by_regime(browser):
+    server = Server(RESULTS / "default.nc")
+    try:
+        page = Page(browser, server.running.url + "?layer=ftle")
+        label = ("(o => o instanceof Map ? o.get(4) : o[4])"
+                 "(m.left[0].major_label_overrides)")
+        page.until("map", "m.title.text === 'log10 ftle'")
+        assert page.model("map", label) is None
+        page.page.locator("select").first.select_option("regime")
+        page.until("map", f"{label} === 'chaotic'")
+        page.shot("explore_scan")
+        assert page.errors == []
+    finally:
+        server.close()
