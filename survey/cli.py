@@ -486,7 +486,7 @@ def _verify(args):
 
 
 def _explore(args):
-    from .presentation import explore
+    from . import explore
     return explore.main(args.archive, args.host, args.port, browser=not args.no_browser)
 
 

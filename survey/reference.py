@@ -306,10 +306,11 @@ def _explorable(archive: Path) -> set[str]:
         return set()
     import netCDF4
     from .catalog.indicators import REGISTRY
+    from .catalog.variables import V
     with netCDF4.Dataset(archive) as nc:
-        if "grid_axes" not in nc.ncattrs() or "regime" not in nc.variables:
+        if "grid_axes" not in nc.ncattrs() or V.regime not in nc.variables:
             return set()
-        return {"regime", "regular_share"} & set(nc.variables) | \
+        return {V.regime, "regular_share"} & set(nc.variables) | \
             {i.headline for i in REGISTRY if i.map is not None and i.headline in nc.variables}
 
 

@@ -77,12 +77,12 @@ def explorer_latency(cells: int = 10_000, t_orbit: float = 2000.0, clicks: int =
             page.evaluate(f"{model}('t_final').value = {t_orbit}")
             times = []
             for k in range(clicks):
-                page.evaluate(f"{model}('status').text = ''")
+                page.evaluate(f"{model}('notice').text = ''")
                 page.mouse.click(box["x"] + box["width"] * (0.45 + 0.05 * k),
                                  box["y"] + box["height"] * 0.5)
                 began = time.perf_counter()
                 page.wait_for_function(
-                    f"{model}('status').text.includes('integrated to t')", timeout=300_000)
+                    f"{model}('notice').text.includes('integrated to t')", timeout=300_000)
                 times.append(time.perf_counter() - began)
         finally:
             proc.terminate()

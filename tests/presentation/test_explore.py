@@ -1,4 +1,4 @@
-"""The explorer's numbers without a browser (survey.presentation.explore.CellView): what a
+"""The explorer's numbers without a browser (survey.explore.CellView): what a
 pointer over a cell shows is the archive's, a clicked cell's orbit is what `survey orbit
 CONFIG --cell K` prints for it, the exported config starts where the archive's cell started
 (bit for bit) and integrates to the same orbit, and bad input says what is wrong before a
@@ -15,7 +15,7 @@ from survey.catalog.regimes import Regime
 from survey.cli import main
 from survey.pipeline.cells import build_starts
 from survey.pipeline.config import parse_config
-from survey.presentation import explore
+from survey import explore
 from survey.presentation.sections import SLAB
 
 RESULTS = Path(__file__).resolve().parents[2] / "results"
@@ -137,36 +137,6 @@ def test_the_gallery_opens_each_map_in_the_explorer(view):
     for layer in ("regime", "megno", "birkhoff_digits"):
         assert f"delta_energy_map_areal_map_{layer}.png" in page
         assert f"http://127.0.0.1:5006/?layer={layer}>" in page
-
-
-BREATHING = ('[initial]\nfamily = "equilateral"\ndelta = 0.0\n\n'
-             '[periodic]\nmode = 3\nparameter = "energy"\nto = 150.0\nsteps = 3\n')
-ROUTH = '''
-[system]
-masses = [1.0, 0.01, 0.0001]
-interactions = [{kind = "pair", potential = "gravity", params = {G = 1.0}}]
-[initial]
-family = "explicit"
-positions = [[1.0, 0.0], [-0.5, 0.8660254037844386], [-0.5, -0.8660254037844386]]
-[equilibria]
-rotation_rate = 1.0
-parameter = "mass_1"
-to = 0.06
-steps = 5
-'''
-
-
-@pytest.fixture(scope="module")
-def families(tmp_path_factory):
-    """A periodic family (the homographic breathing orbits in energy) and a family of
-    relative equilibria (Lagrange's triangle along a mass), each as --output writes it."""
-    folder = tmp_path_factory.mktemp("families")
-    out = {}
-    for kind, text in (("periodic", BREATHING), ("equilibria", ROUTH)):
-        (folder / f"{kind}.toml").write_text(text)
-        out[kind] = folder / f"{kind}.nc"
-        assert main([kind, str(folder / f"{kind}.toml"), "--output", str(out[kind])]) == 0
-    return out
 
 
 def test_a_family_member_is_integrated_and_closes(families):

@@ -16,7 +16,7 @@ import pytest
 from survey.cli import main
 from survey.pipeline.cells import build_starts
 from survey.pipeline.config import parse_config
-from survey.presentation import explore
+from survey import explore
 
 playwright = pytest.importorskip("playwright.sync_api", reason="Playwright is not installed "
                                  "(pip install -e '.[test]')")
@@ -167,12 +167,10 @@ def test_a_one_shell_section_turns_in_3d(browser):
         assert page.model("slice3d", f"Array.from({x}).every((v, i) => v === {u}[i])")
         handle = page.page.locator(".noUi-handle").first
         handle.focus()
-        for _ in range(90):
-            page.page.keyboard.press("ArrowRight")
-        page.until("azimuth", "m.value === 90")
-        # turned a quarter about the vertical: the screen's x is the third coordinate, eta
-        w = "m.renderers[0].data_source.data.w"
-        page.until("slice3d", f"Array.from({x}).every((v, i) => Math.abs(v - {w}[i]) < 1e-12)")
+        page.page.keyboard.press("End")
+        page.until("azimuth", "m.value === 180")
+        # turned half a turn about the vertical: the screen's x is -sigma (scaled)
+        page.until("slice3d", f"Array.from({x}).every((v, i) => Math.abs(v + {u}[i]) < 1e-12)")
         page.shot("explore_section_turned")
         assert page.errors == []
     finally:
@@ -193,17 +191,13 @@ def test_the_bench_times_the_explorer_as_a_user_meets_it(browser, tmp_path):
     assert "warm click / command" in text
 
 
-def test_a_family_members_orbit_is_drawn_on_a_click(browser, tmp_path):
-    cfg = tmp_path / "breathing.toml"
-    cfg.write_text('[initial]\nfamily = "equilateral"\ndelta = 0.0\n\n'
-                   '[periodic]\nmode = 3\nparameter = "energy"\nto = 150.0\nsteps = 3\n')
-    assert main(["periodic", str(cfg), "--output", str(tmp_path / "family.nc")]) == 0
-    server = Server(tmp_path / "family.nc")
+def test_a_family_members_orbit_is_drawn_on_a_click(browser, families):
+    server = Server(families["periodic"])
     try:
         page = Page(browser, server.running.url)
         box = page.page.locator("canvas").first.bounding_box()
         page.page.mouse.click(box["x"] + box["width"] * 0.5, box["y"] + box["height"] * 0.5)
-        page.until("status", "m.text.includes('integrated')", timeout=120_000)
+        page.until("notice", "m.text.includes('integrated')", timeout=120_000)
         text = page.model("orbit-text", "m.text")
         assert "non-trivial Floquet multipliers" in text and "returns to its start" in text
         error = float(re.search(r"within ([0-9.e+-]+) of its size", text).group(1))

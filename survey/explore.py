@@ -20,19 +20,19 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
-from ..catalog.errors import ArchiveError, ConfigError, SurveyError
-from ..catalog.families import EQUILIBRIA, PERIODIC
-from ..catalog.indicators import REGISTRY
-from ..catalog.regimes import Regime
-from ..catalog.status import Status
-from ..catalog.variables import V, label
-from ..numerics.integrate import integrate
-from ..physics.jacobi import reduced
-from ..pipeline import archive, orbits
-from ..pipeline.config import _to_toml, load_config, parse_config
-from ..pipeline.families import family_systems, is_family
-from .sections import SLAB, section_axes, shells
-from .style import REGIME_COLOURS
+from .catalog.errors import ArchiveError, ConfigError, SurveyError
+from .catalog.families import EQUILIBRIA, PERIODIC
+from .catalog.indicators import REGISTRY
+from .catalog.regimes import Regime
+from .catalog.status import Status
+from .catalog.variables import V, label
+from .numerics.integrate import integrate
+from .physics.jacobi import reduced
+from .pipeline import archive, orbits
+from .pipeline.config import _to_toml, load_config, parse_config
+from .pipeline.families import family_systems, is_family
+from .presentation.sections import SLAB, section_axes, shells
+from .presentation.style import REGIME_COLOURS
 
 # a turning wheel before a busy line (its style in the line: each Bokeh Div is a shadow root)
 SPINNER = ("<style>.spin{display:inline-block;animation:spin 1s linear infinite}"
@@ -42,7 +42,7 @@ HOST = "127.0.0.1"
 PORT = 5006              # Bokeh's own default
 DRAWN = 4001             # orbit samples drawn (the orbit's run samples it more densely)
 # the evidence a pointer over a cell shows, where the archive holds it
-HOVERED = (V.regime_confidence, V.regime_horizon, "megno", "ftle", "fli", "birkhoff_digits",
+HOVERED = (V.regime_confidence, V.regime_horizon, V.megno, V.ftle, V.fli, V.birkhoff_digits,
            "regular_share")
 
 
@@ -271,10 +271,10 @@ class CellView:
 
     def _frequencies(self, cell: int) -> list:
         """(name, value) of the cell's labelled fundamental frequencies in the archive."""
-        if "frequency_labelled" not in self.ds:
+        if V.frequency_labelled not in self.ds:
             return []
         at = np.unravel_index(cell, self.shape) if self.axes else ()
-        rows = self.ds["frequency_labelled"][at].values
+        rows = self.ds[V.frequency_labelled][at].values
         names = self.ds["fundamental_name"].values if "fundamental_name" in self.ds.coords \
             else [f"f{k}" for k in range(rows.size)]
         return [(str(n), float(f)) for n, f in zip(names, rows)]
@@ -355,7 +355,7 @@ class FamilyView:
         tables.pop(kind)        # (the command's table: the rest is a survey config)
         config = load_config(tables, check_output=False)
         name = next(iter(data.coords))
-        if name in ("energy", "angular_momentum"):     # one Hamiltonian along the family
+        if name in (V.energy, V.angular_momentum):     # one Hamiltonian along the family
             system = config.system()
             return cls(path, data, lambda p: system)
         return cls(path, data, family_systems(config.system_table, name, kind)[1])
@@ -374,14 +374,14 @@ class FamilyView:
 
     def measure(self) -> tuple[str, np.ndarray]:
         """What the diagram draws against the parameter: the period, or the energy."""
-        name = "period" if self.kind == PERIODIC else "energy"
+        name = "period" if self.kind == PERIODIC else V.energy
         return name, self.ds[name].values.astype(float)
 
     def describe(self, member: int) -> list[str]:
         """A member's numbers as the archive holds them."""
         d, p = self.ds.isel(member=member), self.values[member]
         lines = [f"member {member}: {self.parameter} = {p:.10g}, E = "
-                 f"{float(d['energy']):.10g}, J = {float(d['angular_momentum']):.10g}"]
+                 f"{float(d[V.energy]):.10g}, J = {float(d[V.angular_momentum]):.10g}"]
         if self.kind == PERIODIC:
             mu = d["multiplier_real"].values + 1j * d["multiplier_imag"].values
             mu = mu[np.isfinite(mu)]
@@ -406,7 +406,7 @@ class FamilyView:
         d = self.ds.isel(member=member)
         system = self.system_at(self.values[member])
         if self.kind == PERIODIC:
-            y0, T = d["initial_state"].values.astype(float), float(d["period"])
+            y0, T = d[V.initial_state].values.astype(float), float(d["period"])
         else:
             q = d["positions"].values.astype(float)
             omega = float(d["rotation_rate"])
@@ -492,7 +492,7 @@ def document(view: CellView, doc) -> None:
     choose = Select(title="colour by", value=V.regime, options=list(layers), width=200)
     t_final = NumericInput(title="orbit to t =", value=view.config.settings.integration.t_final,
                            low=1e-6, mode="float", width=140, name="t_final")
-    status = Div(text="", name="status", width=900)
+    status = Div(text="", name="notice", width=900)
     lines = Div(text="", name="orbit-text", width=900)
     export = TextAreaInput(title="the cell as a config ([initial] family = \"explicit\")",
                            value="", rows=12, width=900, name="export")
@@ -526,7 +526,7 @@ def document(view: CellView, doc) -> None:
         for k, v in hovered.items():
             data[k] = [v.reshape(shape).T]
         source = ColumnDataSource(data)
-        plot = figure(width=640, height=520, title="regime",
+        plot = figure(width=640, height=520, title=V.regime,
                       x_axis_label=_tex(label(a)) + (" (index)" if ia else ""),
                       y_axis_label=_tex(label(b)) + (" (index)" if ib else ""),
                       tools="pan,wheel_zoom,box_zoom,reset,hover,save", tooltips=tips,
@@ -566,7 +566,7 @@ def document(view: CellView, doc) -> None:
         source = ColumnDataSource({"x": xs, "y": layers[V.regime].values,
                                    "colour": [REGIME_COLOURS[Regime(r)] for r in regime],
                                    **hovered})
-        plot = figure(width=760, height=360, title="regime",
+        plot = figure(width=760, height=360, title=V.regime,
                       x_axis_label=_tex(label(axes[0])) if axes else "cell",
                       tools="pan,wheel_zoom,box_zoom,reset,hover,save",
                       tooltips=tips, name="map")
@@ -603,11 +603,11 @@ def document(view: CellView, doc) -> None:
     section = figure(width=420, height=400, title=view.section_title(), name="section",
                      x_axis_label=_tex(label(names[0])), y_axis_label=_tex(label(names[1])))
     section.scatter("x", "y", source=crossing_source, size=3, color="black")
-    conv_source = ColumnDataSource({"t": [], "megno": [], "ftle": []})
+    conv_source = ColumnDataSource({"t": [], "mean_y": [], "growth_rate": []})
     convergence = figure(width=420, height=400, title="indicators' convergence",
                          x_axis_label="t", name="convergence")
-    convergence.line("t", "megno", source=conv_source, color="#1f77b4", legend_label="MEGNO")
-    convergence.line("t", "ftle", source=conv_source, color="#d62728",
+    convergence.line("t", "mean_y", source=conv_source, color="#1f77b4", legend_label="MEGNO")
+    convergence.line("t", "growth_rate", source=conv_source, color="#d62728",
                      legend_label="FTLE ln(|w|/|w0|)/t")
     convergence.legend.location = "top_left"
 
@@ -622,7 +622,7 @@ def document(view: CellView, doc) -> None:
             src.data = {"x": o.positions[:, k, 0], "y": o.positions[:, k, 1]}
         crossing_source.data = {"x": np.asarray(o.crossings[0]) if o.crossings else [],
                                 "y": np.asarray(o.crossings[1]) if o.crossings else []}
-        conv_source.data = {"t": o.t, "megno": o.megno, "ftle": o.ftle}
+        conv_source.data = {"t": o.t, "mean_y": o.megno, "growth_rate": o.ftle}
         freq = "; ".join(f"{n} = {f:.8g}" for n, f in o.frequencies if np.isfinite(f))
         lines.text = "<pre>" + _html("\n".join(o.lines + ([f"frequencies (archive): {freq}"]
                                                         if freq else []))) + "</pre>"
@@ -707,7 +707,7 @@ def family_document(view: FamilyView, doc) -> None:
         np.abs(view.ds["eigenvalue_imag"].values)
     for k in range(values.shape[1]):
         below.line(p, values[:, k], color=("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd")[k % 4])
-    status = Div(text="", name="status", width=900)
+    status = Div(text="", name="notice", width=900)
     lines = Div(text="", name="orbit-text", width=900)
     paths = figure(width=460, height=440, title="the member over one period", name="paths",
                    match_aspect=True, x_axis_label="x", y_axis_label="y")
