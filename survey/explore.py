@@ -282,8 +282,8 @@ class CellView:
     # ---- exports
     def export(self, cell: int) -> str:
         """A survey config of the one cell: the archive's stored config with [initial] the
-        cell's start as an explicit family (its momenta exactly: velocities v with m v ==
-        p), term parameters at the cell's values, no [check] or [refine]."""
+        cell's start as an explicit family (its momenta exactly: `_velocities`), term
+        parameters at the cell's values, no [check] or [refine]."""
         raw = tomllib.loads(self.config.text)
         for table in ("check", "refine"):
             raw.pop(table, None)
@@ -320,9 +320,9 @@ class CellView:
 
 
 def _velocities(p, masses) -> np.ndarray:
-    """Velocities v with masses * v == p in floating point (p / m, moved by an ulp where
-    that does not round back), so that an exported start is the archived one bit for
-    bit."""
+    """Velocities v with masses * v == p in floating point where such a v exists (p / m,
+    moved by an ulp where that does not round back; with unit masses p itself), so that
+    an exported start is the archived one bit for bit."""
     m = np.broadcast_to(np.asarray(masses, dtype=float)[:, None], p.shape)
     v = p / m
     for idx in zip(*np.nonzero(m * v != p)):
