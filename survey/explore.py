@@ -26,7 +26,9 @@ from .catalog.indicators import REGISTRY
 from .catalog.regimes import Regime
 from .catalog.status import Status
 from .catalog.variables import V, label
+from .machine import linalg
 from .numerics.integrate import integrate
+from .numerics.periodic import rotation
 from .physics.jacobi import reduced
 from .pipeline import archive, orbits
 from .pipeline.config import _to_toml, load_config, parse_config
@@ -133,8 +135,11 @@ class CellView:
         return cache[name]
 
     def hover_columns(self) -> dict[str, np.ndarray]:
-        """`describe`'s entries for every cell at once: numbers as numbers, the regime and
-        status by name (what the page sends for its tooltips)."""
+        """What the pointer over each cell shows -- its grid values, index, regime and
+        status (by name) and the evidence the archive holds -- for every cell at once (what
+        the page sends for its tooltips; computed once)."""
+        if "_hover" in self.__dict__:
+            return self.__dict__["_hover"]
         cells = np.arange(self.config.n_cells)
         at = np.unravel_index(cells, self.shape) if self.axes else ()
         out = {a: self.axis_values(a)[i] for a, i in zip(self.axes, at)}
@@ -145,6 +150,7 @@ class CellView:
         for name in HOVERED:
             if name in self.ds:
                 out[name] = self.flat(name).astype(float)
+        self.__dict__["_hover"] = out
         return out
 
     def layers(self) -> dict[str, Layer]:
@@ -168,17 +174,10 @@ class CellView:
         return out
 
     def describe(self, cell: int) -> dict[str, str]:
-        """What the pointer over a cell shows: its grid values, regime, status and the
-        evidence the archive holds for it."""
-        at = np.unravel_index(cell, self.shape) if self.axes else ()
-        out = {a: f"{self.axis_values(a)[i]:.6g}" for a, i in zip(self.axes, at)}
-        out["cell"] = str(cell)
-        out[V.regime] = Regime(int(self.flat(V.regime)[cell])).name.lower()
-        out[V.status] = Status(int(self.flat(V.status)[cell])).name.lower()
-        for name in HOVERED:
-            if name in self.ds:
-                out[name] = f"{float(self.flat(name)[cell]):.4g}"
-        return out
+        """What the pointer over a cell shows (`hover_columns`), as text."""
+        return {k: f"{v[cell]:.6g}" if k in self.axes else
+                f"{v[cell]:.4g}" if v.dtype.kind == "f" else str(v[cell])
+                for k, v in self.hover_columns().items()}
 
     # ---- one-shell sections
     def shell_crossings(self):
@@ -416,20 +415,11 @@ class FamilyView:
         t = np.linspace(0.0, T, samples)
         out = integrate(system, y0, T, t_eval=t, rtol=1e-12, atol=1e-12)
         q, _ = system.split(out.samples[:, :system.n])
-        rotated = out.y if self.kind == EQUILIBRIA else _rotated(system, out.y,
-                                                                 -float(d["rotation"]))
-        error = float(np.linalg.norm(rotated - y0) / np.linalg.norm(y0))
+        # a relative periodic orbit returns turned by its rotation (the shooting's R)
+        turn = float(d["rotation"]) if self.kind == PERIODIC and system.dim == 2 else 0.0
+        back = linalg.dot(rotation(system, turn), y0) if turn else y0
+        error = float(np.linalg.norm(out.y - back) / np.linalg.norm(y0))
         return t, q, error
-
-
-def _rotated(system, y, angle: float) -> np.ndarray:
-    """A planar state turned by `angle` about the origin."""
-    if system.dim != 2 or angle == 0.0:
-        return y
-    c, s = np.cos(angle), np.sin(angle)
-    q, p = system.split(y)
-    turn = np.array([[c, -s], [s, c]])
-    return system.state(q @ turn.T, p @ turn.T)
 
 
 def open_view(path):

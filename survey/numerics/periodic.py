@@ -189,7 +189,7 @@ def motion(system: System, y, period: float, rotation: float, tol: float) -> Mot
     return Motion(excursion, float(portable.vdot(angles, np.ones(angles.size))) / (2 * np.pi))
 
 
-def _rotation(system: System, theta: float) -> np.ndarray:
+def rotation(system: System, theta: float) -> np.ndarray:
     """The state-space matrix rotating every position and momentum by theta (the plane)."""
     c, s = portable.cos(theta), portable.sin(theta)
     return np.kron(np.eye(2 * system.n_bodies), np.array([[c, -s], [s, c]]))
@@ -259,7 +259,7 @@ class _Shooting(NamedTuple):
         to the flow and to a rotation), so their residual is zero."""
         n, d = system.n, system.dim
         energy = p if self.energy is None else self.energy
-        R = _rotation(system, theta) if self.rotating else np.eye(n)
+        R = rotation(system, theta) if self.rotating else np.eye(n)
         if tangents:
             yT, phi = flow_map(system, y, T, self.tol)
         else:
@@ -301,7 +301,7 @@ class _Shooting(NamedTuple):
         rotation with J, the centre of mass with the momentum)."""
         n, d = system.n, system.dim
         nq = n // 2
-        R = _rotation(system, theta) if self.rotating else np.eye(n)
+        R = rotation(system, theta) if self.rotating else np.eye(n)
         M = linalg.dot(R.T, phi)
         internal = linalg.svd(_centre(system))[1][2 * d:].T
         J = np.block([[np.zeros((nq, nq)), np.eye(nq)], [-np.eye(nq), np.zeros((nq, nq))]])

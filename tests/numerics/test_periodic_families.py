@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from conftest import BREATHING
 from survey.cli import main
 from survey.numerics.periodic import lyapunov_start, periodic_family, periodic_orbit
 from survey.physics.equilibria import relative_equilibrium
@@ -170,8 +171,7 @@ def test_periodic_family_command(tmp_path, capsys):
     config and provenance, and refuses a family asked to run the wrong way or without an
     end."""
     cfg = tmp_path / "breathing.toml"
-    cfg.write_text('[initial]\nfamily = "equilateral"\ndelta = 0.0\n\n'
-                   '[periodic]\nmode = 3\nparameter = "energy"\nto = 150.0\nsteps = 3\n')
+    cfg.write_text(BREATHING)
     out = tmp_path / "family.nc"
     assert main(["periodic", str(cfg), "--output", str(out)]) == 0
     text = capsys.readouterr().out

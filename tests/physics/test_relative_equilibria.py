@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from conftest import ROUTH
 from survey import integrate
 from survey.cli import main
 from survey.numerics.continuation import equilibrium_family
@@ -163,19 +164,7 @@ def test_equilibria_command_continues_a_family(tmp_path, capsys):
     does not have is named."""
     import xarray as xr
     cfg = tmp_path / "routh.toml"
-    cfg.write_text('''
-[system]
-masses = [1.0, 0.01, 0.0001]
-interactions = [{kind = "pair", potential = "gravity", params = {G = 1.0}}]
-[initial]
-family = "explicit"
-positions = [[1.0, 0.0], [-0.5, 0.8660254037844386], [-0.5, -0.8660254037844386]]
-[equilibria]
-rotation_rate = 1.0
-parameter = "mass_1"
-to = 0.06
-steps = 5
-''')
+    cfg.write_text(ROUTH)
     out = tmp_path / "family.nc"
     assert main(["equilibria", str(cfg), "--output", str(out)]) == 0
     text = capsys.readouterr().out

@@ -17,6 +17,7 @@ from survey.cli import main
 from survey.pipeline.cells import build_starts
 from survey.pipeline.config import parse_config
 from survey import explore
+from survey.bench.explorer import FLAGS
 
 playwright = pytest.importorskip("playwright.sync_api", reason="Playwright is not installed "
                                  "(pip install -e '.[test]')")
@@ -26,8 +27,6 @@ if CHROMIUM is None:
                 "installs it)", allow_module_level=True)
 
 RESULTS = Path(__file__).resolve().parents[2] / "results"
-FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
-         "--disable-component-update", "--disable-sync", "--no-first-run"]
 
 
 class Server:
