@@ -8,10 +8,12 @@ that module changes.
 
 What this module changes beyond itself happens in one call, `start`, made once as it is
 imported (every compiled module imports it first): the cached kernels cleared if their
-sources changed, and LLVM told the machine's real vector width (process-wide).
+sources changed, numba's saves to its cache locked against other processes', and LLVM told
+the machine's real vector width (process-wide).
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 from pathlib import Path
@@ -114,12 +116,47 @@ def vector_width():
     return 4
 
 
+def lock_cache_saves():
+    """numba saves a kernel to its disk cache by reading its function's index, adding the
+    entry and writing both back. Two processes saving different specialisations of one
+    function at once can both number their machine code 1, and the index then names the
+    other's: a kernel of the wrong types. A first run's processes compile at once
+    (pipeline.sweep), as do two surveys started together on a new machine. Each save
+    (and each read of an index and its entry) holds a lock on a file of the cache folder
+    (fcntl's, which the system releases if a process dies holding it). Not on POSIX, or
+    where the folder cannot be written: unlocked, as numba itself."""
+    try:
+        import fcntl
+    except ImportError:
+        return
+    from numba.core.caching import IndexDataCacheFile
+    if getattr(IndexDataCacheFile.save, "locked", False):
+        return
+
+    def locked(method, mode):
+        @functools.wraps(method)
+        def run(self, *args):
+            try:
+                lock = open(os.path.join(self._cache_path, "survey.lock"), "a")
+            except OSError:
+                return method(self, *args)
+            with lock:
+                fcntl.flock(lock, mode)
+                return method(self, *args)
+        run.locked = True
+        return run
+    IndexDataCacheFile.save = locked(IndexDataCacheFile.save, fcntl.LOCK_EX)
+    IndexDataCacheFile.load = locked(IndexDataCacheFile.load, fcntl.LOCK_SH)
+
+
 def start() -> int:
     """Everything survey changes outside itself before it compiles, in one place: numba's
-    disk cache brought in step with the kernel sources (refresh_kernel_cache), and LLVM's
+    disk cache brought in step with the kernel sources (refresh_kernel_cache), its saves
+    locked against each other (lock_cache_saves), and LLVM's
     vector width set for the machine (vector_width, which holds for the process). Returns
     the vector width in doubles."""
     refresh_kernel_cache()
+    lock_cache_saves()
     return vector_width()
 
 
