@@ -34,8 +34,9 @@ BENCH_PARTS = {
     "refine": "how busy a refined map keeps 2 workers (each one's idle share of the compute "
               "phase)",
     "memory": "the driver's peak memory for 10^4 and 10^5 cells",
-    "scale": "the cost per cell of (delta, energy) maps of 10^3 to 10^5 cells, and how soon "
-             "a 10^6-cell grid saves its first chunk, with the driver's memory then",
+    "scale": "the cost per cell of (delta, energy) maps of 10^3 to 10^5 cells, the smallest "
+             "one's compute against heyoka's batch mode on its orbits, and how soon a "
+             "10^6-cell grid saves its first chunk, with the driver's memory then",
     "newton": "a step of the periodic-orbit shooting against the orbit with its full "
               "tangent block",
     "explore": "the explorer on a 10^4-cell map in headless Chromium: the command to an "

@@ -390,30 +390,38 @@ def vector_doubles() -> int:
 
 
 def _heyoka_scan(cells, t_final, tols, dE_max):
-    """heyoka's batch ensemble over the scan's starts at the loosest of `tols` whose largest
-    relative energy error at t_final is not above dE_max, in batches of the SIMD width heyoka
-    recommends or of the width of this machine's vectors, where they differ, whichever runs
-    faster (on a virtual AMD EPYC that hides AVX-512 heyoka recommends 8 and runs the scan
-    ~10% faster in 4): a runner giving (wall time, FTLE per cell), or {} without heyoka."""
+    """heyoka_batches over the scan's starts: the equilateral family, delta in [0, 10], each
+    with survey's first deviation vector."""
+    from ..catalog.indicators import IndicatorOptions
+    system = System.create()
+    seed = IndicatorOptions().seed
+    starts = [initial_state(system, "equilateral", delta=float(delta))
+              for delta in np.linspace(0.0, 10.0, cells)]
+    return heyoka_batches(system, starts, [deviation_vectors(system, y0, 1, seed)[0]
+                                           for y0 in starts], t_final, tols, dE_max)
+
+
+def heyoka_batches(system, starts, deviations, t_final, tols, dE_max):
+    """heyoka's batch ensemble over orbits (starts, each with its deviation vector and
+    MEGNO) at the loosest of `tols` whose largest relative energy error at t_final is not
+    above dE_max, in batches of the SIMD width heyoka recommends or of the width of this
+    machine's vectors, where they differ, whichever runs faster (on a virtual AMD EPYC that
+    hides AVX-512 heyoka recommends 8 and runs the scan ~10% faster in 4): a runner giving
+    (wall time, ln|w(t_final)| / t_final per orbit), or {} without heyoka."""
     try:
         import heyoka as hy
     except ImportError:
         return {}
-    from ..catalog.indicators import IndicatorOptions
-    system = System.create()
     n = system.n
-    seed = IndicatorOptions().seed
-    starts, E0 = [], []
-    for delta in np.linspace(0.0, 10.0, cells):
-        y0 = initial_state(system, "equilateral", delta=float(delta))
-        w0 = deviation_vectors(system, y0, 1, seed)[0]
-        starts.append(np.concatenate([y0, w0 / np.linalg.norm(w0), [0.0, 0.0, 0.0]]))
-        E0.append(system.energy(y0))
+    orbits = len(starts)
+    E0 = [system.energy(y0) for y0 in starts]
+    starts = [np.concatenate([y0, w0 / np.linalg.norm(w0), [0.0, 0.0, 0.0]])
+              for y0, w0 in zip(starts, deviations)]
     recommended = hy.recommended_simd_size()
 
     def runner(tol, width):
-        batches = -(-cells // width)
-        padded = np.array(starts + [starts[-1]] * (batches * width - cells))
+        batches = -(-orbits // width)
+        padded = np.array(starts + [starts[-1]] * (batches * width - orbits))
         first = padded.reshape(batches, width, -1).transpose(0, 2, 1)
         t = time.perf_counter()
         ta = heyoka_integrator(system, starts[0][:n], starts[0][n:2 * n], tol, megno=True,
@@ -428,7 +436,7 @@ def _heyoka_scan(cells, t_final, tols, dE_max):
             clock = time.perf_counter()
             done = hy.ensemble_propagate_until_batch(ta, t_final, batches, gen, max_workers=2)
             wall = time.perf_counter() - clock
-            final = np.concatenate([np.array(r[0].state).T for r in done])[:cells]
+            final = np.concatenate([np.array(r[0].state).T for r in done])[:orbits]
             return wall, final
         return run, compile_s
 
@@ -460,4 +468,4 @@ def _heyoka_scan(cells, t_final, tols, dE_max):
         wall, final = run()
         return wall, final[:, 2 * n]                     # ln|w| / T
     return {**chosen, "run": timed, "width": width, "recommended": recommended,
-            "trials": trials, "batches": -(-cells // width)}
+            "trials": trials, "batches": -(-orbits // width)}

@@ -140,10 +140,63 @@ def _map(n: int, t_final: float, folder) -> dict:
             "integration": {"t_final": t_final}}
 
 
+def _map_against_heyoka(n, t_final, folder, out, repeats=2,
+                        tols=(1e-10, 1e-11, 1e-12, 1e-13, 1e-14, 1e-15)):
+    """The n-cell map's orbits -- every cell's ensemble, one deviation vector each, with
+    MEGNO -- in heyoka's batch mode (baselines.heyoka_batches: the loosest of `tols` whose
+    largest energy error is not above survey's) against survey's compute phase on the same
+    work (every orbit once to t_final, no torus analysis) and with its default verdict
+    machinery; best of `repeats` interleaved runs."""
+    import xarray as xr
+
+    from ..numerics.indicators import ensemble
+    from ..pipeline.build import build_system, indicator_options
+    from ..pipeline.cells import CellTask, GridStarts
+    from ..pipeline.config import load_config
+    from ..pipeline.sweep import run_survey
+    from .baselines import heyoka_batches
+    default = _map(n, t_final, folder)
+    same = {**default, "survey": {**default["survey"], "output": f"{folder}/scale-{n}-same.nc"},
+            "tori": {"extend": 0, "analyse": False}}
+    run_survey(same, progress=False)
+    config = load_config(same)
+    task = CellTask.of(config)
+    system = build_system(task.system)
+    options = indicator_options(task.indicators)
+    jobs = [ensemble(system, y0, options) for y0 in GridStarts(config)(np.arange(config.n_cells))
+            if not np.isnan(y0[0])]
+    starts = [y0 for j in jobs for y0 in j.starts]
+    deviations = [w[0] for j in jobs for w in j.tangents]
+    with xr.open_dataset(same["survey"]["output"]) as ds:
+        dE = float(np.nanmax(ds[V.energy_error].values))
+    hy = heyoka_batches(system, starts, deviations, t_final, tols, dE)
+    if not hy:
+        out("heyoka is not installed (pip install 'survey[bench]'): no baseline for the map.")
+        return None
+    best = {"heyoka": np.inf, "same": np.inf, "default": np.inf}
+    for _ in range(repeats):
+        for name, cfg in (("same", same), ("default", default)):
+            timings = {}
+            run_survey(cfg, progress=False, timings=timings)
+            best[name] = min(best[name], timings["compute"])
+        best["heyoka"] = min(best["heyoka"], hy["run"]()[0])
+    out(f"the {config.n_cells:,}-cell map's {len(starts):,} orbits (every cell's ensemble, one "
+        f"deviation vector each, MEGNO; best of {repeats}): heyoka's batch mode "
+        f"{best['heyoka']:.2f} s (tol {hy['tol']:g}, the loosest of "
+        f"{', '.join(f'{t:g}' for t in tols)} whose largest energy error, {hy['dE']:.1e}, is "
+        f"not above survey's {dE:.1e}; SIMD width {hy['width']}, 2 threads, JIT not counted); "
+        f"survey's compute phase on the same work (every orbit once to t_final, no torus "
+        f"analysis) {best['same']:.2f} s, {best['same'] / best['heyoka']:.2f}x; with its "
+        f"default verdict machinery {best['default']:.2f} s, "
+        f"{best['default'] / best['heyoka']:.2f}x")
+    return best
+
+
 def survey_scale(sizes=(1_000, 10_000, 100_000), t_final=5.0, first=1_000_000,
                  folder="results/bench", out=print):
     """Cost per cell of a (delta, energy) map of 10^3..10^5 cells with the default verdict
-    machinery on 2 local workers (target: flat within 10%); and a grid of `first` cells
+    machinery on 2 local workers (target: flat within 10%); the smallest map's compute
+    against heyoka's batch mode on its orbits (`_map_against_heyoka`); and a grid of `first` cells
     run as a user runs it, until its first chunk is saved: the seconds to that and the
     driver's peak memory (its starts are built by the workers, chunk by chunk)."""
     import os
@@ -177,6 +230,7 @@ def survey_scale(sizes=(1_000, 10_000, 100_000), t_final=5.0, first=1_000_000,
     per = [c / n for n, c, _ in rows]
     out(f"compute per cell, largest against smallest map: {per[-1] / per[0]:.2f}x "
         "(target: within 10%)")
+    _map_against_heyoka(sizes[0], t_final, folder, out)
     cfg = _map(first, t_final, folder)
     config = load_config(cfg)
     toml = Path(folder) / f"scale-{first}.toml"
