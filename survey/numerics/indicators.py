@@ -17,6 +17,7 @@ started a tiny distance away.
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import math
 import statistics
@@ -67,19 +68,38 @@ def _constraints(system: System, y0, project_flow: bool) -> np.ndarray:
     """Orthonormal rows spanning what a deviation vector must not contain: centre-of-mass
     shifts (sum m_i dq_i) and boosts (sum dp_i) where the potential is translation
     invariant, and optionally the flow f(y0) and grad H."""
-    N, d, n = system.n_bodies, system.dim, system.n
+    key = (tuple(system.masses), system.dim, system.translation_invariant)
+    if not project_flow:
+        return _momentum_constraints(*key)
+    n = system.n
+    f = np.zeros(n)
+    rhs(0.0, np.ascontiguousarray(y0, dtype=float), f, system.model, 0)
+    rows = _momentum_rows(*key) + [f, np.concatenate([-f[n // 2:], f[:n // 2]])]
+    return orthonormal(np.array(rows).reshape(-1, n))
+
+
+def _momentum_rows(masses: tuple, d: int, invariant: bool) -> list:
+    """The centre-of-mass shifts and boosts, one of each per axis where the potential is
+    translation invariant."""
+    N = len(masses)
     rows = []
-    for c in range(d if system.translation_invariant else 0):
+    for c in range(d if invariant else 0):
         shift = np.zeros((2, N, d))
-        shift[0, :, c] = system.masses
+        shift[0, :, c] = masses
         boost = np.zeros((2, N, d))
         boost[1, :, c] = 1.0
         rows += [shift.ravel(), boost.ravel()]
-    if project_flow:
-        f = np.zeros(n)
-        rhs(0.0, np.ascontiguousarray(y0, dtype=float), f, system.model, 0)
-        rows += [f, np.concatenate([-f[n // 2:], f[:n // 2]])]
-    return orthonormal(np.array(rows).reshape(-1, n))
+    return rows
+
+
+@functools.lru_cache(maxsize=256)
+def _momentum_constraints(masses: tuple, d: int, invariant: bool) -> np.ndarray:
+    """`_constraints` without the flow: the masses' and the dimension's alone, so built once
+    (rebuilt for each of a cell's 33 deviation draws, it was most of a short map's cost)."""
+    C = orthonormal(np.array(_momentum_rows(masses, d, invariant)).reshape(
+        -1, 2 * len(masses) * d))
+    C.flags.writeable = False
+    return C
 
 
 def deviation_vectors(system: System, y0, count: int, seed: int,

@@ -173,3 +173,17 @@ def test_megno_survives_a_close_approach():
     assert runs[0].megno == pytest.approx(runs[1].megno, rel=0.05)
     assert np.all(np.diff(runs[0].megno_history[8:]) > -0.5) and runs[0].megno > 5
     assert runs[0].megno_slope == pytest.approx(runs[0].ftle / 2, rel=0.5)
+
+
+@pytest.mark.parametrize("masses, dim", [((1.0, 1.0, 1.0), 2), ((1.0, 2.0, 3.5), 2),
+                                         ((1.0, 2.0, 3.5), 3), ((0.5, 1.0, 1.5, 2.0), 2)])
+def test_each_systems_deviations_keep_its_own_centre_of_mass_fixed(masses, dim):
+    """The momentum constraints are built once per masses and dimension (a short map's
+    cells spent most of their time rebuilding them): drawn one system after another, each
+    system's vectors move neither its centre of mass nor its total momentum."""
+    system = System.create(masses=masses, dim=dim)
+    y0 = np.random.default_rng(len(masses) + dim).normal(size=system.n)
+    w = deviation_vectors(system, y0, 4, seed=3)
+    q, p = system.split(w)
+    np.testing.assert_allclose(np.einsum("kid,i->kd", q, system.masses), 0, atol=1e-14)
+    np.testing.assert_allclose(p.sum(axis=1), 0, atol=1e-14)
