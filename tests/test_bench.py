@@ -23,8 +23,11 @@ def test_bench_parts_run_and_print_their_ratios(tmp_path):
     assert all(r["same"] for r in rows)     # the two paths give the same orbit
     steps, plain, limit = bench.step_costs(t_final=2.0, repeats=1, lanes=(1, 16),
                                            out=lines.append)
-    assert plain > 0 and "plain scalar code" in lines[-2]
-    assert limit > 0 and "the machine's limit" in lines[-1] and "16 lanes" in lines[-1]
+    assert plain > 0 and "plain scalar code" in lines[-3]
+    assert limit > 0 and "the machine's limit" in lines[-2] and "16 lanes" in lines[-2]
+    assert re.search(r"probe that does only that arithmetic .* \d+ ns, \d+\.\d\dx the limit "
+                     r".* \d+ divisions and \d+ square roots .* survey \d+\.\d\dx the probe",
+                     lines[-1]), lines[-1]
     # the plain baseline integrates the orbit survey integrates (8 relative components)
     _, _, y, ref = bench.plain_step(t_final=20.0, repeats=1)
     assert np.max(np.abs(y - ref)) < 1e-9
@@ -97,6 +100,23 @@ def test_the_step_flop_count_counts_arithmetic_not_sign_flips():
     assert _Counted.ops == 4 and float(y) == 2.0 * 3.0 + 4.0 / 3.0 + 2.0
     rhs, sums = bench.step_flops()
     assert rhs % 12 == 0 and 40 < rhs // 12 < 200 and 1000 < sums < 5000
+    # of them the divider's: the paper's right-hand side takes three side lengths (square
+    # roots) and their reciprocals; the error norm a division a component and one of each
+    assert bench.divider_ops() == (12 * 3 + 8 + 1, 12 * 3 + 1)
+
+
+def test_the_arithmetic_probe_takes_the_plain_step_in_every_lane():
+    """The probe of a step's arithmetic alone (what the printed limit is checked against)
+    computes the step: each of its lanes ends one step where the plain scalar DOP853 does,
+    bit for bit; a probe that skipped a stage, a term or a lane would not."""
+    from survey.bench.steps import _chaotic_start, _plain_dop853, arithmetic_probe
+    ns, after = arithmetic_probe(lanes=16, repeats=1, h=1e-3, reps=1)
+    _, _, z, _ = _chaotic_start()
+    attempts, _, y = _plain_dop853(z, 1e-3, 1e-12, 1e-3)
+    assert attempts == 1 and ns > 0 and after.shape == (16, 16)
+    assert not np.array_equal(y, z)                         # the step moved the state
+    for lane in after:
+        assert np.array_equal(lane, y)
 
 
 def test_the_memory_part_measures_a_survey_in_a_process_of_its_own(tmp_path):

@@ -30,11 +30,19 @@ from .costs import (
     torus_overhead,
 )
 from .explorer import explorer_latency
-from .steps import fma_peak, plain_step, step_costs, step_flops
+from .steps import (
+    arithmetic_probe,
+    divider_ops,
+    divider_rates,
+    fma_peak,
+    plain_step,
+    step_costs,
+    step_flops,
+)
 from .surveys import refined_map, survey_memory, survey_scale, survey_scaling
 
-__all__ = ["CASES", "GeneralPath", "default_cell", "explorer_latency", "fixed_costs", "fma_peak",
-           "indicator_overhead", "interaction_terms", "newton_step", "plain_step",
+__all__ = ["CASES", "GeneralPath", "arithmetic_probe", "default_cell", "divider_ops",
+           "divider_rates", "explorer_latency", "fixed_costs", "fma_peak", "indicator_overhead", "interaction_terms", "newton_step", "plain_step",
            "refined_map", "run", "scan_vs_heyoka", "step_costs", "step_flops", "survey_memory",
            "survey_scale", "survey_scaling", "timed_command", "torus_overhead",
            "vector_doubles"]

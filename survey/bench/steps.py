@@ -13,7 +13,7 @@ from ..numerics.indicators import deviation_vectors
 from ..numerics.integrate import Frame, integrate, integrate_batch
 from ..physics.families import initial_state
 from ..machine import portable
-from ..machine.jit import helper, kernel, leaf
+from ..machine.jit import helper, kernel, lanes, leaf
 from ..machine.portable import fma
 from ..physics.lanes import rhs_lanes, state_size, workspace_size
 from ..physics.system import System
@@ -50,10 +50,12 @@ def _stage_loop(Y, reps, h, L, model, n_tan, rb):
 
 
 @helper
-def _plain_rhs(y, dy):
-    """The paper's system written plainly for the step baseline: three unit masses in the
+def _plain_forces(y):
+    """The paper's system written plainly for the step baselines: three unit masses in the
     plane, U = P^2/2, the relative motion (bodies 0 and 1 in the centre-of-mass frame, the
-    third at -(q0 + q1)) and one tangent vector; 16 components, as survey integrates it."""
+    third at -(q0 + q1)) and one tangent vector; 16 components, as survey integrates it.
+    Values in (y indexable), values out: the scalar baseline stores them in an array, the
+    lanes' probe in its lane of the rows (`_put`)."""
     ux, uy, vx, vy = y[0], y[1], y[2], y[3]
     wx, wy = -(ux + vx), -(uy + vy)
     ax, ay, bx, by, cx, cy = vx - ux, vy - uy, wx - vx, wy - vy, ux - wx, uy - wy
@@ -62,9 +64,6 @@ def _plain_rhs(y, dy):
     r1, r2, r3 = 1.0 / L1, 1.0 / L2, 1.0 / L3
     e1x, e1y, e2x, e2y, e3x, e3y = ax * r1, ay * r1, bx * r2, by * r2, cx * r3, cy * r3
     U1 = L1 + L2 + L3                               # U' = P, U'' = 1
-    dy[0], dy[1], dy[2], dy[3] = y[4], y[5], y[6], y[7]
-    dy[4], dy[5] = U1 * (e1x - e3x), U1 * (e1y - e3y)
-    dy[6], dy[7] = U1 * (e2x - e1x), U1 * (e2y - e1y)
     s1, s2, s3 = U1 * r1, U1 * r2, U1 * r3
     dux, duy, dvx, dvy = y[8], y[9], y[10], y[11]
     dwx, dwy = -(dux + dvx), -(duy + dvy)
@@ -76,8 +75,24 @@ def _plain_rhs(y, dy):
     g1x, g1y = c1 * e1x + s1 * p1x, c1 * e1y + s1 * p1y
     g2x, g2y = c2 * e2x + s2 * p2x, c2 * e2y + s2 * p2y
     g3x, g3y = c3 * e3x + s3 * p3x, c3 * e3y + s3 * p3y
-    dy[8], dy[9], dy[10], dy[11] = y[12], y[13], y[14], y[15]
-    dy[12], dy[13], dy[14], dy[15] = g1x - g3x, g1y - g3y, g2x - g1x, g2y - g1y
+    return (y[4], y[5], y[6], y[7], U1 * (e1x - e3x), U1 * (e1y - e3y),
+            U1 * (e2x - e1x), U1 * (e2y - e1y), y[12], y[13], y[14], y[15],
+            g1x - g3x, g1y - g3y, g2x - g1x, g2y - g1y)
+
+
+@helper
+def _put(out, L, k, d):
+    """The 16 values d into lane k of out (L lanes, variable-major; L = 1: one orbit)."""
+    out[k], out[L + k], out[2 * L + k], out[3 * L + k] = d[0], d[1], d[2], d[3]
+    out[4 * L + k], out[5 * L + k], out[6 * L + k], out[7 * L + k] = d[4], d[5], d[6], d[7]
+    out[8 * L + k], out[9 * L + k], out[10 * L + k], out[11 * L + k] = d[8], d[9], d[10], d[11]
+    out[12 * L + k], out[13 * L + k], out[14 * L + k], out[15 * L + k] = \
+        d[12], d[13], d[14], d[15]
+
+
+@helper
+def _plain_rhs(y, dy):
+    _put(dy, 1, 0, _plain_forces(y))
 
 
 @helper
@@ -144,12 +159,14 @@ def _plain_dop853(z, t1, tol, h):
 
 
 class _Counted(float):
-    """A float that counts the arithmetic done with it (`step_flops`)."""
-    ops = 0
+    """A float that counts the arithmetic done with it (`step_flops`), and apart from it
+    the divisions and square roots (`divider_ops`)."""
+    ops = divisions = roots = 0
 
-    def _op(f):
+    def _op(f, division=False):
         def op(a, b):
             _Counted.ops += 1
+            _Counted.divisions += division
             return _Counted(f(float(a), float(b)))
         return op
 
@@ -157,40 +174,56 @@ class _Counted(float):
     __sub__ = _op(float.__sub__)
     __rsub__ = _op(float.__rsub__)
     __mul__ = __rmul__ = _op(float.__mul__)
-    __truediv__ = _op(float.__truediv__)
-    __rtruediv__ = _op(float.__rtruediv__)
+    __truediv__ = _op(float.__truediv__, True)
+    __rtruediv__ = _op(float.__rtruediv__, True)
 
     def __neg__(a):             # a sign flip, no arithmetic
         return _Counted(-float(a))
 
 
-def step_flops(n=16, n_err=8) -> tuple[int, int]:
-    """Floating-point operations (an FMA two) of one DOP853 step of the paper's reduced
-    system with a tangent vector (n components, the first n_err error-controlled): the 12
-    right-hand sides, counted by running `_plain_rhs`'s source on counting numbers (a
-    square root one operation), and the stage sums from the tableau -- a stage whose row
-    has m terms costs 2m + 1 a component (m products, m - 1 sums, the multiply-add of h),
-    the solution's row the same, the error norm 45 an error-controlled component (1/sk: a
-    multiply-add and a division; the solution's sum again, 15; three multiply-adds and a
-    product for the 3rd-order estimate, the 8 terms of ER and a product for the 5th; two
-    squares and two sums). Returns (right-hand sides, stage sums and norm)."""
+def _counted_forces(n=16) -> tuple[int, int, int]:
+    """One evaluation of `_plain_forces` on counting numbers: its operations (a square root
+    one), divisions and square roots."""
     import types as pytypes
 
     class CountingMath:
         @staticmethod
         def sqrt(x):
             _Counted.ops += 1
+            _Counted.roots += 1
             return _Counted(math.sqrt(float(x)))
 
-    f = _plain_rhs.py_func
+    f = _plain_forces.py_func
     counted = pytypes.FunctionType(f.__code__, {**f.__globals__, "math": CountingMath})
     y = [_Counted(0.3 + 0.1 * i) for i in range(n)]
-    _Counted.ops = 0
-    counted(y, [0.0] * n)
-    rhs = 12 * _Counted.ops
+    _Counted.ops = _Counted.divisions = _Counted.roots = 0
+    counted(y)
+    return _Counted.ops, _Counted.divisions, _Counted.roots
+
+
+def step_flops(n=16, n_err=8) -> tuple[int, int]:
+    """Floating-point operations (an FMA two) of one DOP853 step of the paper's reduced
+    system with a tangent vector (n components, the first n_err error-controlled): the 12
+    right-hand sides, counted by running `_plain_forces`'s source on counting numbers (a
+    square root one operation), and the stage sums from the tableau -- a stage whose row
+    has m terms costs 2m + 1 a component (m products, m - 1 sums, the multiply-add of h),
+    the solution's row the same, the error norm 45 an error-controlled component (1/sk: a
+    multiply-add and a division; the solution's sum again, 15; three multiply-adds and a
+    product for the 3rd-order estimate, the 8 terms of ER and a product for the 5th; two
+    squares and two sums). Returns (right-hand sides, stage sums and norm)."""
+    rhs = 12 * _counted_forces(n)[0]
     rows = (A2, A3, A4, A5, A6, A7, A8, A9, A10, A11, A12, B)
     combos = n * sum(2 * len(idx) + 1 for idx, _ in rows) + 45 * n_err
     return rhs, combos
+
+
+def divider_ops(n=16, n_err=8) -> tuple[int, int]:
+    """Of `step_flops`' operations, the divisions and square roots (the core's divider runs
+    them, at a fraction of the multiply-adds' rate): the 12 right-hand sides' and the
+    error norm's (a division an error-controlled component, and a square root and a
+    division for the lane's norm). Returns (divisions, square roots)."""
+    _, divisions, roots = _counted_forces(n)
+    return 12 * divisions + n_err + 1, 12 * roots + 1
 
 
 @leaf
@@ -237,15 +270,148 @@ def fma_peak(repeats=5, full_width=False) -> float:
     return 2 * 8 * x.size * reps / best
 
 
-def plain_step(t_final, repeats):
-    """ns per attempted step of `_plain_dop853` on the chaotic orbit of CASES, with a
-    tangent vector (best of `repeats`), its steps, and its relative motion and survey's at
-    t_final (8 components each)."""
+@leaf
+def _divider_chains(x, reps, root):
+    """reps rounds of a square root (root) or a reciprocal on each of x's lanes, x[i] =
+    sqrt(x[i]) or 1 / x[i]: independent chains in a flat array, as the lanes' loops run
+    them (`divider_rates`)."""
+    for _ in range(reps):
+        if root:
+            for i in range(x.size):
+                x[i] = math.sqrt(x[i])
+        else:
+            for i in range(x.size):
+                x[i] = 1.0 / x[i]
+    return x[0]
+
+
+def divider_rates(repeats=5) -> tuple[float, float]:
+    """Seconds a lane of a division and of a square root in vectorised loops (64 independent
+    chains, enough to keep the divider busy; best of `repeats`): the divider runs them, not
+    the multiply-add pipes, at a fraction of their rate."""
+    rates = []
+    for root in (False, True):
+        x, reps = np.linspace(1.5, 2.5, 64), 100_000
+        _divider_chains(x, 1, root)
+        best, _ = best_time(lambda: _divider_chains(x, reps, root), repeats)
+        rates.append(best / (x.size * reps))
+    return rates[0], rates[1]
+
+
+# The probe of a step's arithmetic alone (`arithmetic_probe`): the step of `_plain_dop853`
+# in L lanes, variable-major as survey's, each stage's sums and right-hand side in one loop
+# over the lanes that keeps a lane's 16 values in registers (no stage state stored and read
+# back), then the solution and the error norm; nothing else -- no step control, finiteness,
+# tangent norms, events or bookkeeping, one h for every lane.
+
+@helper
+def _staged(Y, K, h, L, k, comb, i):
+    j = i * L + k
+    return fma(h, stage_dot(K, j, comb), Y[j])
+
+
+@helper
+def _stage_values(Y, K, h, L, k, comb):
+    """Lane k's 16 values at the stage whose tableau row is comb."""
+    return (_staged(Y, K, h, L, k, comb, 0), _staged(Y, K, h, L, k, comb, 1),
+            _staged(Y, K, h, L, k, comb, 2), _staged(Y, K, h, L, k, comb, 3),
+            _staged(Y, K, h, L, k, comb, 4), _staged(Y, K, h, L, k, comb, 5),
+            _staged(Y, K, h, L, k, comb, 6), _staged(Y, K, h, L, k, comb, 7),
+            _staged(Y, K, h, L, k, comb, 8), _staged(Y, K, h, L, k, comb, 9),
+            _staged(Y, K, h, L, k, comb, 10), _staged(Y, K, h, L, k, comb, 11),
+            _staged(Y, K, h, L, k, comb, 12), _staged(Y, K, h, L, k, comb, 13),
+            _staged(Y, K, h, L, k, comb, 14), _staged(Y, K, h, L, k, comb, 15))
+
+
+@lanes
+def _probe_stage(Y, K, h, L, comb, out):
+    """One stage of every lane: its sums and its right-hand side into out (a row of K)."""
+    for k in range(L):
+        _put(out, L, k, _plain_forces(_stage_values(Y, K, h, L, k, comb)))
+
+
+@lanes
+def _probe_rhs(Y, L, out):
+    """The right-hand side of every lane of Y into out."""
+    for k in range(L):
+        _put(out, L, k, _plain_forces((
+            Y[k], Y[L + k], Y[2 * L + k], Y[3 * L + k], Y[4 * L + k], Y[5 * L + k],
+            Y[6 * L + k], Y[7 * L + k], Y[8 * L + k], Y[9 * L + k], Y[10 * L + k],
+            Y[11 * L + k], Y[12 * L + k], Y[13 * L + k], Y[14 * L + k], Y[15 * L + k])))
+
+
+@lanes
+def _probe_solution(Y, K, h, L, tol, YN, sq3, sq5, err):
+    """Every lane's 8th-order solution into YN and its error norm (over the orbit's 8
+    components) into err, as `_plain_dop853` computes them: the squared terms of every
+    lane in one loop (sq3, sq5: 8 L each), then each lane's sums in its components'
+    order."""
+    for i in range(Y.size):
+        YN[i] = fma(h, stage_dot(K, i, B), Y[i])
+    for i in range(8 * L):
+        isk = 1.0 / fma(tol, max(abs(Y[i]), abs(YN[i])), tol)
+        er3 = fma(-BHH3, K[11, i], fma(-BHH2, K[8, i], fma(-BHH1, K[0, i], stage_dot(K, i, B))))
+        er3, er5 = er3 * isk, stage_dot(K, i, ER) * isk
+        sq3[i], sq5[i] = er3 * er3, er5 * er5
+    for k in range(L):
+        e3 = e5 = 0.0
+        for c in range(8):
+            e3, e5 = e3 + sq3[c * L + k], e5 + sq5[c * L + k]
+        err[k] = abs(h) * e5 / math.sqrt(8 * (e5 + 0.01 * e3)) if e5 + e3 > 0.0 else 0.0
+
+
+@leaf
+def _probe_steps(Y, K, YN, sq, err, h, tol, L, reps):
+    """reps steps of every lane from Y (K[0] holding f(Y)): their arithmetic alone."""
+    for _ in range(reps):
+        _probe_stage(Y, K, h, L, A2, K[1])
+        _probe_stage(Y, K, h, L, A3, K[2])
+        _probe_stage(Y, K, h, L, A4, K[3])
+        _probe_stage(Y, K, h, L, A5, K[4])
+        _probe_stage(Y, K, h, L, A6, K[5])
+        _probe_stage(Y, K, h, L, A7, K[6])
+        _probe_stage(Y, K, h, L, A8, K[7])
+        _probe_stage(Y, K, h, L, A9, K[8])
+        _probe_stage(Y, K, h, L, A10, K[9])
+        _probe_stage(Y, K, h, L, A11, K[10])
+        _probe_stage(Y, K, h, L, A12, K[11])
+        _probe_solution(Y, K, h, L, tol, YN, sq[0], sq[1], err)
+        _probe_rhs(YN, L, K[12])
+    return err[0]
+
+
+def _chaotic_start():
+    """The chaotic orbit of CASES with a tangent vector: its system, start and the 16
+    components survey integrates (the relative motion and its deviation), with its frame."""
     system = System.create()
     y0 = initial_state(system, CASES[0][1], **CASES[0][2])
     w = deviation_vectors(system, y0, 1, seed=0)
     frame = Frame.of(system, y0[None], w[None], [])
-    z = frame.reduce(np.concatenate([y0, w[0]])[None], 1)[0]
+    return system, y0, frame.reduce(np.concatenate([y0, w[0]])[None], 1)[0], frame
+
+
+def arithmetic_probe(lanes=16, repeats=5, h=1e-3, reps=20_000):
+    """ns per orbit-step of a step's arithmetic alone (`_probe_steps`) in `lanes` lanes of
+    the chaotic orbit's start with a tangent, best of `repeats`; and every lane's state
+    after one step of h (which `_plain_dop853` must reproduce bit for bit: the probe does
+    the step's arithmetic, all of it)."""
+    _, _, z, _ = _chaotic_start()
+    Y = np.repeat(z[:, None], lanes, 1).ravel()
+    K, YN, err = np.zeros((13, Y.size)), np.zeros(Y.size), np.zeros(lanes)
+    sq = np.zeros((2, 8 * lanes))
+    _probe_rhs(Y, lanes, K[0])
+    _probe_steps(Y, K, YN, sq, err, h, 1e-12, lanes, 1)
+    after = YN.reshape(z.size, lanes).T.copy()
+    best, _ = best_time(lambda: _probe_steps(Y, K, YN, sq, err, h, 1e-12, lanes, reps),
+                        repeats)
+    return 1e9 * best / (reps * lanes), after
+
+
+def plain_step(t_final, repeats):
+    """ns per attempted step of `_plain_dop853` on the chaotic orbit of CASES, with a
+    tangent vector (best of `repeats`), its steps, and its relative motion and survey's at
+    t_final (8 components each)."""
+    system, y0, z, frame = _chaotic_start()
     _plain_dop853(z, 1.0, 1e-12, 1e-3)
     best, (steps, _, y) = best_time(lambda: _plain_dop853(z, t_final, 1e-12, 1e-3), repeats)
     ref = integrate(system, y0, t_final)
@@ -331,4 +497,15 @@ def step_costs(t_final=2000.0, repeats=5, lanes=(1, 4, 8, 16), out=print):
             f"; at the core's full vector width (peak {full / 1e9:.1f} Gflop/s, survey's "
             f"lanes measured narrower: machine.jit.vector_width) the limit is "
             f"{limit * peak / full:.0f} ns, survey {step * full / peak / limit:.2f}x it"))
+    probe, _ = arithmetic_probe(widest, repeats)
+    (t_div, t_root), (divisions, roots) = divider_rates(repeats), divider_ops()
+    out(f"the limit checked by a probe that does only that arithmetic "
+        f"(bench.steps.arithmetic_probe: the step in {widest} lanes, each stage's sums and "
+        f"right-hand side in one loop over the lanes, then the solution and error norm; no "
+        f"step control, bookkeeping or tangent norms): {probe:.0f} ns, {probe / limit:.2f}x "
+        f"the limit -- of the step's operations {divisions} divisions and {roots} square "
+        f"roots run on the divider, not at the multiply-adds' rate (this core's "
+        f"{1e9 * t_div:.2f} and {1e9 * t_root:.2f} ns a lane: "
+        f"{1e9 * (divisions * t_div + roots * t_root):.0f} ns of divider alone, "
+        f"bench.steps.divider_rates); survey {step / probe:.2f}x the probe")
     return rows, plain, limit
