@@ -35,7 +35,7 @@ from typing import NamedTuple
 import numpy as np
 from ..catalog.status import Status
 from ..machine import portable
-from ..machine.jit import helper, leaf
+from ..machine.jit import helper, lanes, leaf
 from ..physics.lanes import SIMD_MIN, rhs_lanes, state_size
 from ..physics.system import Model, rhs
 from .lanestate import RawOutcome, lane_state, reused_samples
@@ -190,8 +190,7 @@ def _start(k, j, ln, out, y0s, rows, t0, t1, model, n_tan, n_err,
             for i in range(rec.size - 1):
                 rec[i] = np.inf if i % 2 == 0 else np.nan
             rec[rec.size - 1] = 0.0
-            # the lane's strided copy, as at every step: one compiled layout
-            _near(rec, ln.Y[k::L], t0, 0.0, masses.size, d, rb, near, thin)
+            _near_lane(rec, ln, k, t0, 0.0, masses.size, d, rb, near, thin)
         for e in range(eoff.size - 1):
             if watch[e]:
                 # the lane's strided copies, as at every step: one compiled layout
@@ -223,67 +222,112 @@ def _lane(ln, k):
 
 
 @helper
-def _position(y, b, c, d, rb):
-    """Coordinate c of body b of orbit state y: full, or reduced (rb: the mass ratios; the
-    third body rebuilt as `put_sample` rebuilds it, in the centre-of-mass frame)."""
-    if rb is None:
-        return y[b * d + c]
-    if b < 2:
-        return y[2 * b + c]
-    return -(rb[0] * y[c] + rb[1] * y[2 + c])
+def _pair(i, j, N):
+    """The row of pair i < j of N bodies, the pairs in order (0, 1), (0, 2), ..."""
+    return i * (2 * N - i - 1) // 2 + j - i - 1
 
 
-@helper
-def _side(y, i, j, d, rb):
-    s = 0.0
-    for c in range(d):
-        x = _position(y, i, c, d, rb) - _position(y, j, c, d, rb)
-        s += x * x
-    return math.sqrt(s)
-
-
-@leaf
-def _near(rec, y, t, dt, N, d, rb, near, thin):
-    """Orbit state y at time t, the end of a step of length dt, into a closest-approach
-    record (`near_width`): each pair's distance, and with NEAR_TRIANGLES the least
-    perimeter and |area| of its triangles, where below the record's (with t), and dt
-    added to the thin time where the thinnest triangle has |A|/P^2 < thin. At step ends:
-    a close approach is where the steps are shortest. A leaf, called for one job in a
-    cell's lanes: inlined at its three calls it cost the first run 30 s of compiling."""
+@lanes
+def near_terms(Y, L, k0, k1, N, d, rb, near, X, R, TP, TA, TQ):
+    """What a closest-approach record takes of lanes k0..k1-1 of the states Y: each pair's
+    distance (R: a row of L a pair, `_pair`) and, with NEAR_TRIANGLES, each triangle's
+    perimeter P, |area| and |area|/P^2 (TP, TA, TQ: a row each a triangle; the last inf
+    where P = 0) -- a distance the square root of the squares summed coordinate by
+    coordinate, a perimeter its sides summed in the pairs' order, as for one orbit alone.
+    The positions are Y's first rows, or for reduced states (rb: the mass ratios) rebuilt
+    into X (the third body as `put_sample` rebuilds it, in the centre-of-mass frame). In
+    loops over the lanes, innermost (SIMD, like the right-hand side's): at every step end
+    of every lane, lane by lane, their square roots cost a scan's integration a sixth.
+    `_near` records them."""
+    pos = Y
+    if rb is not None:
+        for c in range(2):
+            x0, x1, x2 = X[c * L:], X[(2 + c) * L:], X[(4 + c) * L:]
+            for k in range(k0, k1):
+                a, b = Y[c * L + k], Y[(2 + c) * L + k]
+                x0[k], x1[k], x2[k] = a, b, -(rb[0] * a + rb[1] * b)
+        pos = X
     p = 0
     for i in range(N):
         for j in range(i + 1, N):
-            r = _side(y, i, j, d, rb)
-            if r < rec[2 * p]:
-                rec[2 * p], rec[2 * p + 1] = r, t
+            r = R[p * L:(p + 1) * L]    # views: see dop853.error_norms
+            for k in range(k0, k1):
+                r[k] = 0.0
+            for c in range(d):
+                u, v = pos[(i * d + c) * L:], pos[(j * d + c) * L:]
+                for k in range(k0, k1):
+                    x = u[k] - v[k]
+                    r[k] += x * x
+            for k in range(k0, k1):
+                r[k] = math.sqrt(r[k])
             p += 1
     if near != NEAR_TRIANGLES:
         return
-    o = 2 * p
-    least = np.inf
+    q = 0
     for i in range(N):
         for j in range(i + 1, N):
-            for k in range(j + 1, N):
-                P = _side(y, i, j, d, rb) + _side(y, j, k, d, rb) + _side(y, i, k, d, rb)
-                ux = _position(y, j, 0, d, rb) - _position(y, i, 0, d, rb)
-                uy = _position(y, j, 1, d, rb) - _position(y, i, 1, d, rb)
-                vx = _position(y, k, 0, d, rb) - _position(y, i, 0, d, rb)
-                vy = _position(y, k, 1, d, rb) - _position(y, i, 1, d, rb)
+            for m in range(j + 1, N):
+                P, A, Q = TP[q * L:(q + 1) * L], TA[q * L:(q + 1) * L], TQ[q * L:(q + 1) * L]
+                a, b, c = R[_pair(i, j, N) * L:], R[_pair(j, m, N) * L:], R[_pair(i, m, N) * L:]
+                for k in range(k0, k1):
+                    P[k] = a[k] + b[k] + c[k]
+                xi, yi = pos[i * d * L:], pos[(i * d + 1) * L:]
+                xj, yj = pos[j * d * L:], pos[(j * d + 1) * L:]
+                xm, ym = pos[m * d * L:], pos[(m * d + 1) * L:]
                 if d == 2:
-                    A = 0.5 * abs(ux * vy - uy * vx)
+                    for k in range(k0, k1):
+                        ux, uy, vx, vy = xj[k] - xi[k], yj[k] - yi[k], xm[k] - xi[k], ym[k] - yi[k]
+                        A[k] = 0.5 * abs(ux * vy - uy * vx)
                 else:
-                    uz = _position(y, j, 2, d, rb) - _position(y, i, 2, d, rb)
-                    vz = _position(y, k, 2, d, rb) - _position(y, i, 2, d, rb)
-                    A = 0.5 * math.sqrt((uy * vz - uz * vy) ** 2 + (uz * vx - ux * vz) ** 2
-                                        + (ux * vy - uy * vx) ** 2)
-                if P < rec[o]:
-                    rec[o], rec[o + 1] = P, t
-                if A < rec[o + 2]:
-                    rec[o + 2], rec[o + 3] = A, t
-                if P > 0.0:
-                    least = min(least, A / (P * P))
+                    zi, zj, zm = pos[(i * d + 2) * L:], pos[(j * d + 2) * L:], pos[(m * d + 2) * L:]
+                    for k in range(k0, k1):
+                        ux, uy, vx, vy = xj[k] - xi[k], yj[k] - yi[k], xm[k] - xi[k], ym[k] - yi[k]
+                        uz, vz = zj[k] - zi[k], zm[k] - zi[k]
+                        A[k] = 0.5 * math.sqrt((uy * vz - uz * vy) ** 2 +
+                                               (uz * vx - ux * vz) ** 2 +
+                                               (ux * vy - uy * vx) ** 2)
+                for k in range(k0, k1):
+                    Q[k] = A[k] / (P[k] * P[k]) if P[k] > 0.0 else np.inf
+                q += 1
+
+
+@helper
+def _near(rec, ln, k, t, dt, N, near, thin):
+    """Lane k's state at time t, the end of a step of length dt, into its closest-approach
+    record (`near_width`), from what `near_terms` left in ln: each pair's distance, and
+    with NEAR_TRIANGLES the least perimeter and |area| of its triangles, where below the
+    record's (with t), and dt added to the thin time where the thinnest triangle has
+    |A|/P^2 < thin. At step ends: a close approach is where the steps are shortest."""
+    L = ln.job.size
+    pairs = N * (N - 1) // 2
+    for p in range(pairs):
+        r = ln.NR[p * L + k]
+        if r < rec[2 * p]:
+            rec[2 * p], rec[2 * p + 1] = r, t
+    if near != NEAR_TRIANGLES:
+        return
+    o = 2 * pairs
+    least = np.inf
+    for q in range(pairs * (N - 2) // 3):
+        P, A = ln.NT[0, q * L + k], ln.NT[1, q * L + k]
+        if P < rec[o]:
+            rec[o], rec[o + 1] = P, t
+        if A < rec[o + 2]:
+            rec[o + 2], rec[o + 3] = A, t
+        least = min(least, ln.NT[2, q * L + k])
     if least < thin:
         rec[o + 4] += dt
+
+
+@leaf
+def _near_lane(rec, ln, k, t, dt, N, d, rb, near, thin):
+    """`near_terms` and `_near` of lane k alone (a job's start, a terminal event, a step
+    end where few lanes record approaches). A leaf: inlined at its calls it cost the first
+    run 30 s of compiling."""
+    L = ln.job.size
+    near_terms(ln.Y, L, k, k + 1, N, d, rb, near, ln.NX, ln.NR, ln.NT[0], ln.NT[1],
+               ln.NT[2])
+    _near(rec, ln, k, t, dt, N, near, thin)
 
 
 @helper
@@ -635,8 +679,8 @@ def _run(ln, out, y0s, rows, model, control, recording, next_job, iterations, no
                 if ended == EVENT_:
                     if near > 0:        # the state at the event, as _record left it
                         # (only a job that records crossings watches events)
-                        _near(out.near[ln.job[k]], ln.Y[k::L], ln.t[k],
-                              abs(ln.t[k] - t_before), masses.size, d, rb, near, thin)
+                        _near_lane(out.near[ln.job[k]], ln, k, ln.t[k],
+                                   abs(ln.t[k] - t_before), masses.size, d, rb, near, thin)
                     _finish(k, ln, out, EVENT_, rows)
                     ln.flags[k, 3] = 0
             ln.taken[k] = -ln.flags[k, 3]
@@ -645,13 +689,25 @@ def _run(ln, out, y0s, rows, model, control, recording, next_job, iterations, no
         tangent_norms(ln.Y, L, n, n_tan, ln.NW, rb)
         if n_tan > 0:
             growth_terms(ln.NW, ln.t, ln.h, ln.flags, t0, t1, L, n_tan)
+        # the closest approaches at the step ends: of every lane in SIMD loops where a
+        # quarter or more record them, else lane by lane (the same bits)
+        recording_near = 0
+        if near > 0:
+            for k in range(L):
+                recording_near += ln.flags[k, 3] == 1 and rows[0, ln.job[k]] >= 0
+            if 4 * recording_near >= L:
+                near_terms(ln.Y, L, 0, L, masses.size, d, rb, near, ln.NX, ln.NR,
+                           ln.NT[0], ln.NT[1], ln.NT[2])
         for k in range(L):
             if not ln.flags[k, 3]:
                 continue
             if near > 0 and rows[0, ln.job[k]] >= 0:
-                _near(out.near[ln.job[k]], ln.Y[k::L],
-                      t1 if ln.flags[k, 2] else ln.t[k] + ln.h[k], abs(ln.h[k]),
-                      masses.size, d, rb, near, thin)
+                t_end, dt = t1 if ln.flags[k, 2] else ln.t[k] + ln.h[k], abs(ln.h[k])
+                if 4 * recording_near >= L:
+                    _near(out.near[ln.job[k]], ln, k, t_end, dt, masses.size, near, thin)
+                else:
+                    _near_lane(out.near[ln.job[k]], ln, k, t_end, dt, masses.size, d, rb,
+                               near, thin)
             if _advance(k, ln, out, t0, t1, n, n_tan, megno, renorm_dt,
                         ln.NW) == OK_:
                 _finish(k, ln, out, OK_, rows)
@@ -855,16 +911,18 @@ def dop853(y0s, rows, model: Model, control: Control, recording: Recording, L: i
     # started and at most half the lanes run one (their lengths differ 2x and more), those
     # go on in half as many lanes, down to SIMD_MIN, where the last one goes on alone.
     registers = 0 if model.expr is None else model.expr.regs.size
-    ln, next_job = lane_state(L, n, nf, n_tan, m, n_sub, registers), 0
+    N = masses.size
+    ln, next_job = lane_state(L, n, nf, n_tan, m, n_sub, registers, N), 0
     while drive(ln, next_job) == HANDOFF:
         next_job, running = M, np.flatnonzero(ln.job >= 0)
         if ln.job.size // 2 >= SIMD_MIN:
-            fewer = lane_state(ln.job.size // 2, n, nf, n_tan, m, n_sub, registers)
+            fewer = lane_state(ln.job.size // 2, n, nf, n_tan, m, n_sub, registers, N)
             for slot, k in enumerate(running):
                 _adopt(fewer, slot, ln, k)
             ln = fewer
             continue
-        one, handed = lane_state(1, n, nf, n_tan, m, n_sub, registers), time.perf_counter()
+        one, handed = lane_state(1, n, nf, n_tan, m, n_sub, registers, N), \
+            time.perf_counter()
         for k in running:
             _adopt(one, 0, ln, k)
             if time_limit > 0.0:    # a job's budget does not run while it waits its turn

@@ -101,6 +101,9 @@ class Lanes(NamedTuple):
     yd: np.ndarray            # (nf,) scratch of one lane
     y1: np.ndarray            # (nf,) contiguous copy of one lane (starts)
     k1: np.ndarray            # (2, nf)
+    NX: np.ndarray            # (6 L,) reduced states' positions, rebuilt (driver.near_terms);
+    NR: np.ndarray            # (pairs L,) each lane's pair distances at its step end, and
+    NT: np.ndarray            # (3, triangles L) its triangles' P, |A|, |A|/P^2
     wait: Deferred
 
 
@@ -119,11 +122,13 @@ def aligned_zeros(shape, dtype=np.float64) -> np.ndarray:
     return raw[start:start + size].view(dtype).reshape(shape)
 
 
-def lane_state(L, n, nf, n_tan, m, n_sub, registers=0) -> Lanes:
+def lane_state(L, n, nf, n_tan, m, n_sub, registers=0, bodies=0) -> Lanes:
     """A driver's state for L lanes of orbits of n components with n_tan tangent vectors
-    each (nf in all), m watched events scanned in n_sub parts of a step, and the
-    `registers` of the system's formula programs in every lane."""
+    each (nf in all), m watched events scanned in n_sub parts of a step, the `registers` of
+    the system's formula programs in every lane, and the closest approaches of `bodies`."""
     m1 = max(m, 1)
+    pairs = bodies * (bodies - 1) // 2
+    triangles = max(pairs * (bodies - 2) // 3, 1)
     return Lanes(
         Y=aligned_zeros(nf * L), K=aligned_zeros((16, nf * L)), YT=aligned_zeros(nf * L), YN=aligned_zeros(nf * L),
         F=aligned_zeros((7, nf * L)), HH=aligned_zeros(nf * L), W=aligned_zeros(workspace_size(L, nf, registers)),
@@ -138,6 +143,7 @@ def lane_state(L, n, nf, n_tan, m, n_sub, registers=0) -> Lanes:
         s_new=aligned_zeros((L, m1)), todo=aligned_zeros((L, m1), dtype=np.int64),
         found_x=aligned_zeros(max(1, m * n_sub)), found_e=aligned_zeros(max(1, m * n_sub), dtype=np.int64),
         yd=aligned_zeros(nf), y1=aligned_zeros(nf), k1=aligned_zeros((2, nf)),
+        NX=aligned_zeros(6 * L), NR=aligned_zeros(max(pairs, 1) * L), NT=aligned_zeros((3, triangles * L)),
         wait=deferred_state(2 * max(L, SIMD_LANES), n, registers))
 
 

@@ -102,6 +102,39 @@ def test_an_escape_mid_batch_in_lanes_is_the_orbit_alone():
             assert same(a, b) == [], (L, j, same(a, b))
 
 
+@pytest.mark.parametrize("kind", ["reduced", "full", "four bodies in 3-D"])
+def test_closest_approaches_in_lanes_are_those_of_each_orbit_alone(kind):
+    """A batch computes its lanes' closest approaches in SIMD loops where a quarter or more
+    of them record approaches, lane by lane where fewer do (driver.near_terms): either way
+    each orbit's record -- pairs, least perimeter and area, thin time -- and every other
+    output are the bits of the orbit alone. Every orbit recording, then one in four: a
+    batch of 8 runs both ways as its jobs end and start; full and reduced states, and
+    four bodies in 3-D (six pairs; triangles are recorded for three bodies)."""
+    if kind == "four bodies in 3-D":
+        system = System(np.ones(4), 3, (make_potential("perimetric_power"),))
+        tetrahedron = [[1.0, 1.0, 1.0], [1.0, -1.0, -1.0], [-1.0, 1.0, -1.0], [-1.0, -1.0, 1.0]]
+        starts = [initial_state(system, "equilibrium", positions=tetrahedron,
+                                displacement=0.2, speed=0.5, seed=s) for s in range(12)]
+    else:
+        system = System(np.ones(3), 2, (make_potential("perimetric_power"),))
+        starts = [initial_state(system, "equilateral", delta=float(d))
+                  for d in np.linspace(0.5, 6.0, 12)]
+    starts = np.array(starts)
+    events = [Event(Sides(offset=-1e6), direction=1)] if kind == "full" else []
+    options = dict(events=events, approach=True, thin=0.01, **TIGHT)
+    for record in (np.full(12, EVENTS), np.where(np.arange(12) % 4 == 0, EVENTS, 0)):
+        alone = [integrate_batch(system, starts[j:j + 1], 30.0, record=record[j:j + 1],
+                                 lanes=1, **options)[0] for j in range(12)]
+        batch = integrate_batch(system, starts, 30.0, record=record, lanes=8, **options)
+        for j, (a, b) in enumerate(zip(batch, alone)):
+            assert same(a, b) == [], (kind, j, same(a, b))
+            if record[j]:
+                kept = a.near[:2 * 6] if kind == "four bodies in 3-D" else a.near
+                assert a.near.size and np.all(np.isfinite(kept)), a.near
+            else:
+                assert a.near.size == 0
+
+
 def test_a_henon_heiles_orbit_escapes_through_the_exit_an_independent_run_finds():
     system = System(np.ones(1), 2, (make_expression(
         "external", "(x**2 + y**2)/2 + x**2*y - y**3/3"),))
