@@ -236,9 +236,9 @@ def near_terms(Y, L, k0, k1, N, d, rb, near, X, R, TP, TA, TQ):
     coordinate, a perimeter its sides summed in the pairs' order, as for one orbit alone.
     The positions are Y's first rows, or for reduced states (rb: the mass ratios) rebuilt
     into X (the third body as `put_sample` rebuilds it, in the centre-of-mass frame). In
-    loops over the lanes, innermost (SIMD, like the right-hand side's): at every step end
-    of every lane, lane by lane, their square roots cost a scan's integration a sixth.
-    `_near` records them."""
+    loops over the lanes, innermost (SIMD, like the right-hand side's): lane by lane, at
+    every step end, their square roots cost a batch whose orbits all record crossings a
+    sixth of its integration. `_near` records them."""
     pos = Y
     if rb is not None:
         for c in range(2):
