@@ -321,9 +321,8 @@ def _near(rec, ln, k, t, dt, N, near, thin):
 
 @leaf
 def _near_lane(rec, ln, k, t, dt, N, d, rb, near, thin):
-    """`near_terms` and `_near` of lane k alone (a job's start, a terminal event, a step
-    end where few lanes record approaches). A leaf: inlined at its calls it cost the first
-    run 30 s of compiling."""
+    """`near_terms` and `_near` of lane k alone (a job's start, a terminal event). A leaf:
+    inlined at its calls it cost the first run 30 s of compiling."""
     L = ln.job.size
     near_terms(ln.Y, L, k, k + 1, N, d, rb, near, ln.NX, ln.NR, ln.NT[0], ln.NT[1],
                ln.NT[2])
@@ -689,25 +688,23 @@ def _run(ln, out, y0s, rows, model, control, recording, next_job, iterations, no
         tangent_norms(ln.Y, L, n, n_tan, ln.NW, rb)
         if n_tan > 0:
             growth_terms(ln.NW, ln.t, ln.h, ln.flags, t0, t1, L, n_tan)
-        # the closest approaches at the step ends: of every lane in SIMD loops where a
-        # quarter or more record them, else lane by lane (the same bits)
-        recording_near = 0
+        # the closest approaches at the step ends, of every lane in SIMD loops where any
+        # records them (as cheap as one lane's alone: 16 lanes, 1 to 16 of them recording)
+        recording_near = False
         if near > 0:
             for k in range(L):
-                recording_near += ln.flags[k, 3] == 1 and rows[0, ln.job[k]] >= 0
-            if 4 * recording_near >= L:
+                if ln.flags[k, 3] == 1 and rows[0, ln.job[k]] >= 0:
+                    recording_near = True
+                    break
+            if recording_near:
                 near_terms(ln.Y, L, 0, L, masses.size, d, rb, near, ln.NX, ln.NR,
                            ln.NT[0], ln.NT[1], ln.NT[2])
         for k in range(L):
             if not ln.flags[k, 3]:
                 continue
             if near > 0 and rows[0, ln.job[k]] >= 0:
-                t_end, dt = t1 if ln.flags[k, 2] else ln.t[k] + ln.h[k], abs(ln.h[k])
-                if 4 * recording_near >= L:
-                    _near(out.near[ln.job[k]], ln, k, t_end, dt, masses.size, near, thin)
-                else:
-                    _near_lane(out.near[ln.job[k]], ln, k, t_end, dt, masses.size, d, rb,
-                               near, thin)
+                _near(out.near[ln.job[k]], ln, k, t1 if ln.flags[k, 2] else ln.t[k] + ln.h[k],
+                      abs(ln.h[k]), masses.size, near, thin)
             if _advance(k, ln, out, t0, t1, n, n_tan, megno, renorm_dt,
                         ln.NW) == OK_:
                 _finish(k, ln, out, OK_, rows)

@@ -104,12 +104,12 @@ def test_an_escape_mid_batch_in_lanes_is_the_orbit_alone():
 
 @pytest.mark.parametrize("kind", ["reduced", "full", "four bodies in 3-D"])
 def test_closest_approaches_in_lanes_are_those_of_each_orbit_alone(kind):
-    """A batch computes its lanes' closest approaches in SIMD loops where a quarter or more
-    of them record approaches, lane by lane where fewer do (driver.near_terms): either way
+    """A batch computes its lanes' closest approaches at step ends in SIMD loops over every
+    lane (driver.near_terms), at a job's start and a terminal event for its lane alone:
     each orbit's record -- pairs, least perimeter and area, thin time -- and every other
-    output are the bits of the orbit alone. Every orbit recording, then one in four: a
-    batch of 8 runs both ways as its jobs end and start; full and reduced states, and
-    four bodies in 3-D (six pairs; triangles are recorded for three bodies)."""
+    output are the bits of the orbit alone, whether every orbit records approaches or one
+    in four (the others' lanes computed and ignored); full and reduced states, and four
+    bodies in 3-D (six pairs; triangles are recorded for three bodies)."""
     if kind == "four bodies in 3-D":
         system = System(np.ones(4), 3, (make_potential("perimetric_power"),))
         tetrahedron = [[1.0, 1.0, 1.0], [1.0, -1.0, -1.0], [-1.0, 1.0, -1.0], [-1.0, -1.0, 1.0]]
