@@ -42,7 +42,8 @@ from .steps import (
 from .surveys import refined_map, survey_memory, survey_scale, survey_scaling
 
 __all__ = ["CASES", "GeneralPath", "arithmetic_probe", "default_cell", "divider_ops",
-           "divider_rates", "explorer_latency", "fixed_costs", "fma_peak", "indicator_overhead", "interaction_terms", "newton_step", "plain_step",
+           "divider_rates", "explorer_latency", "fixed_costs", "fma_peak",
+           "indicator_overhead", "interaction_terms", "newton_step", "plain_step",
            "refined_map", "run", "scan_vs_heyoka", "step_costs", "step_flops", "survey_memory",
            "survey_scale", "survey_scaling", "timed_command", "torus_overhead",
            "vector_doubles"]

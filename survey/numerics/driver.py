@@ -279,7 +279,8 @@ def near_terms(Y, L, k0, k1, N, d, rb, near, X, R, TP, TA, TQ):
                         ux, uy, vx, vy = xj[k] - xi[k], yj[k] - yi[k], xm[k] - xi[k], ym[k] - yi[k]
                         A[k] = 0.5 * abs(ux * vy - uy * vx)
                 else:
-                    zi, zj, zm = pos[(i * d + 2) * L:], pos[(j * d + 2) * L:], pos[(m * d + 2) * L:]
+                    zi, zj = pos[(i * d + 2) * L:], pos[(j * d + 2) * L:]
+                    zm = pos[(m * d + 2) * L:]
                     for k in range(k0, k1):
                         ux, uy, vx, vy = xj[k] - xi[k], yj[k] - yi[k], xm[k] - xi[k], ym[k] - yi[k]
                         uz, vz = zj[k] - zi[k], zm[k] - zi[k]

@@ -101,7 +101,7 @@ class Lanes(NamedTuple):
     yd: np.ndarray            # (nf,) scratch of one lane
     y1: np.ndarray            # (nf,) contiguous copy of one lane (starts)
     k1: np.ndarray            # (2, nf)
-    NX: np.ndarray            # (6 L,) reduced states' positions, rebuilt (driver.near_terms);
+    NX: np.ndarray            # (6 L,) reduced states' positions, rebuilt (driver.near_terms)
     NR: np.ndarray            # (pairs L,) each lane's pair distances at its step end, and
     NT: np.ndarray            # (3, triangles L) its triangles' P, |A|, |A|/P^2
     wait: Deferred
@@ -143,7 +143,8 @@ def lane_state(L, n, nf, n_tan, m, n_sub, registers=0, bodies=0) -> Lanes:
         s_new=aligned_zeros((L, m1)), todo=aligned_zeros((L, m1), dtype=np.int64),
         found_x=aligned_zeros(max(1, m * n_sub)), found_e=aligned_zeros(max(1, m * n_sub), dtype=np.int64),
         yd=aligned_zeros(nf), y1=aligned_zeros(nf), k1=aligned_zeros((2, nf)),
-        NX=aligned_zeros(6 * L), NR=aligned_zeros(max(pairs, 1) * L), NT=aligned_zeros((3, triangles * L)),
+        NX=aligned_zeros(6 * L), NR=aligned_zeros(max(pairs, 1) * L),
+        NT=aligned_zeros((3, triangles * L)),
         wait=deferred_state(2 * max(L, SIMD_LANES), n, registers))
 
 
