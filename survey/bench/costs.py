@@ -6,6 +6,7 @@ from __future__ import annotations
 import contextlib
 import math
 import time
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -121,6 +122,7 @@ def interaction_terms(t_final=2000.0, repeats=5, out=print):
         f"MEGNO; ns per attempted orbit-step, alone and in {SIMD_LANES} lanes):")
     for name, label in (("ljat", "the LJAT trimer (Lennard-Jones pairs + Axilrod-Teller)"),
                         ("mixed", "the paper's P^2/2 + Lennard-Jones pairs"),
+                        ("yukawa", "the paper's P^2/2 + Yukawa pairs"),
                         ("3-D", "P^2/2 of three bodies in 3-D"),
                         ("four", "P^2/2 of four bodies in the plane (4 triangles)")):
         alone, many = lanes[name]
@@ -130,7 +132,8 @@ def interaction_terms(t_final=2000.0, repeats=5, out=print):
         f"starts, ns per attempted orbit-step in {SIMD_LANES} lanes (target: formula <= 1.3x "
         f"built-in):")
     for name, label in (("four", "P^2/2 of four bodies as 'P**2/2'"),
-                        ("mixed", "P^2/2 + Lennard-Jones pairs as '4*((1/r)**12 - (1/r)**6)'")):
+                        ("mixed", "P^2/2 + Lennard-Jones pairs as '4*((1/r)**12 - (1/r)**6)'"),
+                        ("yukawa", "P^2/2 + Yukawa pairs as 'exp(-r)/r'")):
         builtin, formula = lanes[name][1], lanes[f"{name} formula"][1]
         out(f"  {label:60s} built-in {builtin:6.0f}  formula {formula:6.0f}  "
             f"({formula / builtin:.2f}x)")
@@ -139,11 +142,11 @@ def interaction_terms(t_final=2000.0, repeats=5, out=print):
 
 def _others_in_lanes(repeats, orbits=64, t_final=100.0) -> dict:
     """ns per attempted orbit-step, alone and in SIMD_LANES lanes, of systems other than the
-    paper's -- the LJAT trimer and the paper's P^2/2 beside Lennard-Jones pairs (orbits
-    near the equilateral triangle), P^2/2 of three bodies in 3-D (the triangle tilted out
-    of the plane) and of four in the plane (near a square), seeded momenta -- of the first
-    and the last written as formulas, on the same starts -- and of the paper's 'sides'
-    orbit in as many lanes, best of `repeats`."""
+    paper's -- the LJAT trimer and the paper's P^2/2 beside Lennard-Jones or Yukawa pairs
+    (orbits near the equilateral triangle), P^2/2 of three bodies in 3-D (the triangle
+    tilted out of the plane) and of four in the plane (near a square), seeded momenta --
+    the pairs beside P^2/2 and the four bodies' P^2/2 also written as formulas, on the
+    same starts -- and of the paper's 'sides' orbit in as many lanes, best of `repeats`."""
     rng = np.random.default_rng(3)
     triangle = np.array([[0.0, 0.0, 0.0], [1.12, 0.0, 0.0], [0.56, 0.97, 0.0]])
     square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
@@ -153,6 +156,8 @@ def _others_in_lanes(repeats, orbits=64, t_final=100.0) -> dict:
         make_potential("axilrod_teller", {"strength": 0.3}))), triangle[:, :2]),
         "mixed": (System(np.ones(3), 2, (P2, make_potential("lennard_jones", {}, "pair"))),
                   triangle[:, :2]),
+        "yukawa": (System(np.ones(3), 2, (P2, make_potential("yukawa", {}, "pair"))),
+                   triangle[:, :2]),
         "3-D": (System(np.ones(3), 3, (P2,)), triangle),
         "four": (System(np.ones(4), 2, (P2,)), square)}
     paper = System.create()
@@ -170,7 +175,8 @@ def _others_in_lanes(repeats, orbits=64, t_final=100.0) -> dict:
     # the same terms written as formulas, on the same starts as their built-in systems
     formulas = {"four": System(np.ones(4), 2, (make_expression("triplet", "P**2/2"),)),
                 "mixed": System(np.ones(3), 2, (P2, make_expression(
-                    "pair", "4*((1/r)**12 - (1/r)**6)")))}
+                    "pair", "4*((1/r)**12 - (1/r)**6)"))),
+                "yukawa": System(np.ones(3), 2, (P2, make_expression("pair", "exp(-r)/r")))}
     out = dict(orbits=orbits, t=t_final, paper=per_step(paper, sides, SIMD_LANES, t_final))
     for name, (system, at) in systems.items():
         q = at + 0.02 * rng.normal(size=(orbits,) + at.shape)
@@ -363,6 +369,11 @@ def fixed_costs(folder="results/bench", repeats=3, out=print, cold=True, command
             f"empty cache, numba's compile events; {sum(r[2] for r in rows):.1f} s in all): "
             "seconds of its own (with what it compiled)")
         out("  " + "; ".join(f"{name} {mine:.1f} ({took:.1f})" for name, took, mine in own[:8]))
+        again = Counter(name for name, _, _ in rows if not name.startswith("numba"))
+        again = {name: k for name, k in again.items() if k > 1}
+        out("survey's functions compiled more than once (a literal, an array's layout or "
+            "another type: a second compilation of their code): " + (", ".join(
+                f"{name} x{k}" for name, k in sorted(again.items())) or "none"))
     best.update(command=command, cold=compiling, first_word=first, compiling=rows,
                 talk=command_talk(folder, cold=cold, commands=commands, out=out))
     return best

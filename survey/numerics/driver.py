@@ -172,17 +172,19 @@ def _start(k, j, ln, out, y0s, rows, t0, t1, model, n_tan, n_err,
     if not _finite(K[0]):
         _finish(k, ln, out, NONFINITE_, rows)
         return False
+    # y[::1]: the layout (any) the step's samples give these callees, not a second
+    # compilation of them for contiguous arrays (and a bool, not the literal False)
     r = rows[1, j]
     if r >= 0:
         while ln.i_eval[k] < t_eval.size and t_eval[ln.i_eval[k]] == t0:
-            put_sample(out.samples[r, ln.i_eval[k]], y, n_eval, rb)
-            sample_at(out.sampled[r, ln.i_eval[k]], out.ends[j], ln.acc[k], y, n, n_tan, rb,
-                      0.0, 0.0, False)
+            put_sample(out.samples[r, ln.i_eval[k]], y[::1], n_eval, rb)
+            sample_at(out.sampled[r, ln.i_eval[k]], out.ends[j], ln.acc[k], y[::1], n, n_tan,
+                      rb, 0.0, 0.0, np.bool_(False))
             ln.i_eval[k] += 1
     r = rows[2, j]
     if r >= 0:
         while ln.i_fine[k] < t_fine.size and t_fine[ln.i_fine[k]] == t0:
-            put_sample(out.fine[r, ln.i_fine[k]], y, n, rb)
+            put_sample(out.fine[r, ln.i_fine[k]], y[::1], n, rb)
             ln.i_fine[k] += 1
     if rows[0, j] >= 0:
         if near > 0:
@@ -440,7 +442,7 @@ def _fine_sample(sample, at, F, y, ynew, t, h, t_new, n, yd, rb):
         put_sample(sample, ynew, n, rb)
     else:
         dense_eval(F, y, (at - t) / h, n, yd)
-        put_sample(sample, yd, n, rb)
+        put_sample(sample, yd[::1], n, rb)
 
 
 @helper
@@ -698,7 +700,7 @@ def _run(ln, out, y0s, rows, model, control, recording, next_job, iterations, no
                     recording_near = True
                     break
             if recording_near:
-                near_terms(ln.Y, L, 0, L, masses.size, d, rb, near, ln.NX, ln.NR,
+                near_terms(ln.Y, L, np.int64(0), L, masses.size, d, rb, near, ln.NX, ln.NR,
                            ln.NT[0], ln.NT[1], ln.NT[2])
         for k in range(L):
             if not ln.flags[k, 3]:

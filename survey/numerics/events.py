@@ -66,7 +66,7 @@ def event_value(ep, f0, y, masses, d):
 @leaf
 def _g_at(x, ep, f0, F, y, nd, yd, masses, d):
     dense_eval(F, y, x, nd, yd)
-    return event_value(ep, f0, yd, masses, d)
+    return event_value(ep, f0, yd[::1], masses, d)
 
 
 @leaf
@@ -128,10 +128,10 @@ def event_slope(ep, f0, y, f, n, buf, masses, d, h):
     dt = 1e-4 * abs(h)
     for a in range(n):
         buf[a] = y[a] + dt * f[a]
-    gp = event_value(ep, f0, buf, masses, d)
+    gp = event_value(ep, f0, buf[::1], masses, d)
     for a in range(n):
         buf[a] = y[a] - dt * f[a]
-    return (gp - event_value(ep, f0, buf, masses, d)) / (2.0 * dt)
+    return (gp - event_value(ep, f0, buf[::1], masses, d)) / (2.0 * dt)
 
 
 @leaf
@@ -179,7 +179,7 @@ def scan_events(ep, f0, g0, g1, want, guard0, n_sub, h, xtol, F, y, n, yd, masse
             xr = xb if gb == 0.0 else _brent(ep, f0, xa, xb, ga, gb, xtol, F, y, n, yd,
                                             masses, d)
             dense_eval(F, y, xr, n, yd)
-            if guard0 < 0 or event_value(ep, guard0, yd, masses, d) > 0.0:
+            if guard0 < 0 or event_value(ep, guard0, yd[::1], masses, d) > 0.0:
                 p = n_found
                 while p > 0 and found_x[p - 1] > xr:
                     found_x[p] = found_x[p - 1]

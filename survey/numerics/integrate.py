@@ -277,7 +277,7 @@ def _rebuilt(z, out, rb):
     block of 8 (bodies 0 and 1) with numpy's operations in numpy's order (`put_sample`;
     rb: the mass ratios)."""
     for r in range(z.shape[0]):
-        put_sample(out[r], z[r], z.shape[1], rb)
+        put_sample(out[r], z[r, ::1], z.shape[1], rb)
 
 
 @leaf

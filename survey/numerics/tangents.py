@@ -185,8 +185,8 @@ def tangent_norm(y, off, n, rb):
     """|w| of the tangent vector at y[off:off + n]; of a reduced one (rb: the mass ratios)
     with the third body's rebuilt deviations, in the full vector's order: the norm FTLE,
     MEGNO and FLI measure whatever the state's form."""
-    if rb is None:
-        return norm_block(y, off, n)
+    if rb is None:          # any layout (y[::1]): one compilation for every caller's
+        return norm_block(y[::1], off, n)
     s = 0.0
     for h in range(2):                      # positions, then momenta
         b = off + 4 * h

@@ -413,7 +413,8 @@ class _Builder:
 @helper
 def _apply(op, x, y):
     """One instruction's value, with machine.portable's functions where libm's last bits
-    differ between machines (sqrt and the arithmetic are correctly rounded everywhere)."""
+    differ between machines (sqrt and the arithmetic are correctly rounded everywhere):
+    the arithmetic and exp (the commonest, and small) here, the others in `_elementary`."""
     if op == ADD:
         return x + y
     if op == SUB:
@@ -426,32 +427,40 @@ def _apply(op, x, y):
         return -x
     if op == IPOW:
         return portable.ipow(x, int(y))
-    if op == POW:
-        return portable.power(x, y)
     if op == SQRT:
         return math.sqrt(x)
     if op == EXP:
         return portable.exp(x)
-    if op == LOG:
-        return portable.log(x)
-    if op == SIN:
-        return portable.sin(x)
-    if op == COS:
-        return portable.cos(x)
-    if op == TAN:
-        return portable.sin(x) / portable.cos(x)
-    if op == ATAN:
-        return portable.atan(x)
-    if op == SINH:
-        return 0.5 * (portable.exp(x) - portable.exp(-x))
-    if op == COSH:
-        return 0.5 * (portable.exp(x) + portable.exp(-x))
-    if op == TANH:
-        e = portable.exp(-2.0 * abs(x))
-        return math.copysign((1.0 - e) / (1.0 + e), x)
     if op == ABS:
         return abs(x)
-    return 0.0 if x == 0.0 else math.copysign(1.0, x)        # SIGN
+    if op == SIGN:
+        return 0.0 if x == 0.0 else math.copysign(1.0, x)
+    return _elementary(op, x, y)
+
+
+@leaf
+def _elementary(op, x, y):
+    """The instructions of machine.portable's other elementary functions, each function
+    called at one place: compiled once, called by `run_program` and the lanes'
+    `_apply_lanes`. Inlined into both at each instruction that takes it (seven copies of
+    exp, two or three of each other function), they cost a formula's first run about 30 s
+    of compiling (a Hénon-Heiles orbit's first run 100 s, now 70)."""
+    if op == POW:
+        return portable.power(x, y)
+    if op == LOG:
+        return portable.log(x)
+    if op == ATAN:
+        return portable.atan(x)
+    if op == SIN or op == COS or op == TAN:
+        s = portable.sin(x) if op != COS else 0.0
+        c = portable.cos(x) if op != SIN else 0.0
+        return s if op == SIN else c if op == COS else s / c
+    # SINH, COSH, TANH
+    e = portable.exp(-2.0 * abs(x) if op == TANH else x)
+    if op == TANH:
+        return math.copysign((1.0 - e) / (1.0 + e), x)
+    f = portable.exp(-x)
+    return 0.5 * (e - f) if op == SINH else 0.5 * (e + f)
 
 
 class Programs(NamedTuple):
@@ -556,6 +565,9 @@ def _apply_lanes(op, x, y, out, tmp, L):
     elif op == SQRT:
         for k in range(L):
             out[k] = math.sqrt(x[k])
+    elif op == EXP:         # without branches: SIMD instructions too
+        for k in range(L):
+            out[k] = portable.exp(x[k])
     elif op == IPOW:        # portable.ipow's products, lane by lane in step: the exponent
         n = int(y[0])       # is a constant, the same in every lane; tmp holds the powers
         for k in range(L):

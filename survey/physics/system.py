@@ -655,8 +655,11 @@ def _rows_forces(y, dy, masses, d, n, n_tan, par, X):
 def _formula_forces(y, dy, masses, d, n, n_tan, kind, weighted, X, t):
     """Add the forces of a term written as a formula (program t of X): one of a body's
     position on every body; one of a single measure through that measure's forces with
-    the program's U' and U'' (the GIVEN profile); one of the sides through sides_forces."""
+    the program's U' and U'' (the GIVEN profile); one of the sides through sides_forces.
+    GIVEN is passed as an int64, not the literal: the forces' kernels would compile a
+    second time for it."""
     N = masses.size
+    given = np.int64(GIVEN)
     if kind == POSITION:
         for i in range(N):
             external_forces(y, dy, i, d, n, n_tan, X, t,
@@ -666,7 +669,7 @@ def _formula_forces(y, dy, masses, d, n, n_tan, kind, weighted, X, t):
             for j in range(i + 1, N):
                 r = norm(sub(vec(y, j * d, d), vec(y, i * d, d)))
                 _, U1, U2 = expression_profile(X, t, r)
-                pair_forces(y, dy, i, j, d, n, n_tan, GIVEN, (U1, U2),
+                pair_forces(y, dy, i, j, d, n, n_tan, given, (U1, U2),
                             masses[i] * masses[j] if weighted != 0.0 else 1.0)
     else:
         for i in range(N - 2):
@@ -677,6 +680,6 @@ def _formula_forces(y, dy, masses, d, n, n_tan, kind, weighted, X, t):
                         continue
                     _, U1, U2 = expression_profile(X, t, triplet_measure(y, i, j, k, d, kind))
                     if kind == PERIMETER:
-                        perimetric_forces(y, dy, i, j, k, d, n, n_tan, GIVEN, (U1, U2))
+                        perimetric_forces(y, dy, i, j, k, d, n, n_tan, given, (U1, U2))
                     else:
-                        areal_forces(y, dy, i, j, k, d, n, n_tan, GIVEN, (U1, U2))
+                        areal_forces(y, dy, i, j, k, d, n, n_tan, given, (U1, U2))
