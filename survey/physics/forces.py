@@ -13,7 +13,7 @@ import math
 from ..machine import portable
 from ..machine.jit import helper, lanes, leaf
 from .expressions import output, run_program
-from .terms import BARRIER, GIVEN, LENNARD_JONES, PERIMETER, POWER
+from .terms import BARRIER, GIVEN, LENNARD_JONES, PERIMETER, POWER, YUKAWA
 
 # The perimetric and areal forces exist in one reference and hand-specialised copies, each
 # for speed on the paths that run most; every copy is held to what it specialises, bit for
@@ -141,7 +141,12 @@ def _transcendental_profile(code, par, x):
             return c * portable.log(x), c / x, -c / (x * x)
         xk2 = portable.power(x, k - 2.0)
         return c * xk2 * x * x / k, c * xk2 * x, c * (k - 1.0) * xk2
-    c, g = par[0], par[1]
+    return yukawa(par[0], par[1], x)
+
+
+@helper
+def yukawa(c, g, x):
+    """-c e^(-g x) / x and its first two derivatives."""
     e = portable.exp(-g * x)
     return (-c * e / x, c * e * (g * x + 1.0) / (x * x),
             -c * e * (g * g * x * x + 2.0 * g * x + 2.0) / (x * x * x))
@@ -435,6 +440,9 @@ def profile_lanes(code, par, X, U, L):
     elif code == POWER and par[1] == 2.0:
         for k in range(L):
             _, U[k], U[L + k] = power_2(par[0], X[k])
+    elif code == YUKAWA:        # portable.exp has no branches: SIMD instructions too
+        for k in range(L):
+            _, U[k], U[L + k] = yukawa(par[0], par[1], X[k])
     else:
         for k in range(L):
             _, U[k], U[L + k] = profile(code, par, X[k])
