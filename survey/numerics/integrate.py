@@ -253,7 +253,8 @@ class Frame(NamedTuple):
         lead = z.shape[:-1]
         rows = int(np.prod(lead))
         job = np.repeat(np.asarray(at, dtype=np.int64), rows // max(len(at), 1))
-        return job, np.ascontiguousarray(np.broadcast_to(t, lead), dtype=np.float64).ravel()
+        # a copy: a view of broadcast_to is read-only, a type of its own to the kernel
+        return job, np.broadcast_to(t, lead).astype(np.float64).ravel()
 
     def restore(self, res, order, rows, t0, t_eval, t_fine):
         """The kernel's outcome with full states."""
