@@ -441,8 +441,8 @@ def _apply(op, x, y):
 @leaf
 def _elementary(op, x, y):
     """The instructions of machine.portable's other elementary functions, each function
-    called at one place: compiled once, called by `run_program` and the lanes'
-    `_apply_lanes`. Inlined into both at each instruction that takes it (seven copies of
+    called at one place (exp at two): compiled once, called by `run_program` and the
+    lanes' `_apply_lanes`. Inlined into both at each instruction that takes it (seven copies of
     exp, two or three of each other function), they cost a formula's first run about 30 s
     of compiling (a Hénon-Heiles orbit's first run 100 s, now 70)."""
     if op == POW:
