@@ -1,9 +1,14 @@
-"""numba's disk cache shared by processes that compile at once (machine.jit)."""
+"""How survey compiles (machine.jit): numba's disk cache shared by processes that compile
+at once, and the function passes' aggregates combined first."""
+import collections
 import multiprocessing
 
+import numpy as np
+from numba import njit
 from numba.core.caching import IndexDataCacheFile
+from numba.core.codegen import CPUCodeLibrary
 
-import survey.machine.jit  # noqa: F401  (locks the cache's saves, as any kernel's import)
+from survey.machine import jit  # (locks the cache's saves, as any kernel's import)
 
 KEYS = 300
 
@@ -32,3 +37,33 @@ def test_processes_saving_one_functions_kernels_at_once_keep_every_entry(tmp_pat
     cache = IndexDataCacheFile(str(tmp_path), "kernel", "stamp")
     assert [cache.load(key) for key in range(2 * KEYS)] == \
         [f"machine code of {key}" for key in range(2 * KEYS)]
+
+
+Record = collections.namedtuple("Record", [f"a{i}" for i in range(60)])
+
+
+@njit(error_model="numpy", _nrt=False)
+def _shuffle(record, rounds):
+    """Reads and writes fields of a record of 60 arrays in a loop, as the driver does its
+    lanes (each `record.aK[i]` a whole load of the record in numba's IR)."""
+    for r in range(rounds):
+        for i in range(len(record) - 1):
+            record[i + 1][r % 3] += 0.5 * record[i][(r + 1) % 3] - r
+    return record[len(record) - 1][0]
+
+
+def test_records_of_many_arrays_compile_through_the_combined_passes():
+    """jit.combine_aggregates_first runs LLVM's instruction combiner before numba's function
+    passes: installed once, and a kernel over a record of 60 arrays computes exactly what
+    plain Python computes."""
+    assert CPUCodeLibrary._optimize_functions.combined_first
+    jit.combine_aggregates_first()          # a second call must not wrap it twice
+    assert CPUCodeLibrary._optimize_functions.__wrapped__.__name__ == "_optimize_functions"
+    rng = np.random.default_rng(3)
+    start = [rng.standard_normal(3) for _ in range(60)]
+    compiled, plain = Record(*[a.copy() for a in start]), Record(*[a.copy() for a in start])
+    got = _shuffle(compiled, 7)
+    want = _shuffle.py_func(plain, 7)
+    assert got == want
+    for a, b in zip(compiled, plain):
+        np.testing.assert_array_equal(a, b)
