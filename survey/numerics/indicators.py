@@ -29,8 +29,9 @@ from ..catalog import defaults
 from ..catalog.indicators import IndicatorOptions
 from ..catalog.status import Status
 from ..catalog.variables import ENSEMBLE_QUANTILES, ENSEMBLE_STATISTICS, history_times
+from ..machine.jit import leaf
 from ..machine.linalg import orthonormal
-from ..machine.portable import vdot, vnorm
+from ..machine.portable import vnorm
 from ..physics.system import System, rhs
 from .events import Crossings
 from .driver import EVAL, EVENTS, FINE
@@ -111,10 +112,33 @@ def deviation_vectors(system: System, y0, count: int, seed: int,
     rng = np.random.default_rng([seed, *state_key(y0), stream])
     w = rng.normal(size=(count, system.n))
     C = _constraints(system, y0, project_flow)
-    coefficients = vdot(w[:, None, :], C[None])         # (count, constraints)
-    for k in range(len(C)):
-        w -= coefficients[:, k:k + 1] * C[k]
-    return w / vnorm(w)[:, None]
+    _unconstrained_units(w, C, np.empty(len(C)))
+    return w
+
+
+@leaf
+def _unconstrained_units(w, C, coefficients):
+    """Each row of w without its components along the orthonormal rows of C, then scaled to
+    unit norm, in place: every coefficient from the row as drawn, each row of C then
+    subtracted in turn, the norm summed in order -- numpy's operations in numpy's order,
+    so the same bits. One call: a cell's 33 draws were each a few numpy calls of microseconds
+    (44% of a short map's task)."""
+    for r in range(w.shape[0]):
+        row = w[r]
+        for k in range(C.shape[0]):
+            s = 0.0
+            for i in range(row.size):
+                s += row[i] * C[k, i]
+            coefficients[k] = s
+        for k in range(C.shape[0]):
+            for i in range(row.size):
+                row[i] = row[i] - coefficients[k] * C[k, i]
+        s = 0.0
+        for i in range(row.size):
+            s += row[i] * row[i]
+        size = math.sqrt(s)
+        for i in range(row.size):
+            row[i] = row[i] / size
 
 
 def state_key(y0) -> list[int]:
@@ -196,9 +220,10 @@ def ensemble(system: System, y0, options: IndicatorOptions,
     starts = [y0] * nominal
     tangents = [w0] if control_tangents else [w[None] for w in w0]
     record = [EVENTS | EVAL | FINE] + [EVAL] * (nominal - 1)
+    distance = o.perturbation_size * float(vnorm(y0))
     for j in range(o.perturbations):
         xi = deviation_vectors(system, y0, 1, o.seed, stream=1 + j)[0]
-        yp = y0 + o.perturbation_size * float(vnorm(y0)) * xi
+        yp = y0 + distance * xi
         starts.append(yp)
         tangents.append(deviation_vectors(system, yp, per_job, o.seed, o.project_flow,
                                           stream=1 + j))

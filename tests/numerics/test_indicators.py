@@ -122,6 +122,34 @@ def test_deviation_vectors_are_reproducible_and_carry_no_centre_of_mass_motion(p
     np.testing.assert_allclose(wp @ gradH, 0, atol=1e-12)
 
 
+def test_deviation_vectors_keep_the_bits_of_numpys_projection():
+    """The compiled projection (`_unconstrained_units`) gives the bits numpy's operations
+    give in numpy's order -- every coefficient from the drawn row, each constraint then
+    subtracted, the norm summed in order -- for other masses, 3-D, four bodies, the flow
+    projected or not, one vector or sixteen: an archive's deviation vectors (and so its
+    chaos indicators) do not depend on how they are computed."""
+    from survey.machine.portable import vdot, vnorm
+    from survey.numerics.indicators import _constraints, state_key
+    from survey.physics.terms import make_potential
+
+    rng = np.random.default_rng(5)
+    for masses, d in (((1.0, 1.0, 1.0), 2), ((1.0, 2.0, 0.5), 2), ((1.0, 1.5, 0.7, 2.0), 3)):
+        system = System(np.array(masses), d, (make_potential("perimetric_power"),))
+        for trial in range(20):
+            y0 = rng.standard_normal(system.n) * 10 ** rng.uniform(-3, 3)
+            for project_flow in (False, True):
+                for count in (1, 16):
+                    drawn = np.random.default_rng([trial, *state_key(y0), 2]).normal(
+                        size=(count, system.n))
+                    C = _constraints(system, y0, project_flow)
+                    coefficients = vdot(drawn[:, None, :], C[None])
+                    for k in range(len(C)):
+                        drawn -= coefficients[:, k:k + 1] * C[k]
+                    want = drawn / vnorm(drawn)[:, None]
+                    got = deviation_vectors(system, y0, count, trial, project_flow, 2)
+                    np.testing.assert_array_equal(got.view(np.int64), want.view(np.int64))
+
+
 def test_histories_and_status_for_an_orbit_that_stops(paper_system):
     """A collision ends the histories with NaN past the end, never raises."""
     system = System.create(exponent=-1.0)
