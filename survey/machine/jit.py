@@ -163,21 +163,26 @@ def combine_aggregates_first():
     first turns a field read from a whole load into a load of that field alone. The
     stepping loop's function passes then take 1.5 s. The passes that follow produce the
     same program and IEEE operations, so the results keep every bit (`verify`). A numba
-    without this hook compiles as it would by itself: slower, the same code."""
+    without this hook, or on llvmlite's legacy pass manager (numba < 0.61), compiles as
+    it would by itself: slower, the same code."""
     from numba.core.codegen import CPUCodeLibrary
     original = getattr(CPUCodeLibrary, "_optimize_functions", None)
-    if original is None or getattr(original, "combined_first", False):
+    if original is None or getattr(original, "combined_first", False) or \
+            not hasattr(llvm, "create_new_function_pass_manager"):
         return
 
     @functools.wraps(original)
     def optimize_functions(self, ll_module):
-        ll_module.data_layout = self._codegen._data_layout
-        _, builder = self._codegen._function_pass_manager()
-        combine = llvm.create_new_function_pass_manager()
-        combine.add_instruction_combine_pass()
-        for function in ll_module.functions:
-            if not function.is_declaration:
-                combine.run(function, builder)
+        try:
+            ll_module.data_layout = self._codegen._data_layout
+            _, builder = self._codegen._function_pass_manager()
+            combine = llvm.create_new_function_pass_manager()
+            combine.add_instruction_combine_pass()
+            for function in ll_module.functions:
+                if not function.is_declaration:
+                    combine.run(function, builder)
+        except (AttributeError, TypeError, ValueError):
+            pass            # another numba's codegen: its own passes alone
         original(self, ll_module)
     optimize_functions.combined_first = True
     CPUCodeLibrary._optimize_functions = optimize_functions
