@@ -175,7 +175,7 @@ def combine_aggregates_first():
     def optimize_functions(self, ll_module):
         try:
             ll_module.data_layout = self._codegen._data_layout
-            _, builder = self._codegen._function_pass_manager()
+            builder = self._codegen._pass_builder()
             combine = llvm.create_new_function_pass_manager()
             combine.add_instruction_combine_pass()
             for function in ll_module.functions:

@@ -34,6 +34,7 @@ from ..machine.linalg import orthonormal
 from ..machine.portable import vnorm
 from ..physics.system import System, rhs
 from .events import Crossings
+from .dop853 import norm_block
 from .driver import EVAL, EVENTS, FINE
 from .integrate import Outcome, integrate_batch
 
@@ -120,9 +121,9 @@ def deviation_vectors(system: System, y0, count: int, seed: int,
 def _unconstrained_units(w, C, coefficients):
     """Each row of w without its components along the orthonormal rows of C, then scaled to
     unit norm, in place: every coefficient from the row as drawn, each row of C then
-    subtracted in turn, the norm summed in order -- numpy's operations in numpy's order,
-    so the same bits. One call: a cell's 33 draws were each a few numpy calls of microseconds
-    (44% of a short map's task)."""
+    subtracted in turn, the norm summed in order (`norm_block`) -- numpy's operations in
+    numpy's order, so the same bits. One call: a cell's 33 draws were each a few numpy
+    calls of microseconds (44% of a short map's task)."""
     for r in range(w.shape[0]):
         row = w[r]
         for k in range(C.shape[0]):
@@ -133,10 +134,7 @@ def _unconstrained_units(w, C, coefficients):
         for k in range(C.shape[0]):
             for i in range(row.size):
                 row[i] = row[i] - coefficients[k] * C[k, i]
-        s = 0.0
-        for i in range(row.size):
-            s += row[i] * row[i]
-        size = math.sqrt(s)
+        size = norm_block(row[::1], np.int64(0), row.size)  # its other calls' types
         for i in range(row.size):
             row[i] = row[i] / size
 
