@@ -14,8 +14,7 @@ import numpy as np
 from ..machine.jit import helper, lanes, leaf
 from ..machine import portable
 from ..machine.portable import fma
-from ..physics.lanes import rhs_lanes, state_size
-from ..physics.system import rhs
+from ..physics.lanes import full_rhs, rhs_lanes, state_size
 
 EPS = np.finfo(np.float64).eps
 
@@ -579,7 +578,7 @@ def _rhs(y, dy, L, model, n_tan, W, rb):
     """The right-hand side of L lanes; one full orbit straight through `rhs` (a call less,
     a third of an evaluation). The systems are autonomous: it is given no time."""
     if rb is None and L == 1:
-        rhs(0.0, y, dy, model, n_tan)
+        full_rhs(0.0, y, dy, model, n_tan, rb)
     else:
         rhs_lanes(0.0, y, dy, L, model, n_tan, W, rb)
 

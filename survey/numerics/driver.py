@@ -36,8 +36,8 @@ import numpy as np
 from ..catalog.status import Status
 from ..machine import portable
 from ..machine.jit import helper, lanes, leaf
-from ..physics.lanes import SIMD_MIN, rhs_lanes, state_size
-from ..physics.system import Model, rhs
+from ..physics.lanes import SIMD_MIN, full_rhs, rhs_lanes, state_size
+from ..physics.system import Model
 from .lanestate import RawOutcome, lane_state, reused_samples
 from .tangents import (accumulate, begin, growth_terms, offsets, sample_at, tangent_norms,
                        width)
@@ -763,7 +763,7 @@ def _rhs_one(t, y, dy, model, n_tan, W, rb):
     own, and compiled a second copy of the lanes' right-hand sides (seconds of a first
     run)."""
     if rb is None:
-        rhs(t, y, dy, model, n_tan)
+        full_rhs(t, y, dy, model, n_tan, rb)
     else:
         rhs_lanes(t, y, dy, np.int64(1), model, n_tan, W, rb)
 

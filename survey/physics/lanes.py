@@ -89,15 +89,37 @@ def rhs_lanes(t, Y, dY, L, model, n_tan, W, rb):
     if rb is not None:
         _planar_lanes(Y, dY, L, W, model, n_tan, rb)
     else:
-        _full_lanes(t, Y, dY, L, model, n_tan, W, rb)
+        full_lanes(t, Y, dY, L, model, n_tan, W, rb)
 
 
-@helper
+# numba prunes a branch on `rb is None` where rb is None, not where rb is the mass ratios:
+# a reduced state's kernels would still type, and so compile, the full states' branches
+# they never take (`rhs` and its forces: 2 s of a first run). So those branches call
+# full_lanes and full_rhs, which compile to nothing where rb is not None.
+def full_lanes(t, Y, dY, L, model, n_tan, W, rb):
+    """`rhs_lanes` of full states (rb is None); nothing for reduced ones."""
+
+
+def full_rhs(t, y, dy, model, n_tan, rb):
+    """`rhs` of one full state (rb is None); nothing for a reduced one."""
+
+
+@overload(full_rhs, jit_options=dict(error_model="numpy"), inline="always")
+def _full_rhs(t, y, dy, model, n_tan, rb):
+    if isinstance(rb, types.NoneType):
+        return lambda t, y, dy, model, n_tan, rb: rhs(t, y, dy, model, n_tan)
+    return lambda t, y, dy, model, n_tan, rb: None
+
+
+@overload(full_lanes, jit_options=dict(error_model="numpy"), inline="always")
+def _full_lanes_overload(t, Y, dY, L, model, n_tan, W, rb):
+    if isinstance(rb, types.NoneType):
+        return _full_lanes
+    return lambda t, Y, dY, L, model, n_tan, W, rb: None
+
+
 def _full_lanes(t, Y, dY, L, model, n_tan, W, rb):
-    """`rhs_lanes` of full states (rb is None). rb is passed on, not a literal None: where
-    rb is a tuple, numba still types this branch that never runs, and a literal None
-    compiled a full-state copy of the lanes' right-hand sides into every reduced batch's
-    kernels (seconds of a first run)."""
+    """`full_lanes` (rb None, passed on to _planar_lanes)."""
     masses, d, measure, par = model.masses, model.d, model.measure, model.par
     if L >= SIMD_MIN and masses.size == 3 and d == 2 and par.ndim == 1 and (
             measure == PERIMETER or measure == AREA):

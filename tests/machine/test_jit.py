@@ -1,5 +1,6 @@
 """How survey compiles (machine.jit): numba's disk cache shared by processes that compile
-at once, and the function passes' aggregates combined first."""
+at once, the function passes' aggregates combined first, numba's flags compared without
+their dictionaries and each inlined helper's IR built once."""
 import collections
 import multiprocessing
 
@@ -7,6 +8,8 @@ import numpy as np
 from numba import njit
 from numba.core.caching import IndexDataCacheFile
 from numba.core.codegen import CPUCodeLibrary
+from numba.core.compiler import Flags
+from numba.core.inline_closurecall import InlineWorker
 
 from survey.machine import jit  # (locks the cache's saves, as any kernel's import)
 
@@ -67,3 +70,65 @@ def test_records_of_many_arrays_compile_through_the_combined_passes():
     assert got == want
     for a, b in zip(compiled, plain):
         np.testing.assert_array_equal(a, b)
+
+
+def _flags(**set_):
+    flags = Flags()
+    for name, value in set_.items():
+        setattr(flags, name, value)
+    return flags
+
+
+def test_flags_compare_and_hash_as_their_options_do():
+    """jit.faster_flags: each flags' values, hash and equality are those of every option
+    read through its property (numba's own definition), set or left at the default."""
+    cases = [_flags(), _flags(), _flags(nrt=True), _flags(nrt=False),
+             _flags(error_model="numpy"), _flags(error_model="python"),
+             _flags(nrt=True, error_model="numpy", boundscheck=False),
+             Flags(_flags(nrt=True, error_model="numpy"))]
+    default = Flags.options["error_model"].default
+    cases.append(_flags(error_model=default))     # set to the default: equals unset
+    for a in cases:
+        want = {name: getattr(a, name) for name in a.options}
+        assert a.values() == want
+        assert hash(a) == hash(tuple(sorted(want)))
+        for b in cases:
+            assert (a == b) == (want == {name: getattr(b, name) for name in b.options})
+    assert cases[-1] == cases[0] and cases[2] != cases[3]
+    jit.faster_flags()                             # a second call changes nothing
+    assert Flags.__eq__.fast
+
+
+@njit(inline="always")
+def _twice(x):
+    return 2.0 * x + 1.0
+
+
+@njit(inline="always")
+def _nested(x):
+    return _twice(x) - _twice(-x)
+
+
+@njit
+def _three_sites(x):
+    return _nested(x) + _nested(x + 1.0) * _nested(x - 1.0) + _twice(x)
+
+
+def test_inlined_helpers_are_built_once_and_compute_as_python():
+    """jit.inline_once: a helper inlined at three sites of a kernel (and inlining another at
+    two sites of its own) runs numba's frontend once, and the kernel computes what plain
+    Python computes."""
+    built = collections.Counter()
+    original = InlineWorker.run_untyped_passes
+
+    def counted(self, func, *args, **kwargs):
+        built[func.__name__] += 1
+        return original(self, func, *args, **kwargs)
+    InlineWorker.run_untyped_passes = counted
+    try:
+        got = _three_sites(0.75)
+    finally:
+        InlineWorker.run_untyped_passes = original
+    assert got == 3.0 + 7.0 * -1.0 + 2.5           # 4x + 4(x + 1) 4(x - 1) + 2x + 1, exact
+    assert built["_nested"] == 1 and built["_twice"] == 1
+    assert InlineWorker.inline_function.once
