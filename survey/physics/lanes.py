@@ -30,6 +30,7 @@ from .forces import (
 )
 from .system import (
     _term_params,
+    areal_type,
     lead_params,
     par_type,
     rhs,
@@ -469,19 +470,34 @@ def _add_cyclic_lanes(dY, off, bodies, d, S, V, L):
 def _planar_lanes(Y, dY, L, W, model, n_tan, rb):
     """`rhs_lanes` of three bodies in the plane under one perimetric or areal term: full
     states (rb None) or reduced ones (rb: the mass ratios that rebuild the third body)."""
-    masses, measure, prof, par = model.masses, model.measure, model.prof, model.par
+    masses, prof, par = model.masses, model.prof, model.par
     inv = (1.0 / masses[0], 1.0 / masses[1], 1.0 / masses[2])
     nb = 12                                         # a block's components
     if rb is not None:
         nb = 8
-    if measure == PERIMETER:
-        _perimetric_orbits(Y, dY, L, W, prof, lead_params(par), inv, rb)
+    _lead_lanes(Y, dY, L, W, model, prof, lead_params(par), inv, rb, n_tan, nb)
+
+
+def _lead_lanes(Y, dY, L, W, model, prof, par, inv, rb, n_tan, nb):
+    """The leading term's loops, the orbits' then each tangent vector's: perimetric or
+    areal as the Model's type says (`Model.areal`), so a system compiles its own kind's
+    alone (the other's cost a first run 2-3 s)."""
+
+
+@overload(_lead_lanes, jit_options=dict(error_model="numpy"), inline="always")
+def _lead_lanes_overload(Y, dY, L, W, model, prof, par, inv, rb, n_tan, nb):
+    if areal_type(model):
+        def areal(Y, dY, L, W, model, prof, par, inv, rb, n_tan, nb):
+            _areal_orbits(Y, dY, L, W, prof, par, inv, rb)
+            for t in range(1, 1 + n_tan):
+                _areal_tangent(Y, Y[nb * L * t:], dY[nb * L * t:], L, W, inv, rb)
+        return areal
+
+    def perimetric(Y, dY, L, W, model, prof, par, inv, rb, n_tan, nb):
+        _perimetric_orbits(Y, dY, L, W, prof, par, inv, rb)
         for t in range(1, 1 + n_tan):
             _perimetric_tangent(Y[nb * L * t:], dY[nb * L * t:], L, W, inv, rb)
-    else:
-        _areal_orbits(Y, dY, L, W, prof, lead_params(par), inv, rb)
-        for t in range(1, 1 + n_tan):
-            _areal_tangent(Y, Y[nb * L * t:], dY[nb * L * t:], L, W, inv, rb)
+    return perimetric
 
 
 # The loops over the lanes below are separate compiled functions, not inlined helpers:

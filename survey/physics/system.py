@@ -63,6 +63,9 @@ class Model(NamedTuple):
     par: np.ndarray
     expr: Programs | None       # the programs of the terms written as formulas (None:
     #                             none, and a type of its own: their code is not compiled)
+    areal: bool | None = None   # True where the leading term is areal, else None: a type
+    #                             of its own, so three bodies in the plane compile the
+    #                             lanes' loops of their own term alone (_planar_lanes)
 
 
 @dataclass(frozen=True, eq=False)
@@ -149,7 +152,8 @@ class System:
         X = self._programs
         return Model(masses=self.masses.copy(), d=self.dim, measure=codes[0], prof=codes[1],
                      par=self._par.copy(),
-                     expr=None if X is None else X._replace(regs=X.regs.copy()))
+                     expr=None if X is None else X._replace(regs=X.regs.copy()),
+                     areal=True if codes[0] == AREA else None)
 
     def state(self, positions, momenta) -> np.ndarray:
         """Flat state from positions and momenta of shape (N, d)."""
@@ -335,6 +339,11 @@ def par_type(model):
     return model.types[Model._fields.index("par")]
 
 
+def areal_type(model) -> bool:
+    """Whether a Model's type is that of a leading areal term (`Model.areal`)."""
+    return not isinstance(model.types[Model._fields.index("areal")], types.NoneType)
+
+
 @overload(velocities_and_forces, jit_options=dict(error_model="numpy"), inline="always")
 def _velocities_and_forces(y, dy, model, n_tan):
     if par_type(model).ndim == 1:
@@ -360,7 +369,8 @@ def _potential_energies(qs, model):
 @leaf
 def potential_energy(q, model):
     """Sum over the terms of U summed over triplets i < j < k or pairs i < j."""
-    masses, d, measure, prof, par, X = model
+    masses, d, measure, prof, par, X = model.masses, model.d, model.measure, model.prof, \
+        model.par, model.expr
     N = masses.size
     total = further_energy(q, masses, d, par, X)
     if measure != NONE:
@@ -384,7 +394,8 @@ def _planar_forces(y, dy, model, n_tan):
 @helper
 def _general_forces(y, dy, model, n_tan):
     """Any other system: the leading perimetric or areal term, then the further terms."""
-    masses, d, measure, prof, par, X = model
+    masses, d, measure, prof, par, X = model.masses, model.d, model.measure, model.prof, \
+        model.par, model.expr
     N = masses.size
     _leading_forces(y, dy, masses, N, d, measure, prof, (par[0, 0], par[0, 1]), n_tan)
     _rows_forces(y, dy, masses, d, 2 * N * d, n_tan, par, X)
