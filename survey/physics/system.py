@@ -63,7 +63,7 @@ class Model(NamedTuple):
     par: np.ndarray
     expr: Programs | None       # the programs of the terms written as formulas (None:
     #                             none, and a type of its own: their code is not compiled)
-    areal: bool | None = None   # True where the leading term is areal, else None: a type
+    areal: bool | None          # True where the leading term is areal, else None: a type
     #                             of its own, so three bodies in the plane compile the
     #                             lanes' loops of their own term alone (_planar_lanes)
 
