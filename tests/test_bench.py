@@ -101,8 +101,9 @@ def test_the_step_flop_count_counts_arithmetic_not_sign_flips():
     rhs, sums = bench.step_flops()
     assert rhs % 12 == 0 and 40 < rhs // 12 < 200 and 1000 < sums < 5000
     # of them the divider's: the paper's right-hand side takes three side lengths (square
-    # roots) and their reciprocals; the error norm a division a component and one of each
-    assert bench.divider_ops() == (12 * 3 + 8 + 1, 12 * 3 + 1)
+    # roots) and one reciprocal, of their product (physics.forces.reciprocals); the error
+    # norm a division a component and one of each
+    assert bench.divider_ops() == (12 * 1 + 8 + 1, 12 * 3 + 1)
 
 
 def test_the_arithmetic_probe_takes_the_plain_step_in_every_lane():

@@ -62,7 +62,9 @@ def _plain_forces(y):
     ax, ay, bx, by, cx, cy = vx - ux, vy - uy, wx - vx, wy - vy, ux - wx, uy - wy
     L1, L2, L3 = math.sqrt(ax * ax + ay * ay), math.sqrt(bx * bx + by * by), \
         math.sqrt(cx * cx + cy * cy)
-    r1, r2, r3 = 1.0 / L1, 1.0 / L2, 1.0 / L3
+    L23 = L2 * L3               # physics.forces.reciprocals without its exact rescaling
+    q = 1.0 / (L1 * L23)
+    r1, r2, r3 = q * L23, q * (L1 * L3), q * (L1 * L2)
     e1x, e1y, e2x, e2y, e3x, e3y = ax * r1, ay * r1, bx * r2, by * r2, cx * r3, cy * r3
     U1 = L1 + L2 + L3                               # U' = P, U'' = 1
     s1, s2, s3 = U1 * r1, U1 * r2, U1 * r3

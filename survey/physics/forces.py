@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from ..machine import portable
 from ..machine.jit import helper, lanes, leaf
 from .expressions import output, run_program
@@ -75,6 +77,11 @@ def sub(a, b):
 def axpy(s, a, b):
     """s * a + b."""
     return (s * a[0] + b[0], s * a[1] + b[1], s * a[2] + b[2])
+
+
+@helper
+def scale(s, a):
+    return (a[0] * s, a[1] * s, a[2] * s)
 
 
 @helper
@@ -163,15 +170,35 @@ def triplet_measure(q, i, j, k, d, measure):
 
 @helper
 def _unit(a):
+    """a's unit vector, length L and 1 / L."""
     L = norm(a)
     r = 1.0 / L
-    return (a[0] * r, a[1] * r, a[2] * r), L
+    return scale(r, a), L, r
 
 
 @helper
-def _pair_tangent(e, L, dr, dP, U1, U2):
-    """Variation of U'(P) e for one side: U'' dP e + U' (I - e e^T) dr / L."""
-    s = U1 / L
+def reciprocals(L1, L2, L3):
+    """1 / L1, 1 / L2, 1 / L3 of a triangle's sides from one division: a step's
+    right-hand sides wait on the core's divider, which their square roots keep busy
+    (`bench --only step`); each is within a few units of roundoff of its own division.
+    The sides are first scaled by the power of two s that brings the longest into
+    [1, 2) (exact, and undone exactly: the bits of the unscaled products), so their
+    product neither under- nor overflows: the other two are at least half the longest
+    but the shortest (the triangle inequality), which may be 1e-300 times it (the
+    isosceles plane's restart after a triple collision puts all three near 1e-150)."""
+    longest = max(L1, max(L2, L3))
+    e = min(max((np.float64(longest).view(np.int64) >> 52) & 0x7FF, 1), 2045)
+    s = np.int64((2046 - e) << 52).view(np.float64)
+    a, b, c = L1 * s, L2 * s, L3 * s
+    bc = b * c
+    q = 1.0 / (a * bc)
+    return (q * bc) * s, (q * (a * c)) * s, (q * (a * b)) * s
+
+
+@helper
+def _pair_tangent(e, r, dr, dP, U1, U2):
+    """Variation of U'(P) e for one side of 1 / length r: U'' dP e + U' (I - e e^T) dr r."""
+    s = U1 * r
     return axpy(U2 * dP - s * dot(e, dr), e, (s * dr[0], s * dr[1], s * dr[2]))
 
 
@@ -186,23 +213,23 @@ def _add_cyclic(dy, off, i, j, k, d, s, g1, g2, g3):
 
 @helper
 def _perimetric_sides(u, v, w):
-    """Unit vectors along the sides i->j, j->k, k->i of the triangle (u, v, w) and the
-    sides' lengths: the force on a body is U'(P) times the sum of the unit vectors towards
-    its two neighbours, which bisects the interior angle."""
-    e1, L1 = _unit(sub(v, u))
-    e2, L2 = _unit(sub(w, v))
-    e3, L3 = _unit(sub(u, w))
-    return e1, e2, e3, L1, L2, L3
+    """Unit vectors along the sides i->j, j->k, k->i of the triangle (u, v, w), the sides'
+    lengths and their reciprocals: the force on a body is U'(P) times the sum of the unit
+    vectors towards its two neighbours, which bisects the interior angle."""
+    a, b, c = sub(v, u), sub(w, v), sub(u, w)
+    L1, L2, L3 = norm(a), norm(b), norm(c)
+    r1, r2, r3 = reciprocals(L1, L2, L3)
+    return (scale(r1, a), scale(r2, b), scale(r3, c), L1, L2, L3, r1, r2, r3)
 
 
 @helper
-def _perimetric_tangent(e1, e2, e3, L1, L2, L3, U1, U2, du, dv, dw):
+def _perimetric_tangent(e1, e2, e3, r1, r2, r3, U1, U2, du, dv, dw):
     """The variations g1, g2, g3 of U'(P) e along the three sides (_add_cyclic's
-    derivatives) for deviations du, dv, dw of the bodies."""
-    r1, r2, r3 = sub(dv, du), sub(dw, dv), sub(du, dw)
-    dP = dot(e1, r1) + dot(e2, r2) + dot(e3, r3)
-    return (_pair_tangent(e1, L1, r1, dP, U1, U2), _pair_tangent(e2, L2, r2, dP, U1, U2),
-            _pair_tangent(e3, L3, r3, dP, U1, U2))
+    derivatives; r: the sides' 1 / length) for deviations du, dv, dw of the bodies."""
+    p1, p2, p3 = sub(dv, du), sub(dw, dv), sub(du, dw)
+    dP = dot(e1, p1) + dot(e2, p2) + dot(e3, p3)
+    return (_pair_tangent(e1, r1, p1, dP, U1, U2), _pair_tangent(e2, r2, p2, dP, U1, U2),
+            _pair_tangent(e3, r3, p3, dP, U1, U2))
 
 
 @leaf
@@ -211,13 +238,13 @@ def perimetric_forces(y, dy, i, j, k, d, n, n_tan, prof, par):
     tangent vector t (stored at y[n*(1+t):]) its tangent force -Hess U . dq to dy at the
     same offsets (the paper's one-jet, Appendix E)."""
     nq = n // 2
-    e1, e2, e3, L1, L2, L3 = _perimetric_sides(vec(y, i * d, d), vec(y, j * d, d),
-                                               vec(y, k * d, d))
+    e1, e2, e3, L1, L2, L3, r1, r2, r3 = _perimetric_sides(
+        vec(y, i * d, d), vec(y, j * d, d), vec(y, k * d, d))
     _, U1, U2 = profile(prof, par, L1 + L2 + L3)
     _add_cyclic(dy, nq, i, j, k, d, U1, e1, e2, e3)
     for t in range(n_tan):
         base = n * (1 + t)
-        g1, g2, g3 = _perimetric_tangent(e1, e2, e3, L1, L2, L3, U1, U2,
+        g1, g2, g3 = _perimetric_tangent(e1, e2, e3, r1, r2, r3, U1, U2,
                                          vec(y, base + i * d, d), vec(y, base + j * d, d),
                                          vec(y, base + k * d, d))
         _add_cyclic(dy, base + nq, i, j, k, d, 1.0, g1, g2, g3)
@@ -374,14 +401,14 @@ def pair_forces(y, dy, i, j, d, n, n_tan, prof, par, w):
     a mass-weighted term, else 1): the force on i is w U'(r) along the unit vector towards
     j, its tangent force the variation of that."""
     nq = n // 2
-    e, L = _unit(sub(vec(y, j * d, d), vec(y, i * d, d)))
+    e, L, inv = _unit(sub(vec(y, j * d, d), vec(y, i * d, d)))
     _, U1, U2 = profile(prof, par, L)
     add_to(dy, nq + i * d, d, w * U1, e)
     add_to(dy, nq + j * d, d, -(w * U1), e)
     for t in range(n_tan):
         base = n * (1 + t)
         r = sub(vec(y, base + j * d, d), vec(y, base + i * d, d))
-        g = _pair_tangent(e, L, r, dot(e, r), U1, U2)
+        g = _pair_tangent(e, inv, r, dot(e, r), U1, U2)
         add_to(dy, base + nq + i * d, d, w, g)
         add_to(dy, base + nq + j * d, d, -w, g)
 
@@ -421,7 +448,7 @@ def pair_geometry_lanes(G, P, L):
     """Unit vector from body i (G rows 0-2) to body j (rows 3-5) and their distance, into P
     rows 0-2 and 3, as pair_forces takes them."""
     for k in range(L):
-        e, r = _unit(sub(_row3(G, 3, L, k), _row3(G, 0, L, k)))
+        e, r, _ = _unit(sub(_row3(G, 3, L, k), _row3(G, 0, L, k)))
         _put3(P, 0, L, k, e)
         P[3 * L + k] = r
 
@@ -451,11 +478,12 @@ def profile_lanes(code, par, X, U, L):
 @lanes
 def pair_tangent_lanes(G, P, U, O, L):
     """pair_forces' tangent force g of one tangent vector (its bodies i, j in G rows 0-2,
-    3-5; the pair's unit vector and distance in P, U', U'' in U) into O rows 0-2."""
+    3-5; the pair's unit vector and distance in P, U', U'' in U) into O rows 0-2 (1 / the
+    distance divided again: pair_forces' own, the same bits)."""
     for k in range(L):
-        e, r = _row3(P, 0, L, k), P[3 * L + k]
+        e, inv = _row3(P, 0, L, k), 1.0 / P[3 * L + k]
         dr = sub(_row3(G, 3, L, k), _row3(G, 0, L, k))
-        _put3(O, 0, L, k, _pair_tangent(e, r, dr, dot(e, dr), U[k], U[L + k]))
+        _put3(O, 0, L, k, _pair_tangent(e, inv, dr, dot(e, dr), U[k], U[L + k]))
 
 
 @lanes
@@ -486,15 +514,15 @@ def atm_tangent_lanes(G, O, L, Z):
 @lanes
 def perimetric_lanes(G, E, O, L):
     """perimetric_forces of one triangle (bodies in G rows 0-8) up to U'(P): the unit
-    vectors into E rows 0-8, the side lengths into rows 9-11, the perimeter into row 12,
-    and the cyclic differences e1 - e3, e2 - e1, e3 - e2 into O rows 0-8."""
+    vectors into E rows 0-8, the sides' 1 / length into rows 9-11, the perimeter into row
+    12, and the cyclic differences e1 - e3, e2 - e1, e3 - e2 into O rows 0-8."""
     for k in range(L):
-        e1, e2, e3, L1, L2, L3 = _perimetric_sides(_row3(G, 0, L, k), _row3(G, 3, L, k),
-                                                   _row3(G, 6, L, k))
+        e1, e2, e3, L1, L2, L3, r1, r2, r3 = _perimetric_sides(
+            _row3(G, 0, L, k), _row3(G, 3, L, k), _row3(G, 6, L, k))
         _put3(E, 0, L, k, e1)
         _put3(E, 3, L, k, e2)
         _put3(E, 6, L, k, e3)
-        E[9 * L + k], E[10 * L + k], E[11 * L + k] = L1, L2, L3
+        E[9 * L + k], E[10 * L + k], E[11 * L + k] = r1, r2, r3
         E[12 * L + k] = L1 + L2 + L3
         _put_cyclic(O, 0, L, k, e1, e2, e3)
 
@@ -574,8 +602,8 @@ def sides_forces(y, dy, i, j, k, d, n, n_tan, X, t):
     each side's term varies by (sum over sides s of U_as (e_s . dr_s)) e1 plus U_a's
     turning of e1."""
     nq = n // 2
-    e1, e2, e3, L1, L2, L3 = _perimetric_sides(vec(y, i * d, d), vec(y, j * d, d),
-                                               vec(y, k * d, d))
+    e1, e2, e3, L1, L2, L3, r1, r2, r3 = _perimetric_sides(
+        vec(y, i * d, d), vec(y, j * d, d), vec(y, k * d, d))
     run_program(X, t, L1, L2, L3)
     Ua, Ub, Uc = output(X, t, 1), output(X, t, 2), output(X, t, 3)
     Haa, Hab, Hac = output(X, t, 4), output(X, t, 5), output(X, t, 6)
@@ -585,11 +613,11 @@ def sides_forces(y, dy, i, j, k, d, n, n_tan, X, t):
     for tt in range(n_tan):
         base = n * (1 + tt)
         du, dv, dw = vec(y, base + i * d, d), vec(y, base + j * d, d), vec(y, base + k * d, d)
-        r1, r2, r3 = sub(dv, du), sub(dw, dv), sub(du, dw)
-        d1, d2, d3 = dot(e1, r1), dot(e2, r2), dot(e3, r3)
-        g1 = _pair_tangent(e1, L1, r1, Haa * d1 + Hab * d2 + Hac * d3, Ua, 1.0)
-        g2 = _pair_tangent(e2, L2, r2, Hab * d1 + Hbb * d2 + Hbc * d3, Ub, 1.0)
-        g3 = _pair_tangent(e3, L3, r3, Hac * d1 + Hbc * d2 + Hcc * d3, Uc, 1.0)
+        p1, p2, p3 = sub(dv, du), sub(dw, dv), sub(du, dw)
+        d1, d2, d3 = dot(e1, p1), dot(e2, p2), dot(e3, p3)
+        g1 = _pair_tangent(e1, r1, p1, Haa * d1 + Hab * d2 + Hac * d3, Ua, 1.0)
+        g2 = _pair_tangent(e2, r2, p2, Hab * d1 + Hbb * d2 + Hbc * d3, Ub, 1.0)
+        g3 = _pair_tangent(e3, r3, p3, Hac * d1 + Hbc * d2 + Hcc * d3, Uc, 1.0)
         _add_cyclic(dy, base + nq, i, j, k, d, 1.0, g1, g2, g3)
 
 

@@ -27,6 +27,7 @@ from .forces import (
     power_2,
     profile,
     profile_lanes,
+    reciprocals,
 )
 from .system import (
     _term_params,
@@ -546,35 +547,36 @@ def _lane_velocities(y, dy, L, k, inv, rb):
 def _perimetric_orbits(Y, dY, L, W, prof, par, inv, rb):
     """forces.perimetric_forces of bodies (0, 1, 2) in the plane and the velocities, lane by
     lane, the leading `0.0 +` of each force keeping the general path's zero signs (it adds
-    into zeros). W rows: e1x e1y e2x e2y e3x e3y L1 L2 L3 P U' U'' U'/L1 U'/L2 U'/L3 (the
-    tangent vectors' loops read the unit vectors, U'' and U'/L_i; L_i, P and U' are stored
-    by the general profile's loops only)."""
+    into zeros). W rows: e1x e1y e2x e2y e3x e3y 1/L1 1/L2 1/L3 P U' U'' U'/L1 U'/L2
+    U'/L3 (the tangent vectors' loops read the unit vectors, U'' and U'/L_i; 1/L_i, P and
+    U' are stored by the general profile's loops only)."""
     if prof == POWER and par[1] == 2.0:
         for k in range(L):
-            e, s = _triangle_sides(Y, L, W, k, rb)
+            e, s, r = _triangle_sides(Y, L, W, k, rb)
             _, U1, U2 = power_2(par[0], s[0] + s[1] + s[2])
-            _perimetric_lane(Y, dY, L, W, k, inv, e, s, U1, U2, rb)
+            _perimetric_lane(Y, dY, L, W, k, inv, e, r, U1, U2, rb)
     elif prof == BARRIER:
         for k in range(L):
-            e, s = _triangle_sides(Y, L, W, k, rb)
+            e, s, r = _triangle_sides(Y, L, W, k, rb)
             _, U1, U2 = barrier(par[0], par[1], s[0] + s[1] + s[2])
-            _perimetric_lane(Y, dY, L, W, k, inv, e, s, U1, U2, rb)
+            _perimetric_lane(Y, dY, L, W, k, inv, e, r, U1, U2, rb)
     else:
         for k in range(L):
-            _, s = _triangle_sides(Y, L, W, k, rb)
-            W[6 * L + k], W[7 * L + k], W[8 * L + k] = s
+            _, s, r = _triangle_sides(Y, L, W, k, rb)
+            W[6 * L + k], W[7 * L + k], W[8 * L + k] = r
             W[9 * L + k] = s[0] + s[1] + s[2]
         for k in range(L):
             _, W[10 * L + k], W[11 * L + k] = profile(prof, par, W[9 * L + k])
         for k in range(L):
             e = (W[k], W[L + k], W[2 * L + k], W[3 * L + k], W[4 * L + k], W[5 * L + k])
-            s = (W[6 * L + k], W[7 * L + k], W[8 * L + k])
-            _perimetric_lane(Y, dY, L, W, k, inv, e, s, W[10 * L + k], W[11 * L + k], rb)
+            r = (W[6 * L + k], W[7 * L + k], W[8 * L + k])
+            _perimetric_lane(Y, dY, L, W, k, inv, e, r, W[10 * L + k], W[11 * L + k], rb)
 
 
 @helper
 def _triangle_sides(Y, L, W, k, rb):
-    """Lane k's side unit vectors into W (rows 0-5), and returned with its side lengths.
+    """Lane k's side unit vectors into W (rows 0-5), and returned with its side lengths and
+    their reciprocals (forces.reciprocals).
     (A loop that reads back what it wrote to other rows of W runs scalar -- the compiler
     cannot tell the rows apart, L being a run-time value --, and so does the loop of the
     paper's profile with the lengths stored too: the general profile's loops store them.)"""
@@ -585,18 +587,18 @@ def _triangle_sides(Y, L, W, k, rb):
     L1 = math.sqrt(ax * ax + ay * ay)
     L2 = math.sqrt(bx * bx + by * by)
     L3 = math.sqrt(cx * cx + cy * cy)
-    r1, r2, r3 = 1.0 / L1, 1.0 / L2, 1.0 / L3
+    r1, r2, r3 = reciprocals(L1, L2, L3)
     e = (ax * r1, ay * r1, bx * r2, by * r2, cx * r3, cy * r3)
     W[k], W[L + k], W[2 * L + k], W[3 * L + k], W[4 * L + k], W[5 * L + k] = e
-    return e, (L1, L2, L3)
+    return e, (L1, L2, L3), (r1, r2, r3)
 
 
 @helper
-def _perimetric_lane(Y, dY, L, W, k, inv, e, s, U1, U2, rb):
-    """Lane k's velocities and forces from its side unit vectors e and lengths s (U1, U2:
-    U', U'' at its perimeter), and U'', U'/L_i into W for its tangent vectors."""
+def _perimetric_lane(Y, dY, L, W, k, inv, e, r, U1, U2, rb):
+    """Lane k's velocities and forces from its side unit vectors e and 1 / lengths r (U1,
+    U2: U', U'' at its perimeter), and U'', U'/L_i into W for its tangent vectors."""
     W[11 * L + k] = U2
-    W[12 * L + k], W[13 * L + k], W[14 * L + k] = U1 / s[0], U1 / s[1], U1 / s[2]
+    W[12 * L + k], W[13 * L + k], W[14 * L + k] = U1 * r[0], U1 * r[1], U1 * r[2]
     _lane_velocities(Y, dY, L, k, inv, rb)
     e1x, e1y, e2x, e2y, e3x, e3y = e
     P = _forces_row(rb)

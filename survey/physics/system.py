@@ -27,6 +27,7 @@ from .forces import (
     pair_forces,
     perimetric_forces,
     profile,
+    reciprocals,
     sub,
     triplet_measure,
     vec,
@@ -520,7 +521,7 @@ def _planar_perimetric(y, dy, masses, prof, par, n_tan):
     L1 = math.sqrt(ax * ax + ay * ay)
     L2 = math.sqrt(bx * bx + by * by)
     L3 = math.sqrt(cx * cx + cy * cy)
-    r1, r2, r3 = 1.0 / L1, 1.0 / L2, 1.0 / L3
+    r1, r2, r3 = reciprocals(L1, L2, L3)
     e1x, e1y = ax * r1, ay * r1
     e2x, e2y = bx * r2, by * r2
     e3x, e3y = cx * r3, cy * r3
@@ -531,7 +532,7 @@ def _planar_perimetric(y, dy, masses, prof, par, n_tan):
     dy[9] = 0.0 + U1 * (e2y - e1y)
     dy[10] = 0.0 + U1 * (e3x - e2x)
     dy[11] = 0.0 + U1 * (e3y - e2y)
-    s1, s2, s3 = U1 / L1, U1 / L2, U1 / L3
+    s1, s2, s3 = U1 * r1, U1 * r2, U1 * r3
     for t in range(n_tan):
         b = 12 * (1 + t)
         p1x, p1y = y[b + 2] - y[b], y[b + 3] - y[b + 1]

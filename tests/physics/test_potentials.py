@@ -75,3 +75,24 @@ def test_areal_forces_are_parallel_to_altitudes():
 def test_bad_potential_names_and_parameters(bad, match):
     with pytest.raises(ValueError, match=match):
         make_potential(*bad)
+
+
+def test_a_triangles_three_reciprocals_from_one_division_at_every_scale():
+    """forces.reciprocals: each side's 1 / L within a few units of roundoff, for triangles
+    from 1e-300 to 1e300 across (where the sides' plain product under- or overflows: the
+    isosceles plane restarts a triple collision with all three near 1e-150) and with one
+    side 1e-300 times the others; and, where nothing under- or overflows, the bits of the
+    unscaled products (the scaling by a power of two is exact)."""
+    from survey.physics.forces import reciprocals
+    rng = np.random.default_rng(3)
+    for scale in (1e-300, 1e-150, 1e-20, 1.0, 1e20, 1e150, 1e300):
+        for _ in range(20):
+            q = rng.normal(size=(3, 2)) * scale
+            L = [float(np.hypot(*(q[(i + 1) % 3] - q[i]))) for i in range(3)]
+            r = reciprocals(*L)
+            assert all(abs(ri * Li - 1.0) < 1e-15 for ri, Li in zip(r, L)), (scale, L, r)
+            if 1e-20 <= scale <= 1e20:
+                p = 1.0 / (L[0] * (L[1] * L[2]))
+                assert r == (p * (L[1] * L[2]), p * (L[0] * L[2]), p * (L[0] * L[1]))
+    thin = reciprocals(1.0, 1.0, 1e-300)
+    assert thin == pytest.approx((1.0, 1.0, 1e300), rel=1e-15)
