@@ -182,10 +182,12 @@ def reciprocals(L1, L2, L3):
     right-hand sides wait on the core's divider, which their square roots keep busy
     (`bench --only step`); each is within a few units of roundoff of its own division.
     The sides are first scaled by the power of two s that brings the longest into
-    [1, 2) (exact, and undone exactly: the bits of the unscaled products), so their
-    product neither under- nor overflows: the other two are at least half the longest
-    but the shortest (the triangle inequality), which may be 1e-300 times it (the
-    isosceles plane's restart after a triple collision puts all three near 1e-150)."""
+    [1, 2), exactly, and the results scaled back exactly (where nothing under- or
+    overflows, the bits of the unscaled products). So the product cannot under- or
+    overflow, as the plain one does for a triangle under 1e-103 across (the isosceles
+    plane restarts a triple collision with all three sides near 1e-150): the middle
+    side is at least half the longest (the triangle inequality), and only the shortest
+    may be as small as 1e-300 times it."""
     longest = max(L1, max(L2, L3))
     e = min(max((np.float64(longest).view(np.int64) >> 52) & 0x7FF, 1), 2045)
     s = np.int64((2046 - e) << 52).view(np.float64)
