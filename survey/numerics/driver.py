@@ -28,8 +28,10 @@ is then built in SIMD loops over the batch, not over every lane at every round.
 """
 from __future__ import annotations
 
+import contextvars
 import math
 import time
+from contextlib import contextmanager
 from typing import NamedTuple
 
 import numpy as np
@@ -847,6 +849,52 @@ def compile_handoff():
     _adopt(lane_state(1, 2, 2, 0, 0, 1), 0, lane_state(2, 2, 2, 0, 0, 1), 0)
 
 
+# A first run compiles in two processes (pipeline.sweep): the driver compiles `_run`, whose
+# typing reaches a job's start and the right-hand sides within seconds, but the stepping
+# round's leaves only after a dozen; so a worker compiles those first (cells.warm_beside),
+# and the driver then loads them from numba's disk cache. Under `round_only`, `dop853`
+# calls them once from Python on the lanes it built, with the arguments `_run` gives them
+# (so of the types its compilation asks the cache for: tests/pipeline/test_progress.py),
+# and stops.
+_ROUND_ONLY = contextvars.ContextVar("round_only", default=None)
+
+
+class RoundCompiled(Exception):
+    """dop853 stopped under `round_only`, its stepping round's leaves compiled."""
+
+
+@contextmanager
+def round_only(evaluating: bool):
+    """dop853 compiles (or loads) the stepping round's leaves, then raises RoundCompiled:
+    those that evaluate the right-hand side if `evaluating`, else the others (the driver
+    compiles the right-hand side meanwhile: a job's start calls it first)."""
+    token = _ROUND_ONLY.set(evaluating)
+    try:
+        yield
+    finally:
+        _ROUND_ONLY.reset(token)
+
+
+def _compile_round(ln, out, model, control, recording, rb, evaluating):
+    """The leaves of `_run`'s stepping round (`round_only`), called as it calls them, on
+    lanes without a job."""
+    L, nf = ln.job.size, out.y.shape[1]
+    if evaluating:          # in the order the driver's typing reaches them
+        dense_prepare(model, L, nf, ln.Y, ln.YN, ln.HH, ln.K, ln.YT, ln.F, ln.W, rb)
+        _flush(ln, out, model, recording.t_fine, rb)
+        stages(model, control.n_tan, L, ln.Y, ln.HH, ln.K, ln.YT, ln.YN, ln.W, rb)
+        return
+    n = state_size(model.masses, model.d, rb)
+    spread_steps(ln.h, ln.HH, L, nf)
+    error_norms(ln.Y, ln.YN, ln.K, L, control.n_err, control.rtol, control.atol, ln.h, ln.err,
+                ln.S)
+    step_factors(ln.err, ln.err_old, L, ln.grow, ln.err_next, ln.cut)
+    finite_lanes(ln.YN, ln.K[12], L, nf, ln.NW)
+    take_steps(ln.Y, ln.YN, ln.K[0], ln.K[12], ln.taken, L, nf)
+    tangent_norms(ln.Y, L, n, control.n_tan, ln.NW, rb)
+    growth_terms(ln.NW, ln.t, ln.h, ln.flags, control.t0, control.t1, L, control.n_tan)
+
+
 def dop853(y0s, rows, model: Model, control: Control, recording: Recording, L: int, rb,
            reuse_samples=False):
     """Integrate M orbits (+ n_tan tangent vectors each; starts y0s, shape (M, nf)) from t0
@@ -913,6 +961,9 @@ def dop853(y0s, rows, model: Model, control: Control, recording: Recording, L: i
     registers = 0 if model.expr is None else model.expr.regs.size
     N = masses.size
     ln, next_job = lane_state(L, n, nf, n_tan, m, n_sub, registers, N), 0
+    if _ROUND_ONLY.get() is not None:
+        _compile_round(ln, out, model, control, recording, rb, _ROUND_ONLY.get())
+        raise RoundCompiled
     while drive(ln, next_job) == HANDOFF:
         next_job, running = M, np.flatnonzero(ln.job >= 0)
         if ln.job.size // 2 >= SIMD_MIN:

@@ -27,10 +27,11 @@ from ..catalog.variables import (
 )
 from ..numerics import torus
 from ..numerics.indicators import batch_options, combine, conservation_errors, ensemble
-from ..numerics.driver import compile_handoff
+from ..numerics.driver import RoundCompiled, compile_handoff, round_only
 from ..numerics.events import escape_events
 from ..numerics.integrate import integrate_batch
 from ..machine import linalg, portable
+from ..physics.equilibria import forces
 from ..physics.families import initial_state
 from ..physics.jacobi import reduced
 from . import archive
@@ -407,17 +408,29 @@ def warm_up(task: CellTask, first, starts):
         run_cells(task.short(), first, starts)
 
 
+def _round(task: CellTask, first, starts, evaluating: bool):
+    """Compile the stepping round's leaves of the first cell's integration (driver.round_only)
+    before the driver's compilation of the integrator reaches them."""
+    with round_only(evaluating):
+        try:
+            run_cells(task.short(), first, starts)
+        except RoundCompiled:
+            pass
+
+
 def warm_beside(task: CellTask, first, starts):
     """On a first run, in a worker while the driver compiles the integrator (warm_up, one
-    core for half a minute): compile the kernels the survey needs after it -- the energies a
-    cell's results take (which warm_up compiled after the integrator), the torus analysis
-    and the move of lanes to a smaller batch (which a cell's first real run compiled in
-    every worker) and the linear algebra of the report's special solutions (which the
-    driver compiled after the survey) -- on stand-in data of the types they are given: a
-    smooth quasi-periodic motion near the first start, small matrices (the wrappers of
-    machine.linalg make their kernels' arguments contiguous float64)."""
+    core for twenty seconds): compile the integrator's stepping round (`_round`, which the
+    driver then loads from the disk cache) and the kernels the survey needs after it --
+    the energies a cell's results take (which warm_up compiled after the integrator), the
+    torus analysis and the move of lanes to a smaller batch (which a cell's first real run
+    compiled in every worker) and the linear algebra of the report's special solutions
+    (which the driver compiled after the survey) -- on stand-in data of the types they are
+    given: a smooth quasi-periodic motion near the first start, small matrices (the
+    wrappers of machine.linalg make their kernels' arguments contiguous float64)."""
     if not first.size:
         return
+    _round(task, first, starts, False)
     system = next(_systems(task, first, starts))[0]
     y0 = np.asarray(starts[0], dtype=np.float64)
     rng = np.random.default_rng(0)
@@ -431,22 +444,23 @@ def warm_beside(task: CellTask, first, starts):
     waves = np.stack([np.sin(t), np.cos(np.sqrt(2.0) * t), np.sin(np.sqrt(5.0) * t)], 1)
     states = np.ascontiguousarray(y0 + waves @ modes)
     with np.errstate(all="ignore"):
+        if task.tori.analyse:
+            torus.analyse(system, states, dt, 1e-12, task.tori.observables,
+                          task.tori.lines, task.tori.resonance_order)
+        # by now the driver has compiled the right-hand side these evaluate
+        _round(task, first, starts, True)
         # what every cell's result takes after its orbits, which warm_up's driver would
         # otherwise compile after the integrator: energies, the scale-free energy, the
         # logs of the tangent vectors' norms
         conservation_errors(system, y0, states)
         system.scale_free_energy(y0)
         portable.vlog(portable.vnorm(states))
-        if task.tori.analyse:
-            torus.analyse(system, states, dt, 1e-12, task.tori.observables,
-                          task.tori.lines, task.tori.resonance_order)
+    # the report's special solutions: their forces and Hessians, then linear algebra
+    forces(system, system.split(y0)[0], hessian=True)
     a = rng.standard_normal((6, 6))
     linalg.eig(a)
     linalg.svd(a)
     linalg.lstsq(a, a[0], 1e-14)
     linalg.chain(a, a, a)
     linalg.symmetric_eigen(linalg.dot(a, a.T))     # a relative equilibrium's Morse index
-    # last: it builds lanes, as the driver does first (workspace_size). numba's disk cache
-    # index of a function is read, extended and written back by each process compiling
-    # it, so this job keeps to what the driver is not compiling at the same time.
     compile_handoff()

@@ -455,10 +455,11 @@ def _start(stack, config, task, first, starts, workers, address, clock, progress
     cluster = f"connecting to the dask scheduler at {address}" if address else \
         f"starting {workers or config.settings.dask.workers} local dask workers"
     # A first run: the local workers start first (forked without the kernels, which they
-    # then load from the disk cache), so that one compiles everything but the integrator
-    # (warm_beside) while this process compiles the integrator -- else the second core
-    # idles for that minute (`bench --only fixed` times a first run). Otherwise they are
-    # forked after warm_up, with the kernels loaded.
+    # then load from the disk cache), so that one compiles the integrator's stepping round
+    # and everything the survey needs after the integrator (warm_beside) while this process
+    # compiles the integrator -- else the second core idles for that half minute (`bench
+    # --only fixed` times a first run). Otherwise they are forked after warm_up, with the
+    # kernels loaded.
     beside = None
     if not address and not kernels_cached():
         with notice(cluster, progress):

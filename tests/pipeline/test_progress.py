@@ -132,11 +132,17 @@ from survey.physics.equilibria import relative_equilibrium
 from survey.pipeline import cells
 from survey.pipeline.config import parse_config
 
+# the stepping round's leaves (driver.round_only)
+ROUND = ["spread_steps", "error_norms", "step_factors", "finite_lanes", "take_steps",
+         "tangent_norms", "growth_terms", "dense_prepare", "_flush", "stages"]
+
 def signatures():
     kernels = [(m.__name__, k, v) for m in (torus, linalg) for k, v in vars(m).items()
                if isinstance(v, Dispatcher)] + [
         ("driver", "_adopt", driver._adopt),
+        *[("driver", k, getattr(driver, k)) for k in ROUND]] + [
         ("system", "_potential_energies", system_module._potential_energies),
+        ("system", "rhs", system_module.rhs),
         ("portable", "_elementwise", portable._elementwise),
         ("portable", "power", portable.power)]
     return {(m, k): set(map(str, v.signatures)) for m, k, v in kernels}
@@ -157,7 +163,9 @@ cells.warm_beside(task, np.array([0]), starts[:1])
 warm = signatures()
 assert sum(map(len, warm.values())) > 10, warm
 assert all(warm[k] for k in [("driver", "_adopt"), ("system", "_potential_energies"),
-                             ("portable", "_elementwise"), ("portable", "power")]), warm
+                             ("system", "rhs"),
+                             ("portable", "_elementwise"), ("portable", "power")] +
+           [("driver", k) for k in ROUND]), warm
 res = cells.run_cells(task, np.array([0, 1]), starts)        # real samples, analysed
 assert np.isfinite(res["frequency"]).any()
 system = config.system()
@@ -170,12 +178,13 @@ print(new)
 
 
 def test_the_kernels_compiled_beside_the_driver_are_those_a_survey_uses(tmp_path):
-    """A first run compiles the energies', the torus analysis's, the lanes' handoff and the
-    linear algebra's kernels in a worker while the driver compiles the integrator
-    (cells.warm_beside), on stand-in data: a kernel that a survey's cells and the
-    report's relative equilibria then call with arguments of another type -- or one the
-    stand-in never reached -- would compile again, in the workers and the driver after
-    the survey. Run in a fresh process, where numba's dispatchers list what that process
+    """A first run compiles the integrator's stepping round and the energies', the torus
+    analysis's, the lanes' handoff and the linear algebra's kernels in a worker while the
+    driver compiles the integrator (cells.warm_beside), on stand-in data and lanes: a
+    kernel that a survey's cells and the report's relative equilibria then call with
+    arguments of another type -- or one the stand-in never reached -- would compile
+    again, in the driver as it compiles the integrator, in the workers, or after the
+    survey. Run in a fresh process, where numba's dispatchers list what that process
     compiled or loaded."""
     import subprocess
     import sys
