@@ -556,8 +556,23 @@ def symmetric_eigen(A):
     w = np.empty(n)
     for i in range(n):
         w[i] = a[i, i]
-    order = np.argsort(w, kind="mergesort")
+    order = ascending(w)
     return w[order], V[:, order]
+
+
+@helper
+def ascending(w):
+    """np.argsort(w, kind="stable") (NaN last) by insertion: for the few values of a
+    spectrum, where numba's merge sort cost a first run 0.8 s of compiling."""
+    order = np.empty(w.size, dtype=np.int64)
+    for i in range(w.size):
+        j = i
+        while j > 0 and (w[i] < w[order[j - 1]] or
+                         (math.isnan(w[order[j - 1]]) and not math.isnan(w[i]))):
+            order[j] = order[j - 1]
+            j -= 1
+        order[j] = i
+    return order
 
 
 def orthonormal(rows: np.ndarray) -> np.ndarray:

@@ -147,3 +147,16 @@ def test_symmetric_eigen_gives_the_closed_form_spectrum_and_an_orthonormal_basis
     np.testing.assert_allclose(w, exact, rtol=0, atol=1e-13 * n)
     np.testing.assert_allclose(V.T @ V, np.eye(n), atol=1e-14 * n)
     np.testing.assert_allclose(V @ np.diag(w) @ V.T, A, atol=1e-14 * n)
+
+
+def test_ascending_orders_as_numpys_stable_sort_with_ties_and_nans():
+    """symmetric_eigen's order of its eigenvalues: numpy's stable argsort, NaNs last."""
+    from numba import njit
+    order = njit(L.ascending.py_func)
+    rng = np.random.default_rng(5)
+    for n in (0, 1, 2, 7, 30):
+        for _ in range(50):
+            w = rng.integers(-3, 4, n).astype(float)       # many ties
+            w[rng.random(n) < 0.2] = np.nan
+            w[rng.random(n) < 0.1] = -0.0
+            assert np.array_equal(order(w), np.argsort(w, kind="stable")), w
