@@ -443,24 +443,30 @@ def warm_beside(task: CellTask, first, starts):
                                                                          keepdims=True)
     waves = np.stack([np.sin(t), np.cos(np.sqrt(2.0) * t), np.sin(np.sqrt(5.0) * t)], 1)
     states = np.ascontiguousarray(y0 + waves @ modes)
-    with np.errstate(all="ignore"):
-        if task.tori.analyse:
-            torus.analyse(system, states, dt, 1e-12, task.tori.observables,
-                          task.tori.lines, task.tori.resonance_order)
-        # by now the driver has compiled the right-hand side these evaluate
-        _round(task, first, starts, True)
+    a = rng.standard_normal((6, 6))
+    steps = [
         # what every cell's result takes after its orbits, which warm_up's driver would
         # otherwise compile after the integrator: energies, the scale-free energy, the
         # logs of the tangent vectors' norms
-        conservation_errors(system, y0, states)
-        system.scale_free_energy(y0)
-        portable.vlog(portable.vnorm(states))
-    # the report's special solutions: their forces and Hessians, then linear algebra
-    forces(system, system.split(y0)[0], hessian=True)
-    a = rng.standard_normal((6, 6))
-    linalg.eig(a)
-    linalg.svd(a)
-    linalg.lstsq(a, a[0], 1e-14)
-    linalg.chain(a, a, a)
-    linalg.symmetric_eigen(linalg.dot(a, a.T))     # a relative equilibrium's Morse index
-    compile_handoff()
+        lambda: (conservation_errors(system, y0, states), system.scale_free_energy(y0),
+                 portable.vlog(portable.vnorm(states))),
+        # the report's special solutions' forces and Hessians; the lanes' handoff; the
+        # special solutions' linear algebra
+        lambda: forces(system, system.split(y0)[0], hessian=True),
+        compile_handoff,
+        lambda: (linalg.eig(a), linalg.svd(a), linalg.lstsq(a, a[0], 1e-14),
+                 linalg.chain(a, a, a),
+                 linalg.symmetric_eigen(linalg.dot(a, a.T))),  # a Morse index
+    ]
+    # the round's second half evaluates the right-hand side, which the driver compiles (and
+    # caches) meanwhile: it comes after a few seconds' work -- the torus analysis, or the
+    # results' kernels, the forces and the handoff
+    if task.tori.analyse:
+        steps[:0] = [lambda: torus.analyse(system, states, dt, 1e-12, task.tori.observables,
+                                           task.tori.lines, task.tori.resonance_order),
+                     lambda: _round(task, first, starts, True)]
+    else:
+        steps.insert(3, lambda: _round(task, first, starts, True))
+    with np.errstate(all="ignore"):
+        for step in steps:
+            step()
