@@ -444,29 +444,38 @@ def warm_beside(task: CellTask, first, starts):
     waves = np.stack([np.sin(t), np.cos(np.sqrt(2.0) * t), np.sin(np.sqrt(5.0) * t)], 1)
     states = np.ascontiguousarray(y0 + waves @ modes)
     a = rng.standard_normal((6, 6))
-    steps = [
-        # what every cell's result takes after its orbits, which warm_up's driver would
-        # otherwise compile after the integrator: energies, the scale-free energy, the
-        # logs of the tangent vectors' norms
-        lambda: (conservation_errors(system, y0, states), system.scale_free_energy(y0),
-                 portable.vlog(portable.vnorm(states))),
-        # the report's special solutions' forces and Hessians; the lanes' handoff; the
-        # special solutions' linear algebra
-        lambda: forces(system, system.split(y0)[0], hessian=True),
-        compile_handoff,
-        lambda: (linalg.eig(a), linalg.svd(a), linalg.lstsq(a, a[0], 1e-14),
-                 linalg.chain(a, a, a),
-                 linalg.symmetric_eigen(linalg.dot(a, a.T))),  # a Morse index
-    ]
-    # the round's second half evaluates the right-hand side, which the driver compiles (and
-    # caches) meanwhile: it comes after a few seconds' work -- the torus analysis, or the
-    # results' kernels, the forces and the handoff
+
+    def results():
+        """What every cell's result takes after its orbits (else compiled by warm_up's
+        driver after the integrator): energies, the scale-free energy, log norms."""
+        conservation_errors(system, y0, states)
+        system.scale_free_energy(y0)
+        portable.vlog(portable.vnorm(states))
+
+    def special_forces():       # the report's special solutions' forces and Hessians
+        forces(system, system.split(y0)[0], hessian=True)
+
+    def special_algebra():      # and their linear algebra
+        linalg.eig(a)
+        linalg.svd(a)
+        linalg.lstsq(a, a[0], 1e-14)
+        linalg.chain(a, a, a)
+        linalg.symmetric_eigen(linalg.dot(a, a.T))     # a Morse index
+
+    def analysis():
+        torus.analyse(system, states, dt, 1e-12, task.tori.observables, task.tori.lines,
+                      task.tori.resonance_order)
+
+    def second_half():
+        _round(task, first, starts, True)
+
+    # the round's second half evaluates the right-hand side, which the driver compiles
+    # (and caches) meanwhile: it comes after a few seconds' other work
     if task.tori.analyse:
-        steps[:0] = [lambda: torus.analyse(system, states, dt, 1e-12, task.tori.observables,
-                                           task.tori.lines, task.tori.resonance_order),
-                     lambda: _round(task, first, starts, True)]
+        steps = [analysis, second_half, results, special_forces, compile_handoff,
+                 special_algebra]
     else:
-        steps.insert(3, lambda: _round(task, first, starts, True))
+        steps = [results, special_forces, compile_handoff, second_half, special_algebra]
     with np.errstate(all="ignore"):
         for step in steps:
             step()
