@@ -428,7 +428,9 @@ def _survey(config, command, summary=False, write_report=True, **kw) -> Path:
     from .analysis.classify import summary as summarise
     from .catalog.variables import V
     from .pipeline.sweep import run_survey
-    path = run_survey(config, command=command, **kw)
+    # the report's modules (matplotlib among them) load while the workers compute
+    path = run_survey(config, command=command,
+                      imports=("survey.presentation.report",) if write_report else (), **kw)
     import xarray as xr
     if summary:
         with xr.open_dataset(path) as ds:

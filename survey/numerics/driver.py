@@ -194,7 +194,8 @@ def _start(k, j, ln, out, y0s, rows, t0, t1, model, n_tan, n_err,
             for i in range(rec.size - 1):
                 rec[i] = np.inf if i % 2 == 0 else np.nan
             rec[rec.size - 1] = 0.0
-            _near_lane(rec, ln, k, t0, 0.0, masses.size, d, rb, near, thin)
+            _near_lane(rec, ln.Y, ln.NX, ln.NR, ln.NT, L, k, t0, 0.0, masses.size, d, rb,
+                       near, thin)
         for e in range(eoff.size - 1):
             if watch[e]:
                 # the lane's strided copies, as at every step: one compiled layout
@@ -297,16 +298,16 @@ def near_terms(Y, L, k0, k1, N, d, rb, near, X, R, TP, TA, TQ):
 
 
 @helper
-def _near(rec, ln, k, t, dt, N, near, thin):
+def _near(rec, NR, NT, L, k, t, dt, N, near, thin):
     """Lane k's state at time t, the end of a step of length dt, into its closest-approach
-    record (`near_width`), from what `near_terms` left in ln: each pair's distance, and
+    record (`near_width`), from what `near_terms` left in the L lanes' NR and NT (`Lanes`):
+    each pair's distance, and
     with NEAR_TRIANGLES the least perimeter and |area| of its triangles, where below the
     record's (with t), and dt added to the thin time where the thinnest triangle has
     |A|/P^2 < thin. At step ends: a close approach is where the steps are shortest."""
-    L = ln.job.size
     pairs = N * (N - 1) // 2
     for p in range(pairs):
-        r = ln.NR[p * L + k]
+        r = NR[p * L + k]
         if r < rec[2 * p]:
             rec[2 * p], rec[2 * p + 1] = r, t
     if near != NEAR_TRIANGLES:
@@ -314,24 +315,23 @@ def _near(rec, ln, k, t, dt, N, near, thin):
     o = 2 * pairs
     least = np.inf
     for q in range(pairs * (N - 2) // 3):
-        P, A = ln.NT[0, q * L + k], ln.NT[1, q * L + k]
+        P, A = NT[0, q * L + k], NT[1, q * L + k]
         if P < rec[o]:
             rec[o], rec[o + 1] = P, t
         if A < rec[o + 2]:
             rec[o + 2], rec[o + 3] = A, t
-        least = min(least, ln.NT[2, q * L + k])
+        least = min(least, NT[2, q * L + k])
     if least < thin:
         rec[o + 4] += dt
 
 
 @leaf
-def _near_lane(rec, ln, k, t, dt, N, d, rb, near, thin):
-    """`near_terms` and `_near` of lane k alone (a job's start, a terminal event). A leaf:
-    inlined at its calls it cost the first run 30 s of compiling."""
-    L = ln.job.size
-    near_terms(ln.Y, L, k, k + 1, N, d, rb, near, ln.NX, ln.NR, ln.NT[0], ln.NT[1],
-               ln.NT[2])
-    _near(rec, ln, k, t, dt, N, near, thin)
+def _near_lane(rec, Y, NX, NR, NT, L, k, t, dt, N, d, rb, near, thin):
+    """`near_terms` and `_near` of lane k alone (a job's start, a terminal event), on the L
+    lanes' arrays of `Lanes` it reads (not the whole record: a kernel given it compiles
+    ~0.3 s longer). A leaf: inlined at its calls it cost the first run 30 s of compiling."""
+    near_terms(Y, L, k, k + 1, N, d, rb, near, NX, NR, NT[0], NT[1], NT[2])
+    _near(rec, NR, NT, L, k, t, dt, N, near, thin)
 
 
 @helper
@@ -479,11 +479,12 @@ def _defer(ln, k, row, first, end, t, h, t_new, n):
 
 
 @leaf
-def _flush(ln, out, model, t_fine, rb):
-    """The waiting steps' dense output, all P slots in SIMD loops (slots past the count
-    hold stale values, computed and ignored), and their samples at t_fine: each slot's
-    first (most steps hold one) in a SIMD loop too, any others one by one."""
-    w = ln.wait
+def _flush(w, yd, fine, model, t_fine, rb):
+    """The waiting steps (w: `Deferred`) -- their dense output, all P slots in SIMD loops
+    (slots past the count hold stale values, computed and ignored), and their samples at
+    t_fine into `fine` (RawOutcome.fine): each slot's first (most steps hold one) in a SIMD
+    loop too, any others one by one (yd: a lane's scratch). Given the arrays it uses, not
+    the records holding them: a kernel given the whole Lanes compiled 0.3 s longer."""
     P = w.t.size
     c = w.count[0]
     if c == 0:
@@ -498,15 +499,15 @@ def _flush(ln, out, model, t_fine, rb):
     dense_eval_lanes(w.F, w.Y, w.XX, n * P, w.S)
     for p in range(c):
         F, y, ynew = w.F[:, p::P], w.Y[p::P], w.YN[p::P]
-        fine = out.fine[w.row[p]]
+        job = fine[w.row[p]]
         first = w.first[p]
         if t_fine[first] == w.t_new[p]:
-            put_sample(fine[first], ynew, n, rb)
+            put_sample(job[first], ynew, n, rb)
         else:
-            put_sample(fine[first], w.S[p::P], n, rb)
+            put_sample(job[first], w.S[p::P], n, rb)
         for i in range(first + 1, w.end[p]):
-            _fine_sample(fine[i], t_fine[i], F, y, ynew, w.t[p], w.h[p], w.t_new[p], n,
-                         ln.yd, rb)
+            _fine_sample(job[i], t_fine[i], F, y, ynew, w.t[p], w.h[p], w.t_new[p], n,
+                         yd, rb)
     w.count[0] = 0
 
 
@@ -627,7 +628,7 @@ def _run(ln, out, y0s, rows, model, control, recording, next_job, iterations, no
                 ln.h[k] = t1 - ln.t[k]
         if active == 0:
             if next_job >= M:
-                _flush(ln, out, model, t_fine, rb)
+                _flush(ln.wait, ln.yd, out.fine, model, t_fine, rb)
                 return DONE
             continue
         spread_steps(ln.h, ln.HH, L, nf)
@@ -673,7 +674,7 @@ def _run(ln, out, y0s, rows, model, control, recording, next_job, iterations, no
             dense_prepare(model, L, nf if dense == DENSE_ALL else n,
                           ln.Y, ln.YN, ln.HH, ln.K, ln.YT, ln.F, ln.W, rb)
         elif dense == DENSE_LATER and ln.wait.count[0] + later > ln.wait.t.size:
-            _flush(ln, out, model, t_fine, rb)   # room for the steps
+            _flush(ln.wait, ln.yd, out.fine, model, t_fine, rb)   # room for the steps
         for k in range(L):
             if ln.flags[k, 3]:
                 t_before = ln.t[k]
@@ -683,8 +684,9 @@ def _run(ln, out, y0s, rows, model, control, recording, next_job, iterations, no
                 if ended == EVENT_:
                     if near > 0:        # the state at the event, as _record left it
                         # (only a job that records crossings watches events)
-                        _near_lane(out.near[ln.job[k]], ln, k, ln.t[k],
-                                   abs(ln.t[k] - t_before), masses.size, d, rb, near, thin)
+                        _near_lane(out.near[ln.job[k]], ln.Y, ln.NX, ln.NR, ln.NT, L, k,
+                                   ln.t[k], abs(ln.t[k] - t_before), masses.size, d, rb, near,
+                                   thin)
                     _finish(k, ln, out, EVENT_, rows)
                     ln.flags[k, 3] = 0
             ln.taken[k] = -ln.flags[k, 3]
@@ -708,8 +710,9 @@ def _run(ln, out, y0s, rows, model, control, recording, next_job, iterations, no
             if not ln.flags[k, 3]:
                 continue
             if near > 0 and rows[0, ln.job[k]] >= 0:
-                _near(out.near[ln.job[k]], ln, k, t1 if ln.flags[k, 2] else ln.t[k] + ln.h[k],
-                      abs(ln.h[k]), masses.size, near, thin)
+                _near(out.near[ln.job[k]], ln.NR, ln.NT, L, k,
+                      t1 if ln.flags[k, 2] else ln.t[k] + ln.h[k], abs(ln.h[k]), masses.size,
+                      near, thin)
             if _advance(k, ln, out, t0, t1, n, n_tan, megno, renorm_dt,
                         ln.NW) == OK_:
                 _finish(k, ln, out, OK_, rows)
@@ -728,9 +731,9 @@ def _run(ln, out, y0s, rows, model, control, recording, next_job, iterations, no
             # for the last orbit alone (SIMD_MIN lanes cost less than two orbits one after
             # the other in one lane)
             if 0 < running and (2 * running <= L if L // 2 >= SIMD_MIN else running == 1):
-                _flush(ln, out, model, t_fine, rb)
+                _flush(ln.wait, ln.yd, out.fine, model, t_fine, rb)
                 return HANDOFF
-    _flush(ln, out, model, t_fine, rb)
+    _flush(ln.wait, ln.yd, out.fine, model, t_fine, rb)
     return next_job
 
 
@@ -770,25 +773,23 @@ def _rhs_one(t, y, dy, model, n_tan, W, rb):
         rhs_lanes(t, y, dy, np.int64(1), model, n_tan, W, rb)
 
 
-@leaf
+# what a lane carries from step to step besides its state and derivative, a value or a row
+# per lane (`Lanes`)
+_CARRIED = ("job", "t", "h", "h_max", "err_old", "t_next_renorm", "i_eval", "i_fine", "flags",
+            "acc", "g_old", "s_old")
+
+
 def _adopt(to, slot, ln, k):
     """Lane k of ln into lane `slot` of `to`: everything a lane carries from step to step
     (its state and derivative, time, step, budgets, flags, samples' and events' places,
-    MEGNO sums, clock), so it goes on with the same bits."""
+    MEGNO sums, clock), so it goes on with the same bits. numpy's copies, not a kernel: a
+    batch hands a few lanes over once or twice, and a compiled copy of the Lanes cost a
+    first run 1.2 s of compiling."""
     L, Lt = ln.job.size, to.job.size
-    for i in range(ln.Y.size // L):
-        to.Y[i * Lt + slot] = ln.Y[i * L + k]
-        to.K[0, i * Lt + slot] = ln.K[0, i * L + k]
-    to.job[slot], to.t[slot], to.h[slot], to.h_max[slot] = ln.job[k], ln.t[k], ln.h[k], \
-        ln.h_max[k]
-    to.err_old[slot], to.t_next_renorm[slot] = ln.err_old[k], ln.t_next_renorm[k]
-    to.i_eval[slot], to.i_fine[slot] = ln.i_eval[k], ln.i_fine[k]
-    for f in range(4):
-        to.flags[slot, f] = ln.flags[k, f]
-        to.acc[slot, f] = ln.acc[k, f]
-    for e in range(ln.g_old.shape[1]):
-        to.g_old[slot, e] = ln.g_old[k, e]
-        to.s_old[slot, e] = ln.s_old[k, e]
+    to.Y[slot::Lt] = ln.Y[k::L]
+    to.K[0, slot::Lt] = ln.K[0, k::L]
+    for name in _CARRIED:
+        getattr(to, name)[slot] = getattr(ln, name)[k]
 
 
 @helper
@@ -842,13 +843,6 @@ def _needs_dense(k, ln, rows, t1, direction, events, t_eval, t_fine, tangent_sam
     return need
 
 
-def compile_handoff():
-    """Compile (or load) `_adopt`, the move of a lane to a batch of fewer, which a survey
-    first calls in its first real task (warm_up's short run ends before any): its types
-    are those of every Lanes, whatever the sizes (cells.warm_beside)."""
-    _adopt(lane_state(1, 2, 2, 0, 0, 1), 0, lane_state(2, 2, 2, 0, 0, 1), 0)
-
-
 # A first run compiles in two processes (pipeline.sweep): the driver compiles `_run`, whose
 # typing reaches a job's start and the right-hand sides within seconds, but the stepping
 # round's leaves only after a dozen; so a worker compiles those first (cells.warm_beside),
@@ -881,7 +875,7 @@ def _compile_round(ln, out, model, control, recording, rb, evaluating):
     L, nf = ln.job.size, out.y.shape[1]
     if evaluating:          # in the order the driver's typing reaches them
         dense_prepare(model, L, nf, ln.Y, ln.YN, ln.HH, ln.K, ln.YT, ln.F, ln.W, rb)
-        _flush(ln, out, model, recording.t_fine, rb)
+        _flush(ln.wait, ln.yd, out.fine, model, recording.t_fine, rb)
         stages(model, control.n_tan, L, ln.Y, ln.HH, ln.K, ln.YT, ln.YN, ln.W, rb)
         return
     n = state_size(model.masses, model.d, rb)

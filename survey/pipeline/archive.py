@@ -6,6 +6,7 @@ from __future__ import annotations
 import contextlib
 import datetime
 import hashlib
+import importlib
 import os
 import subprocess
 import sys
@@ -272,13 +273,17 @@ def grid_dims(config) -> tuple[str, ...]:
     return ("cell",) if config.refined else tuple(a.name for a in config.axes)
 
 
-def prefetch():
+def prefetch(modules=()):
     """Import what writing an archive needs (xarray, netCDF4, and the dask.array that
-    xarray loads on its first Variable): a noticeable part of a fresh process, spent here
-    in a thread while the workers compute rather than after them."""
+    xarray loads on its first Variable) and the given modules: a noticeable part of a
+    fresh process, spent here in a thread while the workers compute rather than after
+    them. A module that fails to import is left to its importer to report."""
     import netCDF4  # noqa: F401
     import xarray as xr
     xr.Variable(("x",), np.zeros(1))
+    for name in modules:
+        with contextlib.suppress(ImportError):
+            importlib.import_module(name)
 
 
 def write(config, load: Callable[[list[str]], dict], command: str, cells=None,

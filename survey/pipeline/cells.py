@@ -27,7 +27,7 @@ from ..catalog.variables import (
 )
 from ..numerics import torus
 from ..numerics.indicators import batch_options, combine, conservation_errors, ensemble
-from ..numerics.driver import RoundCompiled, compile_handoff, round_only
+from ..numerics.driver import RoundCompiled, round_only
 from ..numerics.events import escape_events
 from ..numerics.integrate import integrate_batch
 from ..machine import linalg, portable
@@ -423,8 +423,8 @@ def warm_beside(task: CellTask, first, starts):
     core for twenty seconds): compile the integrator's stepping round (`_round`, which the
     driver then loads from the disk cache) and the kernels the survey needs after it --
     the energies a cell's results take (which warm_up compiled after the integrator), the
-    torus analysis and the move of lanes to a smaller batch (which a cell's first real run
-    compiled in every worker) and the linear algebra of the report's special solutions
+    torus analysis (which a cell's first real run compiled in every worker) and the
+    forces and linear algebra of the report's special solutions
     (which the driver compiled after the survey) -- on stand-in data of the types they are
     given: a smooth quasi-periodic motion near the first start, small matrices (the
     wrappers of machine.linalg make their kernels' arguments contiguous float64)."""
@@ -472,10 +472,9 @@ def warm_beside(task: CellTask, first, starts):
     # the round's second half evaluates the right-hand side, which the driver compiles
     # (and caches) meanwhile: it comes after a few seconds' other work
     if task.tori.analyse:
-        steps = [analysis, second_half, results, special_forces, compile_handoff,
-                 special_algebra]
+        steps = [analysis, second_half, results, special_forces, special_algebra]
     else:
-        steps = [results, special_forces, compile_handoff, second_half, special_algebra]
+        steps = [results, special_forces, second_half, special_algebra]
     with np.errstate(all="ignore"):
         for step in steps:
             step()

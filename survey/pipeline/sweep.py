@@ -213,12 +213,13 @@ def _task_count(config: Config, cells: int, counted: int) -> int:
 
 def run_survey(source, *, workers: int | None = None, scheduler: str | None = None,
                progress: bool | None = None, command: str = "survey.run_survey",
-               timings: dict | None = None) -> Path:
+               timings: dict | None = None, imports: tuple[str, ...] = ()) -> Path:
     """Run a survey (config path or dict, or a Config) to its archive; returns the archive
     path. Resumes from checkpoints of an interrupted run of the same config. `timings`, if
     given, receives the seconds spent preparing cells, starting the cluster, computing
     (first task submitted to last result saved), stopping the cluster and writing the
-    archive."""
+    archive. `imports`: modules the caller needs after the survey (a report's), imported
+    while the workers compute (`archive.prefetch`)."""
     clock = {"start": time.perf_counter(), "stream": timings is not None}
     workers, scheduler, progress = _api_arguments(workers, scheduler, progress)
     config = source if isinstance(source, Config) else load_config(source)
@@ -233,11 +234,11 @@ def run_survey(source, *, workers: int | None = None, scheduler: str | None = No
         for attempt in range(3):    # again when a checkpoint vanishes before it is read
             if config.refined:
                 done, cells = _refined(config, key, folder, workers, address, clock,
-                                       progress)
+                                       progress, imports)
                 load = loader(config.fine(), done, cells)
             else:
                 done, cells = _grid(config, key, folder, workers, address, clock,
-                                    progress), None
+                                    progress, imports), None
                 load = loader(config, done)
             clock["archive"] = time.perf_counter()
             try:
@@ -282,7 +283,7 @@ def _write(config, load, command, cells, folder, progress) -> Path:
                           folder) from None
 
 
-def _grid(config, key, folder, workers, address, clock, progress) -> dict:
+def _grid(config, key, folder, workers, address, clock, progress, imports) -> dict:
     """Every cell of the grid, from checkpoints where they are, computed where not:
     the checkpoint files and their cells."""
     task, starts = CellTask.of(config), GridStarts(config)
@@ -311,7 +312,7 @@ def _grid(config, key, folder, workers, address, clock, progress) -> dict:
                      "them again")
             if client is None:
                 client = _start(stack, config, task, starts.first(todo), starts, workers,
-                                address, clock, progress)
+                                address, clock, progress, imports)
                 from tqdm import tqdm
                 bar = stack.enter_context(tqdm(total=config.n_cells, unit="cell",
                                                disable=not progress, desc=config.name,
@@ -324,7 +325,7 @@ def _grid(config, key, folder, workers, address, clock, progress) -> dict:
     return done
 
 
-def _refined(config, key, folder, workers, address, clock, progress):
+def _refined(config, key, folder, workers, address, clock, progress, imports):
     """The cells of a refined survey (analysis.refine): the grid, then, as each chunk's
     results come in, the cells their disagreements call for, submitted at once (no level
     waits for the whole of the one before); from checkpoints where they are. Returns the
@@ -369,7 +370,7 @@ def _refined(config, key, folder, workers, address, clock, progress):
                         first = starts(todo)
                         pick = todo[~np.isnan(first[:, 0])][:1]
                         client = _start(stack, config, task, pick, starts, workers, address,
-                                        clock, progress)
+                                        clock, progress, imports)
                         bar = stack.enter_context(tqdm(unit="cell", disable=not progress,
                                                        desc=config.name, smoothing=0.1))
                         queue = as_completed()
@@ -447,10 +448,13 @@ def _api_arguments(workers, scheduler, progress):
     return workers, scheduler or None, None if progress is None else bool(progress)
 
 
-def _start(stack, config, task, first, starts, workers, address, clock, progress):
+def _start(stack, config, task, first, starts, workers, address, clock, progress, imports):
     """Compile (or load from the disk cache) the kernels once, then start the cluster and
     let every worker load them before the first task (`first`: a cell with a start, if any;
-    starts: a function giving given cells' starts)."""
+    starts: a function giving given cells' starts); then, in a thread of this process while
+    the workers compute, import what the archive and the caller (`imports`) need after
+    them: before, they added to a scan whose tasks all end together (`bench --only scan`
+    times the command line) and to a first run's report."""
     at = starts(first)
     cluster = f"connecting to the dask scheduler at {address}" if address else \
         f"starting {workers or config.settings.dask.workers} local dask workers"
@@ -478,6 +482,8 @@ def _start(stack, config, task, first, starts, workers, address, clock, progress
         if clock["stream"]:
             client.get_task_stream()        # records from here on
     clock["cluster"] = time.perf_counter()
+    threading.Thread(target=archive.prefetch, args=(imports,), name="prefetch",
+                     daemon=True).start()
     return client
 
 
@@ -565,10 +571,6 @@ def _compute(client, task, starts, todo, folder, key, config, bar, round_):
     # an extension task holds about one round of SIMD lanes
     group = max(1, -(-SIMD_LANES // per_cell))
     retries = config.settings.dask.retries
-    # the archive's imports, in a thread of this process while the workers compute: after
-    # them they add to a scan whose tasks all end together (`bench --only scan` times the
-    # command line)
-    threading.Thread(target=archive.prefetch, name="prefetch", daemon=True).start()
     # a chunk by its first cell: its ids, result rows, extensions pending
     chunks = {int(ids[0]): [ids, None, 0] for ids in _chunks(todo, count)}
     # a task's future: the first cell of its chunk, or the (chunk, row) of its extensions

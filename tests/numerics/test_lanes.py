@@ -172,18 +172,18 @@ def test_the_driver_compiles_once_for_every_batch():
     new machine's first run): batches of more
     orbits than lanes (ordered by a pilot run), fewer, one, with and without tangent
     vectors, events and samples, backwards, all run the driver the first one compiled."""
-    from survey.numerics.driver import _adopt, _run
+    from survey.numerics.driver import _run
     system = System.create()
     starts = np.array([initial_state(system, "equilateral", delta=x)
                        for x in np.linspace(0.0, 6.0, 21)])
     tangents = np.array([deviation_vectors(system, y, 1, 0) for y in starts])
     integrate_batch(system, starts[:1], 1.0)
-    compiled = set(_run.signatures) | set(_adopt.signatures)
+    compiled = set(_run.signatures)
     integrate_batch(system, starts, 3.0, tangents=tangents, megno=True)
     integrate_batch(system, starts[:5], (0.0, -2.0), events=[section_event(system)],
                     t_eval=np.linspace(0.0, -2.0, 5), t_fine=-np.arange(20) * 0.1)
     integrate_batch(system, starts[:1], 2.0, tangents=tangents[:1], lanes=1)
-    assert set(_run.signatures) | set(_adopt.signatures) == compiled
+    assert set(_run.signatures) == compiled
 
 
 def test_samples_in_a_reused_buffer_are_those_of_a_fresh_array():

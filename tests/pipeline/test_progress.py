@@ -139,7 +139,6 @@ ROUND = ["spread_steps", "error_norms", "step_factors", "finite_lanes", "take_st
 def signatures():
     kernels = [(m.__name__, k, v) for m in (torus, linalg) for k, v in vars(m).items()
                if isinstance(v, Dispatcher)] + [
-        ("driver", "_adopt", driver._adopt),
         *[("driver", k, getattr(driver, k)) for k in ROUND]] + [
         ("system", "_potential_energies", system_module._potential_energies),
         ("system", "rhs", system_module.rhs),
@@ -162,7 +161,7 @@ task, starts = cells.CellTask.of(config), cells.build_starts(config)
 cells.warm_beside(task, np.array([0]), starts[:1])
 warm = signatures()
 assert sum(map(len, warm.values())) > 10, warm
-assert all(warm[k] for k in [("driver", "_adopt"), ("system", "_potential_energies"),
+assert all(warm[k] for k in [("system", "_potential_energies"),
                              ("system", "rhs"),
                              ("portable", "_elementwise"), ("portable", "power")] +
            [("driver", k) for k in ROUND]), warm
