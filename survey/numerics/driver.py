@@ -869,6 +869,16 @@ def round_only(evaluating: bool):
         _ROUND_ONLY.reset(token)
 
 
+def compile_round(call, evaluating: bool):
+    """The stepping round's leaves of the integration `call()` makes, compiled (or loaded
+    from the disk cache) under `round_only(evaluating)`: nothing is integrated."""
+    with round_only(evaluating):
+        try:
+            call()
+        except RoundCompiled:
+            pass
+
+
 def _compile_round(ln, out, model, control, recording, rb, evaluating):
     """The leaves of `_run`'s stepping round (`round_only`), called as it calls them, on
     lanes without a job."""

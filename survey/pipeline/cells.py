@@ -8,6 +8,7 @@ or worker count, and the same start gives the same numbers in any grid.
 """
 from __future__ import annotations
 
+import contextlib
 import time
 from dataclasses import dataclass, replace
 
@@ -27,10 +28,11 @@ from ..catalog.variables import (
 )
 from ..numerics import torus
 from ..numerics.indicators import batch_options, combine, conservation_errors, ensemble
-from ..numerics.driver import RoundCompiled, round_only
+from ..numerics.driver import compile_round
 from ..numerics.events import escape_events
 from ..numerics.integrate import integrate_batch
 from ..machine import linalg, portable
+from ..machine.jit import kernels_cached
 from ..physics.equilibria import forces
 from ..physics.families import initial_state
 from ..physics.jacobi import reduced
@@ -408,29 +410,20 @@ def warm_up(task: CellTask, first, starts):
         run_cells(task.short(), first, starts)
 
 
-def _round(task: CellTask, first, starts, evaluating: bool):
-    """Compile the stepping round's leaves of the first cell's integration (driver.round_only)
-    before the driver's compilation of the integrator reaches them."""
-    with round_only(evaluating):
-        try:
-            run_cells(task.short(), first, starts)
-        except RoundCompiled:
-            pass
-
-
-def warm_beside(task: CellTask, first, starts):
+def warm_beside(task: CellTask, first, starts, report: bool = True):
     """On a first run, in a worker while the driver compiles the integrator (warm_up, one
-    core for twenty seconds): compile the integrator's stepping round (`_round`, which the
-    driver then loads from the disk cache) and the kernels the survey needs after it --
-    the energies a cell's results take (which warm_up compiled after the integrator), the
-    torus analysis (which a cell's first real run compiled in every worker) and the
-    forces and linear algebra of the report's special solutions
-    (which the driver compiled after the survey) -- on stand-in data of the types they are
-    given: a smooth quasi-periodic motion near the first start, small matrices (the
-    wrappers of machine.linalg make their kernels' arguments contiguous float64)."""
+    core for twenty seconds): compile the integrator's stepping round (`compile_round`,
+    which the driver then loads from the disk cache) and the kernels the survey needs
+    after it -- the energies a cell's results take (which warm_up compiled after the
+    integrator), the torus analysis (which a cell's first real run compiled in every
+    worker) and, with `report`, the forces and linear algebra of the report's special
+    solutions (which the driver compiled after the survey) -- on stand-in data of the
+    types they are given: a smooth quasi-periodic motion near the first start, small
+    matrices (the wrappers of machine.linalg make their kernels' arguments contiguous
+    float64)."""
     if not first.size:
         return
-    _round(task, first, starts, False)
+    compile_round(lambda: run_cells(task.short(), first, starts), False)
     system = next(_systems(task, first, starts))[0]
     y0 = np.asarray(starts[0], dtype=np.float64)
     rng = np.random.default_rng(0)
@@ -467,7 +460,7 @@ def warm_beside(task: CellTask, first, starts):
                       task.tori.resonance_order)
 
     def second_half():
-        _round(task, first, starts, True)
+        compile_round(lambda: run_cells(task.short(), first, starts), True)
 
     # the round's second half evaluates the right-hand side, which the driver compiles
     # (and caches) meanwhile: it comes after a few seconds' other work
@@ -477,4 +470,41 @@ def warm_beside(task: CellTask, first, starts):
         steps = [results, special_forces, second_half, special_algebra]
     with np.errstate(all="ignore"):
         for step in steps:
-            step()
+            if report or step not in (special_forces, special_algebra):
+                step()
+
+
+def head_start(warm, *args):
+    """warm(*args) in another process (a worker, where an exception would be logged as a
+    failed task, or `compiled_beside`'s helper): a head start that fails leaves its
+    kernels to compile where first used, as without it."""
+    try:
+        warm(*args)
+    except Exception:
+        pass
+
+
+@contextlib.contextmanager
+def compiled_beside(warm, *args):
+    """A first run in one process (`verify`, `orbit`): while this process compiles the
+    integrator for the block, a process forked from it runs warm(*args) -- the stepping
+    round's leaves (`compile_round`) and what else the command needs after the integrator
+    (`warm_beside`) -- and this one loads those kernels from the disk cache, else the
+    second core idles for that half minute. Nothing where the kernels are cached or
+    processes cannot be forked; a helper that fails leaves its kernels to compile here, as
+    without it. Forked before this process compiles anything of the block, so no compiler
+    lock is copied held."""
+    import multiprocessing
+    if kernels_cached() or "fork" not in multiprocessing.get_all_start_methods():
+        yield
+        return
+    helper = multiprocessing.get_context("fork").Process(target=head_start,
+                                                         args=(warm, *args), daemon=True)
+    helper.start()
+    try:
+        yield
+    except BaseException:
+        helper.terminate()
+        raise
+    finally:
+        helper.join()

@@ -56,6 +56,7 @@ from ..catalog import defaults
 from ..catalog.errors import ConfigError
 from ..catalog.variables import V
 from ..numerics.dop853 import RTOL_MIN
+from ..numerics.driver import compile_round
 from ..numerics.indicators import deviation_vectors
 from ..numerics.integrate import Outcome, integrate
 from ..numerics.isosceles import (
@@ -74,7 +75,7 @@ from ..physics.geometry import area, sides
 from ..physics.system import System
 from ..physics.terms import PERIMETER, POWER
 from .build import section_event_for
-from .cells import build_starts
+from .cells import build_starts, compiled_beside
 from .config import Config, load_config, read_toml
 from .progress import COMPILING, notice
 from .resources import check_bytes
@@ -267,8 +268,13 @@ def run_orbits(spec: OrbitSpec) -> list[OrbitRun]:
         w0 = deviation_vectors(system, y0, 1, seed=0)[0]
         events = () if section is None else (section_event_for(section, system),)
         kw = dict(tangents=w0, megno=True, sample_tangents=True, events=events)
-        with notice(COMPILING, sys.stderr.isatty(), compiling=True):     # load the kernels
+
+        def first():
             integrate(system, y0, 1e-3, t_eval=t_eval[:1], **kw)
+
+        with notice(COMPILING, sys.stderr.isatty(), compiling=True), \
+                compiled_beside(_round, first):     # load the kernels
+            first()
         start = time.perf_counter()
         out = integrate(system, y0, spec.t_final, t_eval=t_eval, rtol=spec.tol, atol=spec.tol,
                         **kw)
@@ -279,6 +285,13 @@ def run_orbits(spec: OrbitSpec) -> list[OrbitRun]:
         bound = p_max(system, system.energy(y0), float(np.sum(system.angular_momentum(y0))))
         runs.append(OrbitRun(params, system, y0, out, wall, bound, section))
     return runs
+
+
+def _round(call):
+    """The stepping round's leaves of `call`'s integration, both halves (in a first run's
+    helper process: `compiled_beside`)."""
+    for evaluating in (False, True):
+        compile_round(call, evaluating)
 
 
 def describe(spec: OrbitSpec, run: OrbitRun) -> list[str]:

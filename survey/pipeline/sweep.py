@@ -33,8 +33,10 @@ from .cells import (
     GridStarts,
     build_starts,
     classify_rows,
+    compiled_beside,
     extend_cells,
     first_runs,
+    head_start,
     jobs_per_cell,
     merge_rows,
     run_cells,
@@ -468,7 +470,7 @@ def _start(stack, config, task, first, starts, workers, address, clock, progress
     if not address and not kernels_cached():
         with notice(cluster, progress):
             client = stack.enter_context(_client(config, workers, address))
-        beside = client.submit(_head_start, warm_beside, task, first, at, pure=False)
+        beside = client.submit(head_start, warm_beside, task, first, at, pure=False)
     with notice(COMPILING, progress, compiling=True):
         warm_up(task, first, at)
         if beside is not None:
@@ -485,15 +487,6 @@ def _start(stack, config, task, first, starts, workers, address, clock, progress
     threading.Thread(target=archive.prefetch, args=(imports,), name="prefetch",
                      daemon=True).start()
     return client
-
-
-def _head_start(warm, *args):
-    """warm(*args) in a worker, where an exception would be logged as a failed task: a
-    head start that fails leaves its kernels to compile where first used, as without it."""
-    try:
-        warm(*args)
-    except Exception:
-        pass
 
 
 def chunk_count(cells: int, workers: int, per_cell: int) -> int:
@@ -674,7 +667,10 @@ def verify(path, cells: int = 8, seed: int = 0, differences: dict | None = None)
     sample = sample[~timed_out]
     with notice(f"recomputing {len(sample)} cells (compiling the kernels if this kind of "
                 f"system has not run here before: {FIRST_COMPILE})", sys.stderr.isatty()):
-        fresh = run_cells(CellTask.of(grid), ids[sample], build_starts(grid, ids[sample]))
+        task, starts = CellTask.of(grid), build_starts(grid, ids[sample])
+        begins = np.flatnonzero(~np.isnan(starts[:, 0]))[:1]     # a cell with a start
+        with compiled_beside(warm_beside, task, ids[sample][begins], starts[begins], False):
+            fresh = run_cells(task, ids[sample], starts)
     here = archive.machine()
     lines = compare({k: v[sample] for k, v in stored.items()}, fresh, differences)
     ok = not lines

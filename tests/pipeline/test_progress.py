@@ -178,7 +178,7 @@ print(new)
 
 def test_the_kernels_compiled_beside_the_driver_are_those_a_survey_uses(tmp_path):
     """A first run compiles the integrator's stepping round and the energies', the torus
-    analysis's, the lanes' handoff and the linear algebra's kernels in a worker while the
+    analysis's and the linear algebra's kernels in a worker while the
     driver compiles the integrator (cells.warm_beside), on stand-in data and lanes: a
     kernel that a survey's cells and the report's relative equilibria then call with
     arguments of another type -- or one the stand-in never reached -- would compile
@@ -191,6 +191,35 @@ def test_the_kernels_compiled_beside_the_driver_are_those_a_survey_uses(tmp_path
                          cwd=tmp_path, timeout=900)
     assert out.returncode == 0, out.stderr[-3000:]
     assert out.stdout.strip() == "{}", out.stdout
+
+
+def test_a_first_run_in_one_process_compiles_beside_it_in_a_second(tmp_path, monkeypatch):
+    """`verify` and `orbit` on a machine without the kernels: cells.compiled_beside runs its
+    helper in another process, done by the block's end; a helper that fails leaves the
+    block alone; with the kernels cached there is none."""
+    import os
+    from survey.pipeline import cells
+    marker = tmp_path / "helper"
+
+    def warm(path, text):
+        path.write_text(f"{os.getpid()} {text}")
+
+    def fail():
+        raise RuntimeError("a helper that fails")
+
+    monkeypatch.setattr(cells, "kernels_cached", lambda: False)
+    with cells.compiled_beside(warm, marker, "ran"):
+        here = os.getpid()
+    pid, text = marker.read_text().split()
+    assert text == "ran" and int(pid) != here
+    with cells.compiled_beside(fail):
+        done = True
+    assert done
+    monkeypatch.setattr(cells, "kernels_cached", lambda: True)
+    marker.unlink()
+    with cells.compiled_beside(warm, marker, "again"):
+        pass
+    assert not marker.exists()
 
 
 def test_a_continuations_bar_shows_the_span_covered_and_the_members_found():
