@@ -32,7 +32,6 @@ from ..numerics.driver import compile_round
 from ..numerics.events import escape_events
 from ..numerics.integrate import integrate_batch
 from ..machine import linalg, portable
-from ..machine.jit import kernels_cached
 from ..physics.equilibria import forces
 from ..physics.families import initial_state
 from ..physics.jacobi import reduced
@@ -446,14 +445,10 @@ def warm_beside(task: CellTask, first, starts, report: bool = True):
         portable.vlog(portable.vnorm(states))
 
     def special_forces():       # the report's special solutions' forces and Hessians
-        forces(system, system.split(y0)[0], hessian=True)
+        solver_forces(system, y0)
 
     def special_algebra():      # and their linear algebra
-        linalg.eig(a)
-        linalg.svd(a)
-        linalg.lstsq(a, a[0], 1e-14)
-        linalg.chain(a, a, a)
-        linalg.symmetric_eigen(linalg.dot(a, a.T))     # a Morse index
+        solver_algebra(a)
 
     def analysis():
         torus.analyse(system, states, dt, 1e-12, task.tori.observables, task.tori.lines,
@@ -484,18 +479,52 @@ def head_start(warm, *args):
         pass
 
 
+def solver_forces(system, y0):
+    """Compile (or load) what the special solutions' solvers evaluate of `system` at y0's
+    kind of state: its forces with their Hessian (physics.system.rhs among them)."""
+    forces(system, system.split(y0)[0], hessian=True)
+
+
+def solver_algebra(a):
+    """Compile (or load) the solvers' linear algebra, on a small square matrix `a`."""
+    linalg.eig(a)
+    linalg.svd(a)
+    linalg.lstsq(a, a[0], 1e-14)
+    linalg.chain(a, a, a)
+    linalg.symmetric_eigen(linalg.dot(a, a.T))     # a Morse index
+
+
+def warm_solvers(system, y0, integrates: bool = True):
+    """In `compiled_beside`'s helper of `periodic` and `equilibria`, whose solvers compile
+    the system's forces (physics.system.rhs) first: for a solver that `integrates` (then
+    compiles the integrator), the stepping round's half that evaluates the right-hand side
+    (the full states' integrator reaches it 8 s into its compiling, after a job's start),
+    then the other half; the solvers' linear algebra and the system's energy."""
+    def call():
+        integrate_batch(system, y0[None], 1e-3, lanes=1)
+
+    with np.errstate(all="ignore"):
+        if integrates:
+            compile_round(call, True)
+            compile_round(call, False)
+        solver_algebra(np.random.default_rng(0).standard_normal((6, 6)))
+        system.energy(y0)
+
+
 @contextlib.contextmanager
 def compiled_beside(warm, *args):
-    """A first run in one process (`verify`, `orbit`): while this process compiles the
-    integrator for the block, a process forked from it runs warm(*args) -- the stepping
-    round's leaves (`compile_round`) and what else the command needs after the integrator
-    (`warm_beside`) -- and this one loads those kernels from the disk cache, else the
-    second core idles for that half minute. Nothing where the kernels are cached or
-    processes cannot be forked; a helper that fails leaves its kernels to compile here, as
-    without it. Forked before this process compiles anything of the block, so no compiler
-    lock is copied held."""
+    """A first run in one process (`verify`, `orbit`, `periodic`, `equilibria`): while this
+    process compiles the integrator (or a solver's kernels) for the block, a process forked from it runs warm(*args) --
+    the stepping round's leaves (`compile_round`) and what else the block needs after the
+    integrator -- and this one loads those kernels from the disk cache, else the second
+    core idles for that half minute. With the kernels cached the helper only loads some of
+    them, on that second core. It is stopped when the block ends: what it has not compiled
+    by then is no longer ahead (numba writes a cache file under another name and renames
+    it, so a stop leaves no torn kernel). A helper that fails leaves its kernels to compile
+    here, as without it. Forked before this process compiles anything of the block, so no
+    compiler lock is copied held; nothing where processes cannot be forked."""
     import multiprocessing
-    if kernels_cached() or "fork" not in multiprocessing.get_all_start_methods():
+    if "fork" not in multiprocessing.get_all_start_methods():
         yield
         return
     helper = multiprocessing.get_context("fork").Process(target=head_start,
@@ -503,8 +532,6 @@ def compiled_beside(warm, *args):
     helper.start()
     try:
         yield
-    except BaseException:
-        helper.terminate()
-        raise
     finally:
+        helper.terminate()
         helper.join()

@@ -35,7 +35,7 @@ from ..physics.equilibria import relative_equilibria, relative_equilibrium
 from ..physics.system import System
 from .archive import family_dataset
 from .build import build_system
-from .cells import build_starts
+from .cells import build_starts, compiled_beside, warm_solvers
 from .config import _decode, check_table, read_toml, validate
 from .orbits import PlaneSpec, check_plane
 from .progress import count_bar, family_bar
@@ -177,8 +177,9 @@ def solve_equilibria(path):
     config, system, start, table = load_equilibria(path)
     if table["parameter"]:
         return system, table, _equilibrium_family(path, config, system, start, table)
-    with count_bar("solving for relative equilibria from each starting configuration",
-                   sys.stderr.isatty()) as update:
+    with compiled_beside(warm_solvers, system, start, False), \
+            count_bar("solving for relative equilibria from each starting configuration",
+                      sys.stderr.isatty()) as update:
         found = relative_equilibria(
             system, start, table["angular_momentum"], table["rotation_rate"],
             table["starts"], table["seed"], on_guess=None if update is None else
@@ -258,8 +259,9 @@ def solve_periodic(path) -> tuple[System, dict, PeriodicOrbit | Family]:
     Family)."""
     config, system, start, table = load_periodic(path)
     try:
-        orbit = periodic_orbit(system, start, table["period"], table["rotating"],
-                               table["energy"], table["tol"])
+        with compiled_beside(warm_solvers, system, start):
+            orbit = periodic_orbit(system, start, table["period"], table["rotating"],
+                                   table["energy"], table["tol"])
     except GuessError as exc:
         raise ConfigError("[periodic].period" if not table["mode"] else "[periodic].mode",
                           str(exc)) from None

@@ -193,33 +193,43 @@ def test_the_kernels_compiled_beside_the_driver_are_those_a_survey_uses(tmp_path
     assert out.stdout.strip() == "{}", out.stdout
 
 
-def test_a_first_run_in_one_process_compiles_beside_it_in_a_second(tmp_path, monkeypatch):
-    """`verify` and `orbit` on a machine without the kernels: cells.compiled_beside runs its
-    helper in another process, done by the block's end; a helper that fails leaves the
-    block alone; with the kernels cached there is none."""
+def test_a_first_run_in_one_process_compiles_beside_it_in_a_second(tmp_path):
+    """`verify`, `orbit`, `periodic` and `equilibria` compile beside themselves
+    (cells.compiled_beside): the helper runs in another process; one that fails leaves the
+    block alone; one still running when the block ends is stopped, not waited for."""
     import os
+    import pytest
     from survey.pipeline import cells
     marker = tmp_path / "helper"
 
-    def warm(path, text):
-        path.write_text(f"{os.getpid()} {text}")
+    def warm(path, text):       # written whole, then renamed: seen whole or not at all
+        path.with_suffix(".part").write_text(f"{os.getpid()} {text}")
+        path.with_suffix(".part").replace(path)
 
     def fail():
         raise RuntimeError("a helper that fails")
 
-    monkeypatch.setattr(cells, "kernels_cached", lambda: False)
+    def endless(path):
+        warm(path, "endless")
+        time.sleep(3600)
+
     with cells.compiled_beside(warm, marker, "ran"):
         here = os.getpid()
+        deadline = time.monotonic() + 60
+        while not marker.exists() and time.monotonic() < deadline:
+            time.sleep(0.01)
     pid, text = marker.read_text().split()
     assert text == "ran" and int(pid) != here
     with cells.compiled_beside(fail):
         done = True
     assert done
-    monkeypatch.setattr(cells, "kernels_cached", lambda: True)
     marker.unlink()
-    with cells.compiled_beside(warm, marker, "again"):
-        pass
-    assert not marker.exists()
+    with cells.compiled_beside(endless, marker):
+        deadline = time.monotonic() + 60
+        while not marker.exists() and time.monotonic() < deadline:
+            time.sleep(0.01)
+    with pytest.raises(ProcessLookupError):
+        os.kill(int(marker.read_text().split()[0]), 0)
 
 
 def test_a_continuations_bar_shows_the_span_covered_and_the_members_found():
