@@ -869,14 +869,16 @@ def round_only(evaluating: bool):
         _ROUND_ONLY.reset(token)
 
 
-def compile_round(call, evaluating: bool):
+def compile_round(call, *halves: bool):
     """The stepping round's leaves of the integration `call()` makes, compiled (or loaded
-    from the disk cache) under `round_only(evaluating)`: nothing is integrated."""
-    with round_only(evaluating):
-        try:
-            call()
-        except RoundCompiled:
-            pass
+    from the disk cache) under `round_only(evaluating)` for each of `halves` in turn:
+    nothing is integrated."""
+    for evaluating in halves:
+        with round_only(evaluating):
+            try:
+                call()
+            except RoundCompiled:
+                pass
 
 
 def _compile_round(ln, out, model, control, recording, rb, evaluating):

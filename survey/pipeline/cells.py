@@ -505,24 +505,24 @@ def warm_solvers(system, y0, integrates: bool = True):
 
     with np.errstate(all="ignore"):
         if integrates:
-            compile_round(call, True)
-            compile_round(call, False)
+            compile_round(call, True, False)
         solver_algebra(np.random.default_rng(0).standard_normal((6, 6)))
         system.energy(y0)
 
 
 @contextlib.contextmanager
 def compiled_beside(warm, *args):
-    """A first run in one process (`verify`, `orbit`, `periodic`, `equilibria`): while this
-    process compiles the integrator (or a solver's kernels) for the block, a process forked from it runs warm(*args) --
-    the stepping round's leaves (`compile_round`) and what else the block needs after the
-    integrator -- and this one loads those kernels from the disk cache, else the second
-    core idles for that half minute. With the kernels cached the helper only loads some of
-    them, on that second core. It is stopped when the block ends: what it has not compiled
-    by then is no longer ahead (numba writes a cache file under another name and renames
-    it, so a stop leaves no torn kernel). A helper that fails leaves its kernels to compile
-    here, as without it. Forked before this process compiles anything of the block, so no
-    compiler lock is copied held; nothing where processes cannot be forked."""
+    """A first run in one process (`verify`, `orbit`, `periodic`, `equilibria`): while
+    this process compiles the integrator (or a solver's kernels) for the block, a process
+    forked from it runs warm(*args) -- the stepping round's leaves (`compile_round`) and
+    what else the block needs after the integrator -- and this one loads those kernels
+    from the disk cache, else the second core idles for that half minute. With the
+    kernels cached the helper only loads some of them, on that second core. It is stopped
+    when the block ends: what it has not compiled by then is no longer ahead (numba writes
+    a cache file under another name and renames it, so a stop leaves no torn kernel). A
+    helper that fails leaves its kernels to compile here, as without it. Forked before
+    this process compiles anything of the block, so no compiler lock is copied held;
+    nothing where processes cannot be forked."""
     import multiprocessing
     if "fork" not in multiprocessing.get_all_start_methods():
         yield

@@ -273,7 +273,7 @@ def run_orbits(spec: OrbitSpec) -> list[OrbitRun]:
             integrate(system, y0, 1e-3, t_eval=t_eval[:1], **kw)
 
         with notice(COMPILING, sys.stderr.isatty(), compiling=True), \
-                compiled_beside(_round, first):     # load the kernels
+                compiled_beside(compile_round, first, False, True):     # load the kernels
             first()
         start = time.perf_counter()
         out = integrate(system, y0, spec.t_final, t_eval=t_eval, rtol=spec.tol, atol=spec.tol,
@@ -285,13 +285,6 @@ def run_orbits(spec: OrbitSpec) -> list[OrbitRun]:
         bound = p_max(system, system.energy(y0), float(np.sum(system.angular_momentum(y0))))
         runs.append(OrbitRun(params, system, y0, out, wall, bound, section))
     return runs
-
-
-def _round(call):
-    """The stepping round's leaves of `call`'s integration, both halves (in a first run's
-    helper process: `compiled_beside`)."""
-    for evaluating in (False, True):
-        compile_round(call, evaluating)
 
 
 def describe(spec: OrbitSpec, run: OrbitRun) -> list[str]:
