@@ -55,6 +55,7 @@ from ..analysis.findings import to_accuracy
 from ..catalog import defaults
 from ..catalog.errors import ConfigError
 from ..catalog.variables import V
+from ..machine import portable
 from ..numerics.dop853 import RTOL_MIN
 from ..numerics.driver import compile_round
 from ..numerics.indicators import deviation_vectors
@@ -273,7 +274,7 @@ def run_orbits(spec: OrbitSpec) -> list[OrbitRun]:
             integrate(system, y0, 1e-3, t_eval=t_eval[:1], **kw)
 
         with notice(COMPILING, sys.stderr.isatty(), compiling=True), \
-                compiled_beside(compile_round, first, False, True):     # load the kernels
+                compiled_beside(_warm, first, system, y0):     # load the kernels
             first()
         start = time.perf_counter()
         out = integrate(system, y0, spec.t_final, t_eval=t_eval, rtol=spec.tol, atol=spec.tol,
@@ -285,6 +286,20 @@ def run_orbits(spec: OrbitSpec) -> list[OrbitRun]:
         bound = p_max(system, system.energy(y0), float(np.sum(system.angular_momentum(y0))))
         runs.append(OrbitRun(params, system, y0, out, wall, bound, section))
     return runs
+
+
+def _warm(first, system, y0):
+    """`run_orbits`' helper on a first run (cells.compiled_beside): the stepping round of
+    the orbit's first integration, then what the command compiled after it -- the
+    restored samples' angles, their energies and moments of inertia (`describe`) -- on
+    copies of the start."""
+    compile_round(first, False, True)
+    states = np.repeat(y0[None], 4, 0)
+    system.energy(states)
+    system.moment_of_inertia(states)
+    x = np.linspace(0.1, 1.0, 4)
+    portable.vatan2(x, x)
+    portable.vsin(x)
 
 
 def describe(spec: OrbitSpec, run: OrbitRun) -> list[str]:
