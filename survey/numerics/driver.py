@@ -301,10 +301,10 @@ def near_terms(Y, L, k0, k1, N, d, rb, near, X, R, TP, TA, TQ):
 def _near(rec, NR, NT, L, k, t, dt, N, near, thin):
     """Lane k's state at time t, the end of a step of length dt, into its closest-approach
     record (`near_width`), from what `near_terms` left in the L lanes' NR and NT (`Lanes`):
-    each pair's distance, and
-    with NEAR_TRIANGLES the least perimeter and |area| of its triangles, where below the
-    record's (with t), and dt added to the thin time where the thinnest triangle has
-    |A|/P^2 < thin. At step ends: a close approach is where the steps are shortest."""
+    each pair's distance, and with NEAR_TRIANGLES the least perimeter and |area| of its
+    triangles, where below the record's (with t), and dt added to the thin time where the
+    thinnest triangle has |A|/P^2 < thin. At step ends: a close approach is where the
+    steps are shortest."""
     pairs = N * (N - 1) // 2
     for p in range(pairs):
         r = NR[p * L + k]
