@@ -435,7 +435,6 @@ def warm_beside(task: CellTask, first, starts, report: bool = True):
                                                                          keepdims=True)
     waves = np.stack([np.sin(t), np.cos(np.sqrt(2.0) * t), np.sin(np.sqrt(5.0) * t)], 1)
     states = np.ascontiguousarray(y0 + waves @ modes)
-    a = rng.standard_normal((6, 6))
 
     def results():
         """What every cell's result takes after its orbits (else compiled by warm_up's
@@ -443,12 +442,6 @@ def warm_beside(task: CellTask, first, starts, report: bool = True):
         conservation_errors(system, y0, states)
         system.scale_free_energy(y0)
         portable.vlog(portable.vnorm(states))
-
-    def special_forces():       # the report's special solutions' forces and Hessians
-        solver_forces(system, y0)
-
-    def special_algebra():      # and their linear algebra
-        solver_algebra(a)
 
     def analysis():
         torus.analyse(system, states, dt, 1e-12, task.tori.observables, task.tori.lines,
@@ -458,15 +451,17 @@ def warm_beside(task: CellTask, first, starts, report: bool = True):
         compile_round(lambda: run_cells(task.short(), first, starts), True)
 
     # the round's second half evaluates the right-hand side, which the driver compiles
-    # (and caches) meanwhile: it comes after a few seconds' other work
+    # (and caches) meanwhile: it comes after a few seconds' other work; with the report,
+    # its special solutions' forces and Hessians, and their linear algebra
+    report_forces = [lambda: solver_forces(system, y0)] if report else []
+    report_algebra = [solver_algebra] if report else []
     if task.tori.analyse:
-        steps = [analysis, second_half, results, special_forces, special_algebra]
+        steps = [analysis, second_half, results, *report_forces, *report_algebra]
     else:
-        steps = [results, special_forces, second_half, special_algebra]
+        steps = [results, *report_forces, second_half, *report_algebra]
     with np.errstate(all="ignore"):
         for step in steps:
-            if report or step not in (special_forces, special_algebra):
-                step()
+            step()
 
 
 def head_start(warm, *args):
@@ -485,8 +480,9 @@ def solver_forces(system, y0):
     forces(system, system.split(y0)[0], hessian=True)
 
 
-def solver_algebra(a):
-    """Compile (or load) the solvers' linear algebra, on a small square matrix `a`."""
+def solver_algebra():
+    """Compile (or load) the solvers' linear algebra, on a small square matrix."""
+    a = np.random.default_rng(0).standard_normal((6, 6))
     linalg.eig(a)
     linalg.svd(a)
     linalg.lstsq(a, a[0], 1e-14)
@@ -506,7 +502,7 @@ def warm_solvers(system, y0, integrates: bool = True):
     with np.errstate(all="ignore"):
         if integrates:
             compile_round(call, True, False)
-        solver_algebra(np.random.default_rng(0).standard_normal((6, 6)))
+        solver_algebra()
         system.energy(y0)
 
 
