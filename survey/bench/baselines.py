@@ -15,7 +15,7 @@ from ..numerics.indicators import deviation_vectors
 from ..numerics.integrate import integrate, integrate_batch
 from ..physics.families import initial_state
 from ..physics.system import System
-from .common import CASES, best_time, command_phases, user_env
+from .common import CASES, best_time, checked, command_phases
 
 
 def numpy_rhs(system: System, tangent: bool):
@@ -233,7 +233,6 @@ def scan_vs_heyoka(cells=101, t_final=2000.0, tol=1e-12, repeats=2, folder="resu
     line (`python -m survey run`, interpreter start to archive) without and with the default
     torus analysis; best of `repeats` interleaved runs. Targets: compute <= 0.4x heyoka,
     command line <= 1.0x without the torus analysis, <= 1.2x with it."""
-    import subprocess
     import sys
     from pathlib import Path
 
@@ -284,8 +283,8 @@ def scan_vs_heyoka(cells=101, t_final=2000.0, tol=1e-12, repeats=2, folder="resu
         best["tori"] = min(best["tori"], timings["compute"])
         for key, toml in files.items():
             t = time.perf_counter()
-            subprocess.run([sys.executable, "-m", "survey", "run", str(toml), "--no-report",
-                            "--no-progress"], check=True, capture_output=True, env=user_env())
+            checked([sys.executable, "-m", "survey", "run", str(toml), "--no-report",
+                     "--no-progress"])
             best[key] = min(best[key], time.perf_counter() - t)
         by_phase = command_phases(["run", str(files["same", False]), "--no-report",
                                    "--no-progress"])

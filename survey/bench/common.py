@@ -45,18 +45,28 @@ def user_env(**extra) -> dict:
     return {**env, **extra}
 
 
+def checked(args, env=None) -> str:
+    """Run a command to its end; its stdout. One that fails raises with its exit code and
+    the end of its stderr -- what a CI log must show to say why (a bare
+    CalledProcessError names the command only)."""
+    import subprocess
+    done = subprocess.run(args, capture_output=True, text=True, env=env or user_env())
+    if done.returncode:
+        tail = "\n".join(done.stderr.splitlines()[-40:])
+        raise RuntimeError(f"{' '.join(map(str, args))} exited with {done.returncode}; "
+                           f"its stderr ended with:\n{tail}")
+    return done.stdout
+
+
 def command_phases(argv) -> dict:
     """Seconds of a `python -m survey` command by phase: the interpreter's start, survey's
     imports, run_survey's phases (prepare -- the kernels loaded --, cluster, compute,
     shutdown, archive), and the rest (the regime summary; the exit without teardown is not
     run here)."""
     import json
-    import subprocess
     import sys
     launched = time.time()
-    done = subprocess.run([sys.executable, "-c", _CLI_PHASES, *argv], check=True,
-                          capture_output=True, text=True, env=user_env())
-    r = json.loads(done.stdout.strip().splitlines()[-1])
+    r = json.loads(checked([sys.executable, "-c", _CLI_PHASES, *argv]).strip().splitlines()[-1])
     phases = {"interpreter": r["start"] - launched, "imports": r["imported"] - r["start"]}
     phases.update({k: r[k] for k in ("prepare", "cluster", "compute", "shutdown", "archive")})
     phases["rest"] = r["end"] - r["imported"] - r["total"]
@@ -87,7 +97,7 @@ def timed_command(args, env=None, cwd=None) -> Timed:
     start = time.perf_counter()
     proc = subprocess.Popen(args, stdout=slave, stderr=slave, env=env, cwd=cwd)
     os.close(slave)
-    first, last, silence = math.nan, 0.0, 0.0
+    first, last, silence, said = math.nan, 0.0, 0.0, bytearray()
     while True:
         try:
             chunk = os.read(master, 4096)
@@ -95,6 +105,7 @@ def timed_command(args, env=None, cwd=None) -> Timed:
             break
         if not chunk:
             break
+        said += chunk
         now = time.perf_counter() - start
         silence, last = max(silence, now - last), now
         if math.isnan(first):
@@ -103,5 +114,7 @@ def timed_command(args, env=None, cwd=None) -> Timed:
     total = time.perf_counter() - start
     os.close(master)
     if proc.returncode:
-        raise RuntimeError(f"{' '.join(map(str, args))} exited with {proc.returncode}")
+        tail = "\n".join(said.decode(errors="replace").splitlines()[-40:])
+        raise RuntimeError(f"{' '.join(map(str, args))} exited with {proc.returncode}; "
+                           f"it ended with:\n{tail}")
     return Timed(first, total, max(silence, total - last))

@@ -19,7 +19,7 @@ from ..physics.families import initial_state
 from ..physics.lanes import SIMD_LANES
 from ..physics.system import System
 from ..physics.terms import make_expression, make_potential
-from .common import CASES, timed_command, user_env
+from .common import CASES, checked, timed_command, user_env
 
 
 def indicator_overhead(t_final=2000.0, repeats=7, deviations=2, out=print):
@@ -331,7 +331,6 @@ def fixed_costs(folder="results/bench", repeats=3, out=print, cold=True, command
         run_survey(cfg, progress=False, timings=timings)
         if best is None or timings["total"] < best["total"]:
             best = timings
-    import subprocess
     import sys
     toml = Path(folder) / "bench-1cell.toml"
     toml.write_text(f'[survey]\nname = "bench-1cell"\noutput = "{toml.with_suffix(".nc")}"\n'
@@ -340,7 +339,7 @@ def fixed_costs(folder="results/bench", repeats=3, out=print, cold=True, command
     command = math.inf
     for _ in range(repeats):
         t = time.perf_counter()
-        subprocess.run(run, check=True, capture_output=True, env=user_env())
+        checked(run)
         command = min(command, time.perf_counter() - t)
     first = compiling = math.nan
     rows = []
@@ -352,9 +351,8 @@ def fixed_costs(folder="results/bench", repeats=3, out=print, cold=True, command
         with tempfile.TemporaryDirectory() as cache:
             code = ("import json; from survey.bench.costs import compile_times; "
                     "print(json.dumps(compile_times()))")
-            res = subprocess.run([sys.executable, "-c", code], check=True, text=True,
-                                 capture_output=True, env=user_env(NUMBA_CACHE_DIR=cache))
-            rows = json.loads(res.stdout.splitlines()[-1])
+            res = checked([sys.executable, "-c", code], user_env(NUMBA_CACHE_DIR=cache))
+            rows = json.loads(res.splitlines()[-1])
     out("")
     out(f"Fixed costs: a 1-cell survey ('sides', t = 10, warm cache, best of {repeats}), "
         "seconds")

@@ -18,7 +18,7 @@ from ..machine.jit import helper, kernel, lanes, leaf
 from ..machine.portable import fma
 from ..physics.lanes import rhs_lanes, state_size, workspace_size
 from ..physics.system import System
-from .common import CASES, best_time
+from .common import CASES, best_time, checked
 
 
 @leaf
@@ -250,7 +250,6 @@ def fma_peak(repeats=5, full_width=False) -> float:
     at the widest the core has, measured in a process compiled for it (an AVX-512 core
     that survey runs at 256 bits: machine.jit.vector_width)."""
     if full_width:
-        import subprocess
         import sys
         import tempfile
 
@@ -264,9 +263,7 @@ def fma_peak(repeats=5, full_width=False) -> float:
             env = user_env(NUMBA_CACHE_DIR=cache, NUMBA_CPU_NAME=llvm.get_host_cpu_name(),
                            NUMBA_CPU_FEATURES=features.flatten() + ",-prefer-256-bit")
             code = f"from survey.bench.steps import fma_peak; print(fma_peak({repeats}))"
-            res = subprocess.run([sys.executable, "-c", code], env=env, check=True,
-                                 capture_output=True, text=True)
-        return float(res.stdout.split()[-1])
+            return float(checked([sys.executable, "-c", code], env).split()[-1])
     x, reps = np.full(64, 0.5), 100_000
     _fma_chains(x, 1, 0.999999, 1e-7)
     best, _ = best_time(lambda: _fma_chains(x, reps, 0.999999, 1e-7), repeats)

@@ -97,17 +97,16 @@ def survey_memory(sizes=(10_000, 100_000), folder="results/bench", out=print):
     """Peak resident memory of the process driving a survey of many tiny cells (the
     workers are separate processes): finished results stream to checkpoint files, and the
     archive is written one variable at a time."""
-    import subprocess
     import sys
+
+    from .common import checked
     out("")
     out("Peak memory of the process driving a survey (cells of t = 0.01, orbit + indicators, "
         "no section; the workers are separate processes)")
     for n in sizes:
         code = (f"from survey.bench.surveys import _memory_run; "
                 f"print(*_memory_run({n}, {folder!r}))")
-        res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                             check=True)
-        peak, seconds, archive = map(float, res.stdout.split()[-3:])
+        peak, seconds, archive = map(float, checked([sys.executable, "-c", code]).split()[-3:])
         out(f"{n:>8d} cells: peak RSS {peak / 1024:7.1f} MiB, {seconds:6.1f} s, of which "
             f"writing the archive {archive:5.1f} s")
 

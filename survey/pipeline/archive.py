@@ -10,6 +10,7 @@ import importlib
 import os
 import subprocess
 import sys
+import threading
 from dataclasses import replace
 from importlib import metadata
 from pathlib import Path
@@ -273,17 +274,26 @@ def grid_dims(config) -> tuple[str, ...]:
     return ("cell",) if config.refined else tuple(a.name for a in config.axes)
 
 
+_prefetching: list[threading.Thread] = []
+
+
 def prefetch(modules=()):
     """Import what writing an archive needs (xarray, netCDF4, and the dask.array that
-    xarray loads on its first Variable) and the given modules: a noticeable part of a
-    fresh process, spent here in a thread while the workers compute rather than after
-    them. A module that fails to import is left to its importer to report."""
-    import netCDF4  # noqa: F401
-    import xarray as xr
-    xr.Variable(("x",), np.zeros(1))
-    for name in modules:
-        with contextlib.suppress(ImportError):
-            importlib.import_module(name)
+    xarray loads on its first Variable) and the given modules in a thread, while the
+    workers compute: a noticeable part of a fresh process. `write` waits for it. The
+    caller's thread must not import anything new meanwhile: CPython's imports in two
+    threads at once once failed to find a module that was there (a CI run of `survey run`:
+    "No module named 'tqdm.version'"). A module that fails to import is left to its
+    importer to report."""
+    def imports():
+        import netCDF4  # noqa: F401
+        import xarray as xr
+        xr.Variable(("x",), np.zeros(1))
+        for name in modules:
+            with contextlib.suppress(ImportError):
+                importlib.import_module(name)
+    _prefetching.append(threading.Thread(target=imports, name="prefetch", daemon=True))
+    _prefetching[-1].start()
 
 
 def write(config, load: Callable[[list[str]], dict], command: str, cells=None,
@@ -295,6 +305,8 @@ def write(config, load: Callable[[list[str]], dict], command: str, cells=None,
     (cells, ...). annotate(ds) -> attributes (text) computed from the finished Dataset,
     added before the rename (what the report needs that only a solver can compute:
     pipeline.special.report_attributes)."""
+    while _prefetching:
+        _prefetching.pop().join()
     import xarray as xr
     out = config.output
     out.parent.mkdir(parents=True, exist_ok=True)

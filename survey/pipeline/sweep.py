@@ -484,8 +484,11 @@ def _start(stack, config, task, first, starts, workers, address, clock, progress
         if clock["stream"]:
             client.get_task_stream()        # records from here on
     clock["cluster"] = time.perf_counter()
-    threading.Thread(target=archive.prefetch, args=(imports,), name="prefetch",
-                     daemon=True).start()
+    # what this thread imports while the prefetch runs, imported first (archive.prefetch):
+    # the bar, and numpy's serialisation, which dask's IO thread loads at the first result
+    import distributed.protocol.numpy  # noqa: F401
+    import tqdm  # noqa: F401
+    archive.prefetch(imports)
     return client
 
 

@@ -1,6 +1,7 @@
 """The survey pipeline against real dask clusters: archive contents and attributes,
 bit-identity across chunking and worker counts, checkpoints and resume after SIGKILL, a
 killed worker, an external scheduler, verify, atomic writes."""
+import json
 import os
 import shutil
 import signal
@@ -206,6 +207,34 @@ def test_resume_after_sigkill_finishes_only_what_is_missing(tmp_path):
     assert not folder.exists()
     fresh_cfg = write_config(tmp_path / "..", "big-fresh", num=24, t_final=150.0, chunk=6)
     assert_same_data(resumed, run(fresh_cfg))
+
+
+# A survey on the command line with every import's finder call recorded by thread; printed
+# last: how many modules the prefetch thread imported, and what other threads imported
+# between its first and last import.
+_IMPORTS_BY_THREAD = """
+import json, sys, threading
+log = []
+class Spy:
+    def find_spec(self, name, path=None, target=None):
+        log.append((threading.current_thread().name, name))
+sys.meta_path.insert(0, Spy())
+from survey import cli
+code = cli.main(sys.argv[1:])
+mine = [i for i, (thread, _) in enumerate(log) if thread == "prefetch"]
+print(json.dumps([code, len(mine), [entry for entry in log[mine[0]:mine[-1] + 1]
+                                    if entry[0] != "prefetch"] if mine else []]))
+"""
+
+
+def test_nothing_else_imports_while_the_archive_modules_load_beside_the_workers(tmp_path):
+    # CPython's imports in two threads at once once failed to find a module that was there
+    # (a CI run: the progress bar's "tqdm.version" while the archive's modules loaded)
+    cfg = write_config(tmp_path, "imports", num=2, t_final=2.0)
+    done = subprocess.run([sys.executable, "-c", _IMPORTS_BY_THREAD, "run", str(cfg),
+                           "--no-progress"], capture_output=True, text=True, check=True)
+    code, prefetched, beside = json.loads(done.stdout.splitlines()[-1])
+    assert code == 0 and prefetched > 100 and beside == []
 
 
 def test_changed_config_never_reuses_checkpoints(tmp_path):
