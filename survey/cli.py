@@ -241,8 +241,7 @@ def _plot(args):
         _survey_archive(args.archive, ds, "plot")
         ds = _with_report_attributes(ds)
         with notice("drawing the figures", sys.stderr.isatty()):
-            figs = plots.figures(ds, args.var or None)
-            paths = plots.save(figs, out, Path(args.archive).stem)
+            paths = plots.draw(ds, out, Path(args.archive).stem, args.var or None)
         for path in paths:
             print(f"wrote {path}")
     return 0

@@ -25,8 +25,9 @@ class SurveyAccessor:
         """The figures that fit the grid; written as PNGs into `folder` if given (returns
         their paths), else returned as matplotlib Figures by name."""
         from . import plots
-        figs = plots.figures(self._ds, variables)
-        return figs if folder is None else plots.save(figs, folder, self._stem())
+        if folder is None:
+            return plots.figures(self._ds, variables)
+        return plots.draw(self._ds, folder, self._stem(), variables)
 
     def report(self, folder) -> Path:
         """Write the Markdown report and its figures into `folder`; returns its path: the

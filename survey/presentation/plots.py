@@ -4,8 +4,8 @@ Conventions: axes carry symbols and units, not long names; continuous indicators
 perceptually uniform colour maps with the clipping range written in the colourbar label;
 regimes use a categorical palette; cells whose run did not finish (or that have no start)
 are masked in their own colours with their counts in the legend -- never drawn as a value
-of the indicator; point clouds are rasterised. Every function returns Figures; `save`
-writes them.
+of the indicator; point clouds are rasterised. Every function returns Figures; `draw`
+writes a survey's, `save` any others.
 """
 from __future__ import annotations
 
@@ -13,7 +13,9 @@ import itertools
 import json
 import textwrap
 import warnings
+from functools import partial
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 from matplotlib.colors import BoundaryNorm, ListedColormap
@@ -60,14 +62,14 @@ def _cell_xy(ds, idx, a, b) -> tuple[float, float]:
     return float(per_cell(ds, a)[flat]), float(per_cell(ds, b)[flat])
 
 
-def figures(ds, variables=None, special=None, slice_at=None) -> dict[str, Figure]:
-    """The figures that fit the archive's grid: maps for two axes, scans for one, the
-    section, convergence histories and the frequency map where the data exist. special:
-    the special solutions its cells start on, marked on the regime map and the scans;
-    slice_at: the section coordinates a grid over the others fixes, for its overlay of
-    crossings -- both, unless given, as the archive stores them (stored_special). A
-    refined survey over one axis is drawn as the uneven grid it is
-    (analysis.refine.as_grid)."""
+def figure_plan(ds, variables=None, special=None, slice_at=None) -> dict[str, Callable]:
+    """The figures that fit the archive's grid, each as the call that draws it (titled):
+    maps for two axes, scans for one, the section, convergence histories and the
+    frequency map where the data exist. special: the special solutions its cells start
+    on, marked on the regime map and the scans; slice_at: the section coordinates a grid
+    over the others fixes, for its overlay of crossings -- both, unless given, as the
+    archive stores them (stored_special). A refined survey over one axis is drawn as the
+    uneven grid it is (analysis.refine.as_grid)."""
     stored, fixed = stored_special(ds)
     special = stored if special is None else special
     slice_at = fixed if slice_at is None else slice_at
@@ -77,49 +79,59 @@ def figures(ds, variables=None, special=None, slice_at=None) -> dict[str, Figure
     names = [m for m in MAPS if m[0] in ds and (variables is None or m[0] in variables)]
     if "seed" in axes and len(axes) > 1:    # seeded starts per point: their regular share
         if V.regime in ds and len(axes) in (2, 3):
-            out["regular_share"] = regular_share_figure(ds)
+            out["regular_share"] = partial(regular_share_figure, ds)
     elif len(map_axes(ds)) == 2:
         if V.regime in ds and (variables is None or V.regime in variables):
-            out["map_regime"] = regime_map(ds, special)
+            out["map_regime"] = partial(regime_map, ds, special)
         for name, style in names:       # a map with no value would be all mask
             if np.isfinite(ds[name].values).any():
-                out[f"map_{name}"] = indicator_map(ds, name, style.cmap, style.clip,
-                                                   style.log)
+                out[f"map_{name}"] = partial(indicator_map, ds, name, style.cmap,
+                                             style.clip, style.log)
         if _height_axis(ds) is not None:
-            out["map_regime_height"] = regime_height_map(ds)
+            out["map_regime_height"] = partial(regime_height_map, ds)
         if V.escape_time in ds and np.any(ds[V.status].values == Status.ESCAPED):
-            out["map_escape"] = escape_map(ds)
+            out["map_escape"] = partial(escape_map, ds)
         if all(f"crossing_{a}" in ds for a in map_axes(ds)) and V.megno in ds \
                 and np.isfinite(ds[V.megno].values).any():
             style = OWNER[V.megno].map
-            out["map_megno_section"] = indicator_map(ds, V.megno, style.cmap, style.clip,
-                                                     style.log, overlay=True,
-                                                     slice_at=slice_at or {})
+            out["map_megno_section"] = partial(indicator_map, ds, V.megno, style.cmap,
+                                               style.clip, style.log, overlay=True,
+                                               slice_at=slice_at or {})
     elif len(axes) == 1 and axes[0] != "seed":      # seeds are in no order: no scan
-        out["scan"] = scan(ds, [n for n, _ in names] if variables is None else variables,
-                           special)
+        out["scan"] = partial(scan, ds, [n for n, _ in names] if variables is None
+                              else variables, special)
     if section_axes(ds) and int(np.nansum(ds[V.n_crossings].values)) > 0 \
             and len(shells(ds)) <= MAX_SHELLS:
-        out["section"] = section(ds)
+        out["section"] = partial(section, ds)
         if len(shells(ds)) == 1 and crossing_surface(ds)[0] == "phi":   # the 4-D section, sliced
-            out["section_slice"] = section_slice(ds)
+            out["section_slice"] = partial(section_slice, ds)
     if V.megno_history in ds and np.isfinite(ds[V.megno_history].values).any():
-        out["convergence"] = convergence(ds)
+        out["convergence"] = partial(convergence, ds)
     if V.closest_approach in ds and V.ftle in ds and np.any(ds[V.ftle].values > 0):
-        out["approach"] = approach_figure(ds)
+        out["approach"] = partial(approach_figure, ds)
     if V.frequency in ds and V.regime in ds and sum(
             str(n).startswith("shape") for n in ds["fundamental_name"].values) >= 3:
         # frequencies mean something on regular cells; the map needs three of them
         regular = np.isin(ds[V.regime].values, REGULAR)
         if np.isfinite(ds[V.frequency].values[regular]).any():
-            out["frequency_map"] = frequency_map(ds)
+            out["frequency_map"] = partial(frequency_map, ds)
     title = survey_title(ds)
-    for fig in out.values():
-        # wrapped to the figure's width (about 15 characters of small text an inch): a
-        # title wider than its figure is cut off at both ends
-        fig.suptitle(textwrap.fill(title, int(15 * fig.get_figwidth())), fontsize="small",
-                     color="0.25")
-    return out
+    return {name: partial(_titled, draw, title) for name, draw in out.items()}
+
+
+def _titled(draw, title) -> Figure:
+    fig = draw()
+    # wrapped to the figure's width (about 15 characters of small text an inch): a title
+    # wider than its figure is cut off at both ends
+    fig.suptitle(textwrap.fill(title, int(15 * fig.get_figwidth())), fontsize="small",
+                 color="0.25")
+    return fig
+
+
+def figures(ds, variables=None, special=None, slice_at=None) -> dict[str, Figure]:
+    """The figures of figure_plan, drawn."""
+    return {name: draw() for name, draw in
+            figure_plan(ds, variables, special, slice_at).items()}
 
 
 def term_label(term: dict) -> str:
@@ -151,6 +163,49 @@ def survey_title(ds) -> str:
     extended = f" (verdicts in doubt to {longest:g})" if longest > T else ""
     return (f"{config['survey']['name']}: {config['initial']['family']} family under "
             f"{potential}, T = {T:g}{extended}{varies}")
+
+
+# seconds at least that `draw` waits for its second process once its own share is drawn
+PATIENCE = 60.0
+
+
+def draw(ds, folder, stem: str, variables=None, special=None, slice_at=None) -> list[Path]:
+    """The figures of figure_plan written as STEM_NAME.png into `folder`, every other one
+    drawn in a second process forked for them: matplotlib's layout and rendering are most
+    of a report's time, on one core (the default survey's five figures: 2.2 s). The
+    archive is read into memory first (two processes never read one file). A second
+    process that fails, or takes far longer than this one's share, leaves its figures to
+    this one."""
+    import multiprocessing
+    import time
+    ds.load()
+    plan = figure_plan(ds, variables, special, slice_at)
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = {name: folder / f"{stem}_{name}.png" for name in plan}
+    names = list(plan)
+    # (a daemonic process, such as a worker's, may not have children)
+    theirs = names[1::2] if "fork" in multiprocessing.get_all_start_methods() and \
+        not multiprocessing.current_process().daemon else []
+    beside = None
+    if theirs:
+        beside = multiprocessing.get_context("fork").Process(
+            target=_save, args=(plan, theirs, paths), name="figures", daemon=True)
+        beside.start()
+    began = time.perf_counter()
+    _save(plan, [n for n in names if n not in theirs], paths)
+    if beside is not None:
+        beside.join(max(PATIENCE, 4 * (time.perf_counter() - began)))
+        if beside.exitcode != 0:        # failed, or still running
+            beside.kill()
+            beside.join()
+            _save(plan, theirs, paths)
+    return [paths[name] for name in names]
+
+
+def _save(plan, names, paths):
+    for name in names:
+        plan[name]().savefig(paths[name], dpi=130)
 
 
 def save(figs: dict[str, Figure], folder, stem: str) -> list[Path]:

@@ -43,8 +43,8 @@ def write(ds, folder, stem: str | None = None, figures: bool = True, checks=None
     stem = stem or Path(ds.encoding.get("source", "survey")).stem
     special, slice_at = plots.stored_special(ds)
     ds = as_grid(ds)
-    figs = plots.save(plots.figures(ds, special=special, slice_at=slice_at), folder,
-                      stem) if figures else []
+    figs = plots.draw(ds, folder, stem, special=special, slice_at=slice_at) if figures \
+        else []
     text = markdown(ds, [p.name for p in figs], checks, special)
     path = folder / f"{stem}_report.md"
     tmp = path.with_name(f".{path.name}.tmp")

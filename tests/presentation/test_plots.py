@@ -1,6 +1,8 @@
 """Figures and reports, asserted on the figure objects (labels with symbols, masked cells
 with counts, artists, legends) and on the report's text; every workflow in miniature; the
 embedded default ending with its figures and report."""
+import os
+import time
 import tomllib
 from pathlib import Path
 
@@ -271,6 +273,41 @@ def test_the_accessor_classifies_draws_and_reports(grid1, tmp_path):
     assert (tmp_path / "g1_scan.png") in written
     path = grid1.survey.report(tmp_path)
     assert path == tmp_path / "g1_report.md" and "## Regimes" in path.read_text()
+
+
+def test_figures_drawn_in_two_processes_are_those_drawn_in_one(grid1, tmp_path, monkeypatch):
+    one = plots.save(plots.figures(grid1), tmp_path / "one", "g1")
+    here, save, marks = os.getpid(), plots._save, tmp_path / "marks"
+    marks.mkdir()
+
+    def marked(plan, names, paths, then=None):       # which process drew which figures
+        with open(marks / str(os.getpid()), "a") as f:
+            f.write(" ".join(names) + "\n")
+        if os.getpid() != here and then is not None:
+            then()
+        save(plan, names, paths)
+
+    def fails():
+        raise RuntimeError("the second process fails")
+
+    def hangs():
+        time.sleep(600)
+
+    for then, folder in [(None, "two"), (fails, "failed"), (hangs, "hung")]:
+        for f in marks.iterdir():
+            f.unlink()
+        monkeypatch.setattr(plots, "_save", lambda *a, then=then: marked(*a, then))
+        monkeypatch.setattr(plots, "PATIENCE", 1.0)
+        drawn = plots.draw(grid1, tmp_path / folder, "g1")
+        assert [p.name for p in drawn] == [p.name for p in one] and len(one) >= 3
+        for a, b in zip(one, drawn):
+            assert a.read_bytes() == b.read_bytes(), (folder, a.name)
+        by = {f.name == str(here): [line.split() for line in f.read_text().splitlines()]
+              for f in marks.iterdir()}
+        names = [p.name[3:-4] for p in one]
+        assert by[False] == [names[1::2]], folder       # the second process had its share
+        # and this one drew it again where that one failed or hung
+        assert by[True] == [names[0::2]] + ([names[1::2]] if then else []), folder
 
 
 @pytest.mark.parametrize("energy", ["", "energy = [84.46, 90.0]\n"], ids=["scan", "map"])
