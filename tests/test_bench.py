@@ -84,8 +84,17 @@ def test_the_cold_runs_timer_hears_a_terminals_first_word():
     assert first <= silence <= total
     quiet = bench.timed_command([sys.executable, "-c", "pass"])
     assert math.isnan(quiet[0]) and quiet[1] > 0.0
-    with pytest.raises(RuntimeError, match="exited with 3"):
-        bench.timed_command([sys.executable, "-c", "raise SystemExit(3)"])
+    fails = [sys.executable, "-c", "import sys; sys.stderr.write('why'); raise SystemExit(3)"]
+    with pytest.raises(RuntimeError, match="exited with 3(.|\n)*why"):
+        bench.timed_command(fails)
+
+
+def test_a_command_the_bench_runs_that_fails_says_why():
+    """A CI log then shows the command's own error, not only its exit code."""
+    assert bench.common.checked([sys.executable, "-c", "print('out')"]) == "out\n"
+    fails = [sys.executable, "-c", "import sys; sys.stderr.write('why'); raise SystemExit(3)"]
+    with pytest.raises(RuntimeError, match="exited with 3(.|\n)*why"):
+        bench.common.checked(fails)
 
 
 def test_the_step_flop_count_counts_arithmetic_not_sign_flips():
