@@ -66,7 +66,10 @@ def _dU(system: System, q: np.ndarray) -> float:
         x = float(portable.vnorm(v - u) + portable.vnorm(w - v) + portable.vnorm(u - w))
     else:
         x = 0.5 * abs((v - u)[0] * (w - u)[1] - (v - u)[1] * (w - u)[0])
-    return profile(system.potential.profile, system.potential.pair, x)[1]
+    # profile's Python, which compiles only the branch the system takes: compiled, it
+    # compiled the transcendental profiles for an array of parameters, which no kernel
+    # passes (they pass a tuple), serially before a first run's workers start (1 s)
+    return profile.py_func(system.potential.profile, system.potential.pair, x)[1]
 
 
 def _equal_masses(system: System, family: str):
